@@ -1,0 +1,17 @@
+#pragma once
+/// Small geometric vocabulary shared by all stages.
+
+#include <Eigen/Core>
+#include <array>
+
+namespace tprf {
+
+/// A point or direction in metres (double precision: form factors of close patches need it).
+using Vec3 = Eigen::Vector3d;
+/// An RGB triple (albedo, emission, intensity or power per channel).
+using Rgb = Eigen::Array3d;
+
+/// Speed of light, m/s (SPEC: the same in every medium of v1).
+inline constexpr double kSpeedOfLight = 299792458.0;
+
+}  // namespace tprf
