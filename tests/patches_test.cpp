@@ -1,0 +1,242 @@
+#include "tprf/patches.h"
+
+#include "tprf/error.h"
+#include "tprf/scene.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using tprf::Vec3;
+
+// Geometry is built from a handful of exact-ish operations on numbers of order 1: 1e-12 is far above
+// their rounding and far below any mistake a test could catch.
+constexpr double kTol = 1e-12;
+
+tprf::Object rectangle(Vec3 origin, Vec3 u, Vec3 v, bool two_sided = false) {
+    tprf::Object o;
+    o.shape = tprf::RectangleShape{origin, u, v};
+    o.two_sided = two_sided;
+    o.emission = tprf::Rgb(1, 2, 3);
+    return o;
+}
+
+double total_area(const tprf::PatchSet& p) {
+    double a = 0.0;
+    for (double x : p.area) a += x;
+    return a;
+}
+
+// Checks what every patch set must satisfy: edges no longer than max_edge, corners counter-clockwise
+// about the normal, area and centroid consistent with the corners.
+void expect_well_formed(const tprf::PatchSet& p, double max_edge) {
+    ASSERT_EQ(p.first.size(), p.size() + 1);
+    EXPECT_EQ(p.first.front(), 0u);
+    EXPECT_EQ(p.first.back(), p.vertices.size());
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        const Vec3* c = p.polygon(i);
+        const std::size_t n = p.corners(i);
+        Vec3 mean = Vec3::Zero();
+        for (std::size_t k = 0; k < n; ++k) {
+            const Vec3& a = c[k];
+            const Vec3& b = c[(k + 1) % n];
+            const Vec3& d = c[(k + 2) % n];
+            // pieces() allows a relative 1e-9 of overshoot to absorb rounding in length / max_edge.
+            EXPECT_LE((b - a).norm(), max_edge * (1 + 1e-9)) << "patch " << i;
+            // Every turn is to the left about the normal: convex and counter-clockwise.
+            EXPECT_GT((b - a).cross(d - b).dot(p.normal[i]), 0.0) << "patch " << i;
+            EXPECT_NEAR((a - c[0]).dot(p.normal[i]), 0.0, kTol) << "patch " << i << " is not planar";
+            mean += a / static_cast<double>(n);
+        }
+        EXPECT_NEAR(p.normal[i].norm(), 1.0, kTol);
+        // Triangles and parallelograms have their area centroid at the corners' mean.
+        EXPECT_LT((p.centroid[i] - mean).norm(), kTol);
+    }
+}
+
+TEST(Patches, RectangleBecomesGridOfQuads) {
+    tprf::Scene scene;
+    scene.objects.push_back(rectangle(Vec3(0.2, -1, 0.5), Vec3(0, 1, 0), Vec3(0, 0, 0.5)));
+    scene.max_edge = 0.1;
+    tprf::PatchStats stats;
+    const auto p = tprf::build_patches(scene, {}, &stats);
+    EXPECT_DOUBLE_EQ(stats.max_edge, 0.1);
+    EXPECT_EQ(stats.dropped_degenerate, 0);
+    ASSERT_EQ(p.size(), 50u);  // ceil(1 / 0.1) x ceil(0.5 / 0.1)
+    EXPECT_NEAR(total_area(p), 0.5, kTol);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        EXPECT_EQ(p.corners(i), 4u);
+        EXPECT_LT((p.normal[i] - Vec3::UnitX()).norm(), kTol);  // normalize(u x v) = normalize(y x z)
+        EXPECT_NEAR(p.area[i], 0.01, kTol);
+        EXPECT_EQ(p.object[i], 0u);
+        EXPECT_TRUE((p.emission[i] == tprf::Rgb(1, 2, 3)).all());
+    }
+    expect_well_formed(p, 0.1);
+}
+
+TEST(Patches, SkewRectangleKeepsAreaAndOrientation) {
+    tprf::Scene scene;
+    const Vec3 u(0.7, 0.1, 0), v(0.3, 0.4, 0.2);
+    scene.objects.push_back(rectangle(Vec3(1, 2, 3), u, v));
+    scene.max_edge = 0.15;
+    const auto p = tprf::build_patches(scene);
+    EXPECT_EQ(p.size(), std::size_t{5 * 4});  // ceil(0.707 / 0.15) x ceil(0.539 / 0.15)
+    EXPECT_NEAR(total_area(p), u.cross(v).norm(), kTol);
+    for (const Vec3& n : p.normal) EXPECT_LT((n - u.cross(v).normalized()).norm(), kTol);
+    expect_well_formed(p, 0.15);
+}
+
+class PatchesMesh : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+        m_file = fs::temp_directory_path() /
+                 ("tprf_patches_test_" + std::to_string(::getpid()) + "_" + test + ".obj");
+    }
+    void TearDown() override { fs::remove(m_file); }
+
+    tprf::Object mesh(const std::string& obj_text, bool two_sided = false) const {
+        std::ofstream(m_file) << obj_text;
+        tprf::Object o;
+        o.shape = tprf::MeshShape{m_file, Eigen::Matrix4d::Identity()};
+        o.two_sided = two_sided;
+        return o;
+    }
+
+    fs::path m_file;
+};
+
+// An equilateral triangle of edge 1 in the plane z = 0, counter-clockwise seen from +z.
+const std::string kTriangle = "v 0 0 0\nv 1 0 0\nv 0.5 0.8660254037844386 0\nf 1 2 3\n";
+
+TEST_F(PatchesMesh, TriangleIsRefinedUniformly) {
+    tprf::Scene scene;
+    scene.objects.push_back(mesh(kTriangle));
+    scene.max_edge = 0.3;
+    const auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 16u);  // n = ceil(1 / 0.3) = 4 pieces per edge, n^2 triangles
+    // OpenMesh's OBJ reader parses coordinates as single-precision floats: 1e-7 relative.
+    EXPECT_NEAR(total_area(p), std::sqrt(3.0) / 4.0, 1e-7);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        EXPECT_EQ(p.corners(i), 3u);
+        EXPECT_LT((p.normal[i] - Vec3::UnitZ()).norm(), kTol);
+        EXPECT_NEAR(p.area[i], std::sqrt(3.0) / 64.0, 1e-7);
+    }
+    expect_well_formed(p, 0.3);
+}
+
+TEST_F(PatchesMesh, QuadIsSplitIntoTriangles) {
+    tprf::Scene scene;
+    scene.objects.push_back(mesh("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4\n"));
+    scene.max_edge = 10.0;
+    const auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 2u);
+    EXPECT_NEAR(total_area(p), 2.0, kTol);
+    expect_well_formed(p, 10.0);
+}
+
+TEST_F(PatchesMesh, CornerOnAnEdgeLeavesNoSliver) {
+    // A square with an extra corner 1 in the middle of the edge from 0 to 2: the fan piece (0, 1, 2) has
+    // no area.
+    tprf::Scene scene;
+    scene.objects.push_back(mesh("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nf 1 2 3 4 5\n"));
+    scene.max_edge = 10.0;
+    const auto p = tprf::build_patches(scene);
+    EXPECT_EQ(p.size(), 2u);
+    EXPECT_NEAR(total_area(p), 4.0, kTol);
+    expect_well_formed(p, 10.0);
+}
+
+TEST_F(PatchesMesh, TwoSidedDoublesWithOppositeNormals) {
+    tprf::Scene scene;
+    scene.objects.push_back(rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY(), true));
+    scene.objects.push_back(mesh(kTriangle, true));
+    scene.max_edge = 0.3;
+    const auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 2u * (16 + 16));
+    for (std::size_t i = 0; i < p.size(); i += 2) {
+        EXPECT_LT((p.normal[i] + p.normal[i + 1]).norm(), kTol);
+        EXPECT_LT((p.centroid[i] - p.centroid[i + 1]).norm(), kTol);
+        EXPECT_NEAR(p.area[i], p.area[i + 1], kTol);
+        EXPECT_EQ(p.object[i], p.object[i + 1]);
+        // Both sides of a two-sided emitter emit (see patches.cpp).
+        EXPECT_TRUE((p.emission[i] == p.emission[i + 1]).all());
+    }
+    expect_well_formed(p, 0.3);
+}
+
+TEST_F(PatchesMesh, ObjectIdsAreSceneIndices) {
+    tprf::Scene scene;
+    scene.objects.push_back(rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY()));
+    scene.objects.push_back(mesh(kTriangle));
+    scene.objects.push_back(rectangle(Vec3::UnitZ(), Vec3::UnitY(), Vec3::UnitX()));
+    scene.max_edge = 0.5;
+    const auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 4u + 4u + 4u);
+    for (std::size_t i = 0; i < p.size(); ++i) EXPECT_EQ(p.object[i], i / 4) << "patch " << i;
+    // The third rectangle has u x v = y x x = -z.
+    EXPECT_LT((p.normal[11] + Vec3::UnitZ()).norm(), kTol);
+}
+
+TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverSixteenAndDropsAreSummed) {
+    tprf::Scene scene;
+    scene.objects.push_back(rectangle(Vec3::Zero(), Vec3(3, 0, 0), Vec3(0, 4, 0)));
+    // The mesh lies inside the rectangle's box and brings one degenerate face.
+    scene.objects.push_back(mesh(kTriangle + "f 1 2 2\n"));
+    tprf::PatchStats stats;
+    const auto p = tprf::build_patches(scene, {}, &stats);
+    EXPECT_DOUBLE_EQ(stats.max_edge, 5.0 / 16.0);  // box 3 x 4 x 0
+    EXPECT_EQ(stats.dropped_degenerate, 1);
+    EXPECT_EQ(p.size(), std::size_t{10 * 13 + 16});  // ceil(3 / 0.3125) x ceil(4 / 0.3125), n = 4
+    expect_well_formed(p, stats.max_edge);
+}
+
+TEST_F(PatchesMesh, ReportsProgressPerObject) {
+    tprf::Scene scene;
+    scene.objects.push_back(rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY()));
+    scene.objects.push_back(mesh(kTriangle));
+    std::vector<double> fractions;
+    tprf::PatchOptions options;
+    options.progress = [&](std::string_view phase, double f) {
+        EXPECT_EQ(phase, "patches");
+        fractions.push_back(f);
+    };
+    tprf::build_patches(scene, options);
+    EXPECT_EQ(fractions, (std::vector<double>{0.5, 1.0}));
+}
+
+TEST_F(PatchesMesh, MissingMeshNamesItsObject) {
+    tprf::Scene scene;
+    scene.file = "scene.json";
+    scene.objects.push_back(rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY()));
+    tprf::Object o;
+    o.shape = tprf::MeshShape{m_file, Eigen::Matrix4d::Identity()};
+    scene.objects.push_back(o);
+    try {
+        tprf::build_patches(scene);
+        ADD_FAILURE() << "no error";
+    } catch (const tprf::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("scene.json: objects[1].file: "), std::string::npos) << e.what();
+    }
+}
+
+TEST(Patches, AddPatchComputesCentroidOfTrapezoid) {
+    // Trapezoid with parallel sides 2 (y = 0) and 1 (y = 1): area 1.5, centroid height
+    // h (b1 + 2 b2) / (3 (b1 + b2)) = 4/9, x = 1 by symmetry.
+    const std::array<Vec3, 4> c{Vec3(0, 0, 0), Vec3(2, 0, 0), Vec3(1.5, 1, 0), Vec3(0.5, 1, 0)};
+    tprf::PatchSet p;
+    tprf::add_patch(p, c.data(), c.size(), tprf::Rgb::Constant(0.5), tprf::Rgb::Zero(), 7);
+    ASSERT_EQ(p.size(), 1u);
+    EXPECT_EQ(p.first, (std::vector<std::uint32_t>{0, 4}));
+    EXPECT_NEAR(p.area[0], 1.5, kTol);
+    EXPECT_LT((p.centroid[0] - Vec3(1, 4.0 / 9.0, 0)).norm(), kTol);
+    EXPECT_LT((p.normal[0] - Vec3::UnitZ()).norm(), kTol);
+    EXPECT_EQ(p.object[0], 7u);
+}
+
+}  // namespace
