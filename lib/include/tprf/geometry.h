@@ -2,6 +2,7 @@
 /// Small geometric vocabulary shared by all stages.
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 
 namespace tprf {

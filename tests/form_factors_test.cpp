@@ -1,0 +1,84 @@
+#include "tprf/form_factors.h"
+
+#include "test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+
+namespace tprf {
+namespace {
+
+// Square [x0,x0+a] x [y0,y0+b] at height z, counter-clockwise about `up` (+z or -z).
+std::array<Vec3, 4> square(double x0, double y0, double a, double b, double z, bool facing_up) {
+    std::array<Vec3, 4> q = {Vec3(x0, y0, z), Vec3(x0 + a, y0, z), Vec3(x0 + a, y0 + b, z), Vec3(x0, y0 + b, z)};
+    if (!facing_up) std::swap(q[1], q[3]);
+    return q;
+}
+
+TEST(FormFactors, PointToParallelSquareMatchesHowellB3) {
+    // The point under the centre of a 2 x 2 square at distance 1 sees four corner rectangles 1 x 1.
+    const auto q = square(-1, -1, 2, 2, 1.0, false);
+    const double f = point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), q.data(), 4, -Vec3::UnitZ());
+    // The contour integral is exact: only rounding separates it from the closed form.
+    EXPECT_NEAR(f, 4 * test::ff_point_parallel_rectangle_corner(1, 1, 1), 1e-12);
+    // Off-centre: the point under a corner of a 1 x 2 rectangle at distance 0.5.
+    const auto r = square(0, 0, 1, 2, 0.5, false);
+    EXPECT_NEAR(point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), r.data(), 4, -Vec3::UnitZ()),
+                test::ff_point_parallel_rectangle_corner(1, 2, 0.5), 1e-12);
+}
+
+TEST(FormFactors, PointBehindOrBelowHorizonSeesNothing) {
+    const auto facing_away = square(-1, -1, 2, 2, 1.0, true);
+    EXPECT_EQ(point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), facing_away.data(), 4, Vec3::UnitZ()), 0.0);
+    // A polygon entirely below the point's horizon.
+    const auto below = square(-1, -1, 2, 2, -1.0, true);
+    EXPECT_EQ(point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), below.data(), 4, Vec3::UnitZ()), 0.0);
+}
+
+TEST(FormFactors, ClippingAtTheHorizonKeepsTheVisibleHalf) {
+    // A vertical square straddling the horizon of an upward-facing point: only its upper half counts,
+    // and the upper half alone is a perpendicular rectangle of known form factor from the point.
+    const std::array<Vec3, 4> full = {Vec3(1, -1, -1), Vec3(1, 1, -1), Vec3(1, 1, 1), Vec3(1, -1, 1)};
+    const std::array<Vec3, 4> upper = {Vec3(1, -1, 0), Vec3(1, 1, 0), Vec3(1, 1, 1), Vec3(1, -1, 1)};
+    std::array<Vec3, 4> f = full, u = upper;
+    // Counter-clockwise about -x (facing the point at the origin).
+    std::swap(f[1], f[3]);
+    std::swap(u[1], u[3]);
+    const double clipped = point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), f.data(), 4, -Vec3::UnitX());
+    const double half = point_polygon_form_factor(Vec3::Zero(), Vec3::UnitZ(), u.data(), 4, -Vec3::UnitX());
+    EXPECT_GT(half, 0.0);
+    EXPECT_NEAR(clipped, half, 1e-12);
+}
+
+TEST(FormFactors, ParallelSquaresMatchHowellC11) {
+    const auto a = square(0, 0, 1, 1, 0.0, true);
+    const auto b = square(0, 0, 1, 1, 1.0, false);
+    const FormFactorQuadrature fine{1e-4, 7};
+    const double f = polygon_form_factor(a.data(), 4, Vec3::UnitZ(), b.data(), 4, -Vec3::UnitZ(), fine);
+    EXPECT_NEAR(test::ff_parallel_rectangles(1, 1, 1), 0.19982, 1e-5);  // the catalogue's value
+    // Adaptive tolerance 1e-4 relative per cell: the total stays within 1e-4.
+    EXPECT_NEAR(f / test::ff_parallel_rectangles(1, 1, 1), 1.0, 1e-4);
+    // The fixed Gauss rule on one unit square at unit distance: error O((size/distance)^4), a few 1e-3.
+    const double g = polygon_form_factor_gauss(a.data(), 4, Vec3::UnitZ(), b.data(), 4, -Vec3::UnitZ());
+    EXPECT_NEAR(g / test::ff_parallel_rectangles(1, 1, 1), 1.0, 1e-2);
+}
+
+TEST(FormFactors, PerpendicularSquaresSharingAnEdgeMatchHowellC14) {
+    // Floor [0,1]^2 at z=0 facing up and wall x=0 facing +x share the edge x=0, z=0.
+    const auto floor = square(0, 0, 1, 1, 0.0, true);
+    const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
+    // Counter-clockwise about +x: (0,0,0) -> (0,1,0) -> (0,1,1) -> (0,0,1) turns from +y to +z. Good.
+    const double f = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX(),
+                                         FormFactorQuadrature{1e-4, 7});
+    EXPECT_NEAR(test::ff_perpendicular_rectangles(1, 1, 1), 0.20004, 1e-5);
+    // The integrand's gradient is singular along the shared edge: adaptive refinement still
+    // reaches 1e-4, the quadrature tolerance.
+    EXPECT_NEAR(f / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 1e-4);
+    // The default (coarser, for speed) rule still holds 1e-3, its own tolerance.
+    const double d = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    EXPECT_NEAR(d / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 1e-3);
+}
+
+}  // namespace
+}  // namespace tprf

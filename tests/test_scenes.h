@@ -1,0 +1,60 @@
+#pragma once
+// Scenes with known answers, built directly as tprf::Scene (no JSON), shared by the stage tests.
+
+#include "tprf/scene.h"
+
+#include <cmath>
+
+namespace tprf::test {
+
+inline Object rectangle(const Vec3& origin, const Vec3& u, const Vec3& v, double albedo = 0.5,
+                        double emission = 0.0) {
+    Object o;
+    o.shape = RectangleShape{origin, u, v};
+    o.albedo = Rgb::Constant(albedo);
+    o.emission = Rgb::Constant(emission);
+    return o;
+}
+
+/// Howell's catalogue C-11: directly opposed parallel rectangles a x b at distance c.
+inline double ff_parallel_rectangles(double a, double b, double c) {
+    const double x = a / c, y = b / c;
+    const double x1 = std::sqrt(1 + x * x), y1 = std::sqrt(1 + y * y);
+    return 2.0 / (M_PI * x * y) *
+           (std::log(x1 * y1 / std::sqrt(1 + x * x + y * y)) + x * y1 * std::atan(x / y1) +
+            y * x1 * std::atan(y / x1) - x * std::atan(x) - y * std::atan(y));
+}
+
+/// Howell's catalogue C-14: perpendicular rectangles with a common edge of length l; the sending
+/// rectangle is w x l, the receiving one h x l.
+inline double ff_perpendicular_rectangles(double w, double h, double l) {
+    const double W = w / l, H = h / l;
+    const double w2 = W * W, h2 = H * H, s = w2 + h2;
+    const double a = (1 + w2) * (1 + h2) / (1 + s);
+    const double b = w2 * (1 + s) / ((1 + w2) * s);
+    const double c = h2 * (1 + s) / ((1 + h2) * s);
+    return 1.0 / (M_PI * W) *
+           (W * std::atan(1 / W) + H * std::atan(1 / H) - std::sqrt(s) * std::atan(1 / std::sqrt(s)) +
+            0.25 * (std::log(a) + w2 * std::log(b) + h2 * std::log(c)));
+}
+
+/// Differential area to a parallel rectangle a x b at distance c, the normal through one corner
+/// (Howell's catalogue B-3).
+inline double ff_point_parallel_rectangle_corner(double a, double b, double c) {
+    const double A = a / c, B = b / c;
+    const double a1 = std::sqrt(1 + A * A), b1 = std::sqrt(1 + B * B);
+    return 1.0 / (2 * M_PI) * (A / a1 * std::atan(B / a1) + B / b1 * std::atan(A / b1));
+}
+
+/// A closed box [0,s]^3 of six rectangles facing inward.
+inline void add_closed_cube(Scene& scene, double s, double albedo = 0.5, double emission = 0.0) {
+    const Vec3 X = s * Vec3::UnitX(), Y = s * Vec3::UnitY(), Z = s * Vec3::UnitZ(), O = Vec3::Zero();
+    scene.objects.push_back(rectangle(O, X, Y, albedo, emission));  // floor z=0, normal +z
+    scene.objects.push_back(rectangle(Z, Y, X, albedo, emission));  // ceiling z=s, normal -z
+    scene.objects.push_back(rectangle(O, Z, X, albedo, emission));  // wall y=0, normal +y
+    scene.objects.push_back(rectangle(Y, X, Z, albedo, emission));  // wall y=s, normal -y
+    scene.objects.push_back(rectangle(O, Y, Z, albedo, emission));  // wall x=0, normal +x
+    scene.objects.push_back(rectangle(X, Z, Y, albedo, emission));  // wall x=s, normal -x
+}
+
+}  // namespace tprf::test
