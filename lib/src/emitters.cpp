@@ -1,0 +1,126 @@
+#include "tprf/emitters.h"
+
+#include "tprf/error.h"
+#include "tprf/patches.h"
+#include "tprf/scene.h"
+#include "tprf/visibility.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <variant>
+
+namespace tprf {
+namespace {
+
+// Stratified sample s of n = g * g over the patch (uniform in area for triangles and parallelograms).
+Vec3 sample_patch(const PatchSet& patches, std::size_t i, int s, int g) {
+    const double u = (s % g + 0.5) / g, v = (s / g + 0.5) / g;
+    const Vec3* p = patches.polygon(i);
+    if (patches.corners(i) == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
+    const double su = std::sqrt(u);
+    return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
+}
+
+// Direct light from a point source at `source` with radiant intensity `intensity(direction)`,
+// reflected by patch i: one pulse per stratified sample that sees the source.
+template <class IntensityFn>
+void light_from_point(const PatchSet& patches, const Visibility& vis, std::size_t i, const Vec3& source,
+                      double path_offset, std::uint8_t order, int grid, const IntensityFn& intensity,
+                      std::vector<Pulse>& out) {
+    const int samples = grid * grid;
+    const Vec3& n = patches.normal[i];
+    for (int s = 0; s < samples; ++s) {
+        const Vec3 x = sample_patch(patches, i, s, grid);
+        const Vec3 d = source - x;
+        const double r = d.norm();
+        if (r <= 0.0) continue;
+        const double cos_x = n.dot(d) / r;
+        if (cos_x <= 0.0) continue;
+        const Rgb radiant = intensity(Vec3(-d / r));
+        if (!(radiant > 0.0).any()) continue;
+        if (vis.occluded(x + vis.epsilon() * n, source)) continue;
+        Pulse p;
+        p.path = path_offset + r;
+        p.energy = patches.albedo[i] * radiant * (cos_x / (r * r)) / double(samples);
+        p.order = order;
+        p.propagates = true;
+        p.exact_at_camera = true;
+        out.push_back(p);
+    }
+}
+
+}  // namespace
+
+LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const PatchSet& /*patches*/,
+                          const Visibility& visibility) {
+    LaserSpot spot;
+    const RayHit hit = visibility.intersect(origin, direction, std::numeric_limits<double>::infinity());
+    if (!hit.hit || !hit.front) return spot;
+    spot.hit = true;
+    spot.patch = hit.patch;
+    spot.point = hit.point;
+    spot.path = hit.distance;
+    return spot;
+}
+
+Emission compute_emission(const Scene& scene, const PatchSet& patches, const Visibility& vis,
+                          const EmitterOptions& options) {
+    const std::size_t n = patches.size();
+    const int grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.samples, 1))))));
+    const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+
+    std::vector<LaserSpot> spots;
+    std::vector<Rgb> laser_power;
+    for (const Light& light : scene.lights)
+        if (const auto* laser = std::get_if<Laser>(&light)) {
+            spots.push_back(find_laser_spot(laser->origin, laser->direction, patches, vis));
+            laser_power.push_back(laser->power);
+        }
+
+    std::vector<std::vector<Pulse>> per_patch(n);
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
+    for (std::size_t i = 0; i < n; ++i) {
+        std::vector<Pulse>& out = per_patch[i];
+        if ((patches.emission[i] > 0.0).any()) {
+            Pulse p;
+            p.energy = M_PI * patches.emission[i];  // exitance of a Lambertian emitter: pi L_e
+            p.order = 0;
+            out.push_back(p);
+        }
+        for (const Light& light : scene.lights)
+            if (const auto* point = std::get_if<PointLight>(&light))
+                light_from_point(patches, vis, i, point->position, 0.0, 1, grid,
+                                 [&](const Vec3&) { return point->intensity; }, out);
+        for (std::size_t l = 0; l < spots.size(); ++l) {
+            const LaserSpot& spot = spots[l];
+            if (!spot.hit) continue;
+            const Rgb reflected = patches.albedo[spot.patch] * laser_power[l];  // W leaving X
+            if (i == spot.patch) {
+                Pulse p;
+                p.path = spot.path;
+                p.energy = reflected / patches.area[i];
+                p.order = 1;
+                p.propagates = false;
+                out.push_back(p);
+                continue;
+            }
+            const Vec3& nx = patches.normal[spot.patch];
+            const Vec3 lifted = spot.point + vis.epsilon() * nx;
+            // X is a Lambertian point: radiant intensity albedo P cos(theta) / pi.
+            light_from_point(patches, vis, i, lifted, spot.path, 2, grid,
+                             [&](const Vec3& dir) { return reflected * std::max(0.0, nx.dot(dir)) / M_PI; }, out);
+        }
+    }
+
+    Emission e;
+    e.row.assign(n + 1, 0);
+    for (std::size_t i = 0; i < n; ++i) e.row[i + 1] = e.row[i] + per_patch[i].size();
+    e.pulses.reserve(e.row[n]);
+    for (auto& v : per_patch) e.pulses.insert(e.pulses.end(), v.begin(), v.end());
+    return e;
+}
+
+}  // namespace tprf

@@ -1,0 +1,110 @@
+#include "tprf/steady.h"
+
+#include "tprf/emitters.h"
+#include "tprf/error.h"
+#include "tprf/links.h"
+#include "tprf/patches.h"
+
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCore>
+
+#include <string>
+
+namespace tprf {
+namespace {
+
+using SparseRows = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
+
+// y = diag(albedo_c) F x for one channel.
+Eigen::VectorXd gather(const PatchSet& patches, const Links& links, const Eigen::VectorXd& x, int c) {
+    const Eigen::Index n = Eigen::Index(patches.size());
+    Eigen::VectorXd y(n);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (Eigen::Index i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (std::uint64_t k = links.row[std::size_t(i)]; k < links.row[std::size_t(i) + 1]; ++k)
+            s += double(links.ff[k]) * x[links.source[k]];
+        y[i] = patches.albedo[std::size_t(i)][c] * s;
+    }
+    return y;
+}
+
+SparseRows system_matrix(const PatchSet& patches, const Links& links, int c) {
+    const int n = int(patches.size());
+    SparseRows m(n, n);
+    Eigen::VectorXi sizes(n);
+    for (int i = 0; i < n; ++i) sizes[i] = int(links.row[std::size_t(i) + 1] - links.row[std::size_t(i)]) + 1;
+    m.reserve(sizes);
+    for (int i = 0; i < n; ++i) {
+        const double a = patches.albedo[std::size_t(i)][c];
+        bool diagonal = false;
+        for (std::uint64_t k = links.row[std::size_t(i)]; k < links.row[std::size_t(i) + 1]; ++k) {
+            const int j = int(links.source[k]);
+            if (!diagonal && j > i) {
+                m.insert(i, i) = 1.0;
+                diagonal = true;
+            }
+            m.insert(i, j) = -a * double(links.ff[k]);
+        }
+        if (!diagonal) m.insert(i, i) = 1.0;
+    }
+    m.makeCompressed();
+    return m;
+}
+
+}  // namespace
+
+std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
+                              int max_bounces) {
+    const std::size_t n = patches.size();
+    TPRF_CHECK_EQ(links.receivers(), n);
+    int max_order = 0;
+    for (const Pulse& p : emission.pulses) max_order = std::max(max_order, int(p.order));
+    // Time-integrated emission per order (a pulse's energy is its whole contribution).
+    std::vector<std::vector<Rgb>> by_order(std::size_t(max_order) + 1, std::vector<Rgb>(n, Rgb::Zero()));
+    std::vector<Rgb> seen_only(n, Rgb::Zero());
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
+            const Pulse& p = emission.pulses[k];
+            if (max_bounces >= 0 && p.order > max_bounces) continue;
+            (p.propagates ? by_order[p.order][i] : seen_only[i]) += p.energy;
+        }
+
+    std::vector<Rgb> b(n, Rgb::Zero());
+    for (int c = 0; c < 3; ++c) {
+        Eigen::VectorXd result;
+        if (max_bounces >= 0) {
+            // Neumann series up to max_bounces: R_k = E_k + diag(a) F R_{k-1}.
+            Eigen::VectorXd r = Eigen::VectorXd::Zero(Eigen::Index(n));
+            result = Eigen::VectorXd::Zero(Eigen::Index(n));
+            for (int k = 0; k <= max_bounces; ++k) {
+                Eigen::VectorXd next = k > 0 ? gather(patches, links, r, c) : Eigen::VectorXd::Zero(Eigen::Index(n));
+                if (k <= max_order)
+                    for (std::size_t i = 0; i < n; ++i) next[Eigen::Index(i)] += by_order[std::size_t(k)][i][c];
+                r = std::move(next);
+                result += r;
+            }
+        } else {
+            Eigen::VectorXd e = Eigen::VectorXd::Zero(Eigen::Index(n));
+            for (const auto& order : by_order)
+                for (std::size_t i = 0; i < n; ++i) e[Eigen::Index(i)] += order[i][c];
+            if (e.squaredNorm() == 0.0) {
+                result = e;
+            } else {
+                const SparseRows m = system_matrix(patches, links, c);
+                Eigen::BiCGSTAB<SparseRows, Eigen::DiagonalPreconditioner<double>> solver;
+                solver.setTolerance(1e-8);
+                solver.setMaxIterations(10000);
+                solver.compute(m);
+                result = solver.solve(e);
+                if (solver.info() != Eigen::Success)
+                    throw InternalError("steady state: BiCGSTAB did not converge (relative residual " +
+                                        std::to_string(solver.error()) + ")");
+            }
+        }
+        for (std::size_t i = 0; i < n; ++i) b[i][c] = result[Eigen::Index(i)] + seen_only[i][c];
+    }
+    return b;
+}
+
+}  // namespace tprf

@@ -1,0 +1,288 @@
+#include "tprf/solver.h"
+
+#include "tprf/emitters.h"
+#include "tprf/links.h"
+#include "tprf/patches.h"
+#include "tprf/steady.h"
+#include "tprf/visibility.h"
+
+#include "test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <numeric>
+
+namespace tprf {
+namespace {
+
+// Everything the solver needs, built from a scene.
+struct Prepared {
+    PatchSet patches;
+    Links links;
+    Emission emission;
+};
+
+Prepared prepare(const Scene& scene) {
+    Prepared p;
+    p.patches = build_patches(scene);
+    const Visibility vis(p.patches);
+    p.links = compute_links(p.patches, vis);
+    p.emission = compute_emission(scene, p.patches, vis);
+    return p;
+}
+
+// Full profiles, N x T x 3 (and the per-order terms, K x N x T x 3), collected from the block sink.
+struct Profiles {
+    std::size_t n = 0;
+    int bins = 0;
+    std::vector<float> total;
+    std::vector<float> terms;
+    int term_count = 0;
+    SolveStats stats;
+
+    double at(std::size_t i, int t, int c) const { return total[(i * std::size_t(bins) + std::size_t(t)) * 3 + std::size_t(c)]; }
+    double term(int k, std::size_t i, int t, int c) const {
+        return terms[((std::size_t(k) * n + i) * std::size_t(bins) + std::size_t(t)) * 3 + std::size_t(c)];
+    }
+};
+
+Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = {}) {
+    Profiles out;
+    out.n = p.patches.size();
+    out.bins = time.bins;
+    out.total.assign(out.n * std::size_t(time.bins) * 3, 0.0f);
+    out.stats = solve_transient(p.patches, p.links, p.emission, time, options, [&](const SolveBlock& b) {
+        out.term_count = b.terms;
+        if (b.terms > 0 && out.terms.empty()) out.terms.assign(std::size_t(b.terms) * out.total.size(), 0.0f);
+        for (std::size_t i = 0; i < b.patches; ++i)
+            for (int t = 0; t < b.bins; ++t)
+                for (int c = 0; c < 3; ++c) {
+                    const std::size_t src = (i * std::size_t(b.bins) + std::size_t(t)) * 3 + std::size_t(c);
+                    const std::size_t dst = (i * std::size_t(time.bins) + std::size_t(b.first_bin + t)) * 3 + std::size_t(c);
+                    out.total[dst] = b.radiosity[src];
+                    for (int k = 0; k < b.terms; ++k)
+                        out.terms[std::size_t(k) * out.total.size() + dst] = b.per_order[std::size_t(k) * b.patches * std::size_t(b.bins) * 3 + src];
+                }
+    });
+    return out;
+}
+
+TimeAxis axis(int bins, double width, double start = 0.0) {
+    TimeAxis t;
+    t.bins = bins;
+    t.bin_width = width;
+    t.start = start;
+    return t;
+}
+
+TEST(Solver, FurnaceSteadyStateIsEmissionOverOneMinusAlbedo) {
+    const double a = 0.6, le = 1.0;
+    Scene scene;
+    scene.max_edge = 0.25;
+    test::add_closed_cube(scene, 1.0, a, le);
+    const Prepared p = prepare(scene);
+    const std::vector<Rgb> b = solve_steady(p.patches, p.links, p.emission);
+    const double expected = M_PI * le / (1 - a);
+    // The cube's rows sum to 1 within about 2e-4 (Links tests); B inherits that over 1 - a.
+    for (const Rgb& v : b) EXPECT_NEAR(v[1], expected, 1e-3 * expected);
+}
+
+TEST(Solver, FurnaceBounceEnergiesFallAsPowersOfTheAlbedo) {
+    const double a = 0.6, le = 1.0;
+    Scene scene;
+    scene.max_edge = 0.25;
+    test::add_closed_cube(scene, 1.0, a, le);
+    const Prepared p = prepare(scene);
+    SolverOptions options;
+    options.max_bounces = 4;
+    options.bounce_terms = 1;
+    // Four bounces of at most sqrt(3) m each stay inside 8 m.
+    const Profiles pr = solve(p, axis(400, 0.02), options);
+    ASSERT_EQ(pr.term_count, 5);
+    double emitted = 0.0;
+    for (std::size_t i = 0; i < p.patches.size(); ++i) emitted += p.patches.area[i] * M_PI * le;
+    for (int k = 0; k <= 4; ++k) {
+        double energy = 0.0;
+        for (std::size_t i = 0; i < p.patches.size(); ++i)
+            for (int t = 0; t < pr.bins; ++t) energy += p.patches.area[i] * pr.term(k, i, t, 0);
+        EXPECT_NEAR(energy / emitted, std::pow(a, k), 1e-3 * std::pow(a, k)) << "bounce " << k;
+    }
+}
+
+TEST(Solver, NothingArrivesBetweenTheDirectPulseAndTheFirstEcho) {
+    // Plates z=0 (up) and z=1 (down), 2.4 x 2.4 m, a point light midway.
+    Scene scene;
+    scene.max_edge = 0.1;
+    scene.objects.push_back(test::rectangle(Vec3(-1.2, -1.2, 0), 2.4 * Vec3::UnitX(), 2.4 * Vec3::UnitY()));
+    scene.objects.push_back(test::rectangle(Vec3(-1.2, -1.2, 1), 2.4 * Vec3::UnitY(), 2.4 * Vec3::UnitX()));
+    scene.lights.push_back(PointLight{Vec3(0, 0, 0.5), Rgb::Constant(1.0)});
+    const Prepared p = prepare(scene);
+    const double w = 0.01;
+    SolverOptions options;
+    options.bounce_terms = 5;  // orders 0..3 and 4+
+    const Profiles pr = solve(p, axis(400, w), options);
+    // The bottom plate's patch under the light.
+    std::size_t centre = 0;
+    for (std::size_t i = 0; i < p.patches.size(); ++i)
+        if (p.patches.object[i] == 0 && (p.patches.centroid[i] - Vec3(0.05, 0.05, 0)).norm() < 1e-9) centre = i;
+    ASSERT_NEAR(p.patches.centroid[centre].x(), 0.05, 1e-9);
+    auto energy = [&](int order, double from, double to) {
+        double e = 0.0;
+        for (int t = int(std::floor(from / w + 1e-9)); t < int(std::ceil(to / w - 1e-9)); ++t)
+            e += order < 0 ? pr.at(centre, t, 0) : pr.term(order, centre, t, 0);
+        return e;
+    };
+    // The direct pulse: paths from the light to the patch run from 0.5 to |(0.1, 0.1, 0.5)| < 0.52.
+    EXPECT_GT(energy(1, 0.5, 0.52), 0.0);
+    EXPECT_EQ(energy(1, 0.52, 4.0), 0.0);
+    // The gap: the first echo travels at least 0.5 up and 1 down (1.5), less a bin of placement.
+    for (int t = int(std::ceil(0.52 / w)); (t + 1) * w <= 1.49; ++t) EXPECT_EQ(pr.at(centre, t, 0), 0.0) << "bin " << t;
+    // Each echo starts one gap (1 m) after the previous one: order k + 1 needs at least 0.5 + k metres.
+    for (int k = 1; k <= 3; ++k) {
+        const double onset = 0.5 + k - 1;
+        EXPECT_EQ(energy(k, 0.0, onset - 0.01), 0.0) << "order " << k;
+        EXPECT_GT(energy(k, onset - 0.01, onset + 0.2), 0.0) << "order " << k;
+    }
+    EXPECT_GT(energy(4, 3.49, 4.0), 0.0);
+}
+
+TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
+    Scene scene;
+    scene.max_edge = 0.2;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);  // a coloured wall: three channels are solved
+    scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.8), Rgb(1.0, 2.0, 3.0)});
+    const Prepared p = prepare(scene);
+    const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
+    // Light loses at least half its energy per bounce of at most sqrt(3) m: after 40 m, below 1e-6.
+    for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
+        SolverOptions options;
+        options.delay = mode;
+        const Profiles pr = solve(p, axis(800, 0.05), options);
+        EXPECT_EQ(pr.stats.channels, 3);
+        for (std::size_t i = 0; i < p.patches.size(); ++i)
+            for (int c = 0; c < 3; ++c) {
+                double sum = 0.0;
+                for (int t = 0; t < pr.bins; ++t) sum += pr.at(i, t, c);
+                // Float accumulation over ~40 bounces and the steady solve's 1e-8: 1e-4 relative.
+                EXPECT_NEAR(sum, steady[i][c], 1e-4 * steady[i][c] + 1e-9) << "patch " << i << " channel " << c;
+            }
+    }
+}
+
+TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
+    // Bins of 10 m: every link of a 1 m cube has delay 0, so all the light lands in bin 0.
+    Scene scene;
+    scene.max_edge = 0.25;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{Vec3(0.3, 0.4, 0.5), Rgb::Constant(1.0)});
+    const Prepared p = prepare(scene);
+    const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
+    for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
+        SolverOptions options;
+        options.delay = mode;
+        const Profiles pr = solve(p, axis(4, 10.0), options);
+        EXPECT_GT(pr.stats.max_jacobi_iterations, 1);
+        for (std::size_t i = 0; i < p.patches.size(); ++i) {
+            double sum = 0.0;
+            for (int t = 0; t < pr.bins; ++t) sum += pr.at(i, t, 0);
+            EXPECT_NEAR(sum, steady[i][0], 1e-4 * steady[i][0]) << "patch " << i;
+        }
+    }
+}
+
+TEST(Solver, LinearDelaysKeepTheMeanArrivalTimeExact) {
+    // Two small facing squares 1.2345 bins apart; the emitter fires at path 0 (bin 0, whose mean is
+    // taken as the bin's start, as a delay is counted in whole bins from there).
+    const double w = 0.1, d = 1.2345 * w * 10;  // 12.345 bins
+    PatchSet patches;
+    const Vec3 lo[4] = {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0.01, 0.01, 0), Vec3(0, 0.01, 0)};
+    const Vec3 hi[4] = {Vec3(0, 0, d), Vec3(0, 0.01, d), Vec3(0.01, 0.01, d), Vec3(0.01, 0, d)};
+    add_patch(patches, lo, 4, Rgb::Constant(0.5), Rgb::Constant(1.0), 0);
+    add_patch(patches, hi, 4, Rgb::Constant(0.5), Rgb::Zero(), 1);
+    const Visibility vis(patches);
+    Prepared p;
+    p.patches = patches;
+    p.links = compute_links(patches, vis);
+    Scene scene;
+    p.emission = compute_emission(scene, patches, vis);
+    ASSERT_EQ(p.links.size(), 2u);
+    for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
+        SolverOptions options;
+        options.delay = mode;
+        options.max_bounces = 1;
+        const Profiles pr = solve(p, axis(40, w), options);
+        double mass = 0.0, moment = 0.0;
+        for (int t = 0; t < pr.bins; ++t) {
+            mass += pr.at(1, t, 0);
+            moment += t * pr.at(1, t, 0);
+        }
+        const double bins = double(p.links.distance[0]) / w;
+        EXPECT_NEAR(mass, 0.5 * p.links.ff[0] * M_PI, 1e-5 * mass);
+        if (mode == DelayMode::Linear)
+            EXPECT_NEAR(moment / mass, bins, 1e-5);
+        else
+            EXPECT_NEAR(moment / mass, std::round(bins), 1e-9);
+    }
+}
+
+TEST(Solver, LaserEnergyIsCountedOnce) {
+    // A laser into a closed cube of albedo a: the spot sends a P, and each later bounce keeps a of it,
+    // so the exitance power of all patches together is a P / (1 - a).
+    const double a = 0.5, power = 2.0;
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0, a);
+    Laser laser;
+    laser.origin = Vec3(0.5, 0.5, 0.9);
+    laser.direction = Vec3(0.1, 0.05, -1).normalized();
+    laser.power = Rgb::Constant(power);
+    scene.lights.push_back(laser);
+    const Prepared p = prepare(scene);
+    const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
+    double exitance = 0.0;
+    for (std::size_t i = 0; i < p.patches.size(); ++i) exitance += p.patches.area[i] * steady[i][0];
+    // 16 samples per patch integrate the point source's irradiance to about 1% near the spot.
+    EXPECT_NEAR(exitance, a * power / (1 - a), 0.01 * a * power / (1 - a));
+    // The spot's own patch shows a P / A once, in the bin of |origin - X|.
+    SolverOptions options;
+    options.max_bounces = 1;
+    options.bounce_terms = 1;
+    const Profiles pr = solve(p, axis(200, 0.05), options);
+    const LaserSpot spot = find_laser_spot(laser.origin, laser.direction, p.patches, Visibility(p.patches));
+    ASSERT_TRUE(spot.hit);
+    double seen = 0.0;
+    for (int t = 0; t < pr.bins; ++t) seen += pr.term(1, spot.patch, t, 0);
+    EXPECT_NEAR(seen, a * power / p.patches.area[spot.patch], 1e-5 * seen);
+    EXPECT_GT(pr.term(1, spot.patch, int(spot.path / 0.05), 0), 0.0);
+}
+
+TEST(Solver, OneAndTwoThreadsGiveIdenticalProfiles) {
+    Scene scene;
+    scene.max_edge = 0.2;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.8), Rgb::Constant(1.0)});
+    const Prepared p = prepare(scene);
+    SolverOptions one, two;
+    one.threads = 1;
+    two.threads = 2;
+    // Short blocks and fine bins exercise long links, short links and the same-bin iteration.
+    one.block_bins = two.block_bins = 8;
+    const Profiles a = solve(p, axis(300, 0.02), one), b = solve(p, axis(300, 0.02), two);
+    EXPECT_EQ(a.total, b.total);
+}
+
+TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {
+    Scene scene;
+    scene.max_edge = 0.25;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.8), Rgb::Constant(1.0)});
+    const Prepared p = prepare(scene);
+    const SolveStats short_run = solve_transient(p.patches, p.links, p.emission, axis(256, 0.02), {}, {});
+    const SolveStats long_run = solve_transient(p.patches, p.links, p.emission, axis(8192, 0.02), {}, {});
+    EXPECT_EQ(short_run.working_bytes, long_run.working_bytes);
+    EXPECT_EQ(short_run.ring_bins, long_run.ring_bins);
+}
+
+}  // namespace
+}  // namespace tprf
