@@ -1,17 +1,91 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
 #include "tprf/error.h"
+#include "tprf/render.h"
 #include "tprf/scene.h"
 
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <exception>
 #include <string>
+#include <string_view>
+
+#include <unistd.h>
+
+namespace {
+
+// A one-line progress bar on stderr with the time left, redrawn at most ten times a second.
+class ProgressBar {
+public:
+    // Drawn only on a terminal: a log file gets the summary alone, not hundreds of redraws.
+    explicit ProgressBar(bool quiet) : m_quiet(quiet || !isatty(fileno(stderr))) {}
+    ~ProgressBar() { finish(); }
+
+    void update(std::string_view phase, double fraction) {
+        if (m_quiet) return;
+        const auto now = std::chrono::steady_clock::now();
+        if (phase != m_phase) {
+            finish();
+            m_phase = phase;
+            m_start = now;
+            m_last = {};
+        }
+        if (fraction < 1.0 && now - m_last < std::chrono::milliseconds(100)) return;
+        m_last = now;
+        const double elapsed = std::chrono::duration<double>(now - m_start).count();
+        const int width = 30, filled = int(fraction * width + 0.5);
+        std::string bar(std::size_t(filled), '#');
+        bar.resize(std::size_t(width), '.');
+        char left[32] = "";
+        if (fraction > 0.02 && fraction < 1.0) std::snprintf(left, sizeof left, ", %.0f s left", elapsed * (1 - fraction) / fraction);
+        std::fprintf(stderr, "\r%-8s [%s] %3.0f%% %.1f s%s   ", m_phase.c_str(), bar.c_str(), 100 * fraction, elapsed, left);
+        std::fflush(stderr);
+        m_drawn = true;
+    }
+
+    void finish() {
+        if (m_drawn) std::fputc('\n', stderr);
+        m_drawn = false;
+    }
+
+private:
+    bool m_quiet;
+    bool m_drawn = false;
+    std::string m_phase;
+    std::chrono::steady_clock::time_point m_start{}, m_last{};
+};
+
+int run_info(const std::string& scene_file, int threads, bool quiet) {
+    const tprf::Scene scene = tprf::load_scene(scene_file);
+    ProgressBar bar(quiet);
+    tprf::PipelineOptions options;
+    options.threads = threads;
+    options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
+    const tprf::SceneSummary s = tprf::describe_scene(scene, options);
+    bar.finish();
+    if (s.dropped_degenerate > 0)
+        std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
+                     s.dropped_degenerate);
+    std::printf("scene    %s\n", scene_file.c_str());
+    std::printf("patches  %zu (max_edge %.6g m)\n", s.patches, s.max_edge);
+    std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
+                static_cast<unsigned long long>(s.pairs_tested));
+    std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
+    std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
+    return 0;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
     CLI::App app{"tprf: transient radiosity, light in flight"};
     app.require_subcommand(1);
     std::string scene_file;
+    int threads = 0;
+    bool quiet = false;
+    app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
+    app.add_flag("-q,--quiet", quiet, "no progress bar");
     auto* info = app.add_subcommand("info", "print patch count, link count, link memory and the time window");
     info->add_option("scene", scene_file, "scene JSON file")->required();
     try {
@@ -21,9 +95,8 @@ int main(int argc, char** argv) {
         return rc == 0 ? 0 : 2;
     }
     try {
-        const tprf::Scene scene = tprf::load_scene(scene_file);
-        std::printf("bins %d\n", scene.time.bins);
-        return 0;
+        if (info->parsed()) return run_info(scene_file, threads, quiet);
+        return 2;
     } catch (const tprf::Error& e) {
         std::fprintf(stderr, "tprf: error: %s\n", e.what());
         return 2;

@@ -1,0 +1,421 @@
+#include "tprf/scene.h"
+
+#include "tprf/error.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <fstream>
+#include <initializer_list>
+#include <iterator>
+#include <limits>
+#include <numbers>
+#include <string_view>
+#include <system_error>
+
+namespace tprf {
+
+double TimeAxis::to_metres(double value_in_unit) const {
+    // Picoseconds are of light travel, so a time converts to the optical path length it covers.
+    return unit == TimeUnit::Picoseconds ? value_in_unit * 1e-12 * kSpeedOfLight : value_in_unit;
+}
+
+double TimeAxis::bin_width_m() const { return to_metres(bin_width); }
+
+double TimeAxis::start_m() const { return to_metres(start); }
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// Relative tolerance below which two directions count as parallel: nearer than this, a rectangle or a
+// camera frame is numerically meaningless although not exactly degenerate.
+constexpr double kParallelTol = 1e-9;
+
+// Built by append: GCC 12 warns falsely (-Wrestrict) on `"\"" + std::string(s)`.
+std::string in_quotes(std::string_view s) {
+    std::string out;
+    out.reserve(s.size() + 2);
+    out.push_back('"');
+    out.append(s);
+    out.push_back('"');
+    return out;
+}
+
+bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
+
+// One JSON value with its path, so that every check can say where it failed.
+struct Node {
+    const json& j;
+    std::string path;
+    const fs::path& file;
+
+    [[noreturn]] void fail(std::string_view what) const { fail_input(file, path, what); }
+
+    void expect_object() const {
+        if (!j.is_object()) fail(std::string("expected an object, got ") + j.type_name());
+    }
+
+    std::size_t array_size() const {
+        if (!j.is_array()) fail(std::string("expected an array, got ") + j.type_name());
+        return j.size();
+    }
+
+    bool has(std::string_view key) const { return j.contains(key); }
+
+    Node child(std::string_view key) const {
+        expect_object();
+        const auto it = j.find(key);
+        if (it == j.end()) fail("missing key " + in_quotes(key));
+        return member(key, *it);
+    }
+
+    std::optional<Node> find(std::string_view key) const {
+        expect_object();
+        const auto it = j.find(key);
+        if (it == j.end()) return std::nullopt;
+        return member(key, *it);
+    }
+
+    Node at(std::size_t i) const { return Node{j.at(i), path + "[" + std::to_string(i) + "]", file}; }
+
+    // Unknown keys are errors rather than ignored, so that a misspelt optional key cannot silently fall
+    // back to its default.
+    void check_keys(std::initializer_list<std::string_view> allowed) const {
+        expect_object();
+        for (const auto& [key, value] : j.items()) {
+            if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
+            std::string list;
+            for (const std::string_view a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
+            member(key, value).fail("unknown key (allowed here: " + list + ")");
+        }
+    }
+
+    double number() const {
+        if (!j.is_number()) fail(std::string("expected a number, got ") + j.type_name());
+        const double v = j.get<double>();
+        if (!std::isfinite(v)) fail("expected a finite number");
+        return v;
+    }
+
+    int integer() const {
+        const double v = number();
+        if (v != std::floor(v)) fail("expected an integer");
+        if (v < std::numeric_limits<int>::min() || v > std::numeric_limits<int>::max()) fail("integer out of range");
+        return static_cast<int>(v);
+    }
+
+    bool boolean() const {
+        if (!j.is_boolean()) fail(std::string("expected true or false, got ") + j.type_name());
+        return j.get<bool>();
+    }
+
+    std::string string() const {
+        if (!j.is_string()) fail(std::string("expected a string, got ") + j.type_name());
+        return j.get<std::string>();
+    }
+
+    Vec3 vec3() const {
+        if (!j.is_array() || j.size() != 3) fail("expected an array of 3 numbers");
+        return Vec3(at(0).number(), at(1).number(), at(2).number());
+    }
+
+    // Colours are a grey number or an RGB triple (SPEC, "Scene file").
+    Rgb rgb() const {
+        if (j.is_number()) return Rgb::Constant(number());
+        if (!j.is_array() || j.size() != 3) fail("expected a number or an array of 3 numbers");
+        return Rgb(at(0).number(), at(1).number(), at(2).number());
+    }
+
+    Node member(std::string_view key, const json& value) const {
+        return Node{value, path.empty() ? std::string(key) : path + "." + std::string(key), file};
+    }
+};
+
+Rgb non_negative_rgb(const Node& n) {
+    const Rgb c = n.rgb();
+    if ((c < 0.0).any()) n.fail("must be >= 0");
+    return c;
+}
+
+double positive(const Node& n) {
+    const double v = n.number();
+    if (v <= 0.0) n.fail("must be > 0");
+    return v;
+}
+
+int positive_int(const Node& n) {
+    const int v = n.integer();
+    if (v <= 0) n.fail("must be > 0");
+    return v;
+}
+
+TimeAxis parse_time(const Node& n) {
+    n.check_keys({"bins", "bin_width", "start", "unit"});
+    TimeAxis t;
+    t.bins = positive_int(n.child("bins"));
+    t.bin_width = positive(n.child("bin_width"));
+    if (const auto start = n.find("start")) t.start = start->number();
+    if (const auto unit = n.find("unit")) {
+        const std::string u = unit->string();
+        if (u == "m")
+            t.unit = TimeUnit::Metres;
+        else if (u == "ps")
+            t.unit = TimeUnit::Picoseconds;
+        else
+            unit->fail("unknown time unit " + in_quotes(u) + " (expected \"m\" or \"ps\")");
+    }
+    return t;
+}
+
+Camera parse_camera(const Node& n) {
+    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
+    Camera c;
+    c.position = n.child("position").vec3();
+    const Node look_at = n.child("look_at");
+    c.look_at = look_at.vec3();
+    if (c.look_at == c.position) look_at.fail("equals camera.position, so there is no view direction");
+    const Node up = n.child("up");
+    c.up = up.vec3();
+    if (c.up.norm() == 0.0) up.fail("has zero length");
+    if (parallel(c.up, c.look_at - c.position)) up.fail("is parallel to the view direction (look_at - position)");
+    const Node fov = n.child("fov");
+    c.fov_deg = fov.number();
+    if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
+    c.width = positive_int(n.child("width"));
+    c.height = positive_int(n.child("height"));
+    if (const auto spp = n.find("spp")) c.spp = positive_int(*spp);
+    if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
+    return c;
+}
+
+Light parse_laser(const Node& n) {
+    n.check_keys({"type", "origin", "direction", "target", "power"});
+    Laser l;
+    l.origin = n.child("origin").vec3();
+    const auto direction = n.find("direction");
+    const auto target = n.find("target");
+    if (direction && target) n.fail("give either \"direction\" or \"target\", not both");
+    if (direction) {
+        const Vec3 d = direction->vec3();
+        if (d.norm() == 0.0) direction->fail("has zero length");
+        l.direction = d.normalized();
+    } else if (target) {
+        const Vec3 d = target->vec3() - l.origin;
+        if (d.norm() == 0.0) target->fail("equals origin, so there is no direction");
+        l.direction = d.normalized();
+    } else {
+        n.fail("missing key \"direction\" or \"target\"");
+    }
+    l.power = non_negative_rgb(n.child("power"));
+    return l;
+}
+
+Light parse_light(const Node& n) {
+    const Node type = n.child("type");
+    const std::string name = type.string();
+    if (name == "laser") return parse_laser(n);
+    if (name != "point") type.fail("unknown light type " + in_quotes(name) + " (expected \"point\" or \"laser\")");
+    n.check_keys({"type", "position", "intensity"});
+    PointLight p;
+    p.position = n.child("position").vec3();
+    p.intensity = non_negative_rgb(n.child("intensity"));
+    return p;
+}
+
+RectangleShape parse_rectangle(const Node& n) {
+    RectangleShape r;
+    r.origin = n.child("origin").vec3();
+    const Node u = n.child("u");
+    const Node v = n.child("v");
+    r.u = u.vec3();
+    r.v = v.vec3();
+    if (r.u.norm() == 0.0) u.fail("has zero length");
+    if (r.v.norm() == 0.0) v.fail("has zero length");
+    if (parallel(r.u, r.v)) v.fail("is parallel to u, so the rectangle has no area");
+    return r;
+}
+
+Eigen::Matrix4d parse_matrix(const Node& n) {
+    if (!n.j.is_array() || n.j.size() != 16) n.fail("expected an array of 16 numbers (row-major 4x4)");
+    Eigen::Matrix4d m;
+    for (Eigen::Index r = 0; r < 4; ++r)
+        for (Eigen::Index c = 0; c < 4; ++c) m(r, c) = n.at(static_cast<std::size_t>(4 * r + c)).number();
+    if (m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) n.fail("last row must be 0 0 0 1 (an affine transform)");
+    // Scale-relative, so that a tiny but uniform scale is not taken for a singular matrix.
+    const Eigen::Matrix3d a = m.topLeftCorner<3, 3>();
+    const double size = a.norm() / std::sqrt(3.0);
+    if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) n.fail("is singular");
+    return m;
+}
+
+Eigen::Matrix4d parse_transform(const Node& n) {
+    n.check_keys({"matrix", "translate", "scale", "rotate"});
+    if (const auto matrix = n.find("matrix")) {
+        if (n.has("translate") || n.has("scale") || n.has("rotate"))
+            n.fail("\"matrix\" cannot be combined with translate, scale or rotate");
+        return parse_matrix(*matrix);
+    }
+    Eigen::Affine3d t = Eigen::Affine3d::Identity();
+    if (const auto translate = n.find("translate")) t.translate(translate->vec3());
+    if (const auto rotate = n.find("rotate")) {
+        rotate->check_keys({"axis", "angle"});
+        const Node axis_node = rotate->child("axis");
+        const Vec3 axis = axis_node.vec3();
+        if (axis.norm() == 0.0) axis_node.fail("has zero length");
+        const double angle = rotate->child("angle").number() * std::numbers::pi / 180.0;
+        t.rotate(Eigen::AngleAxisd(angle, axis.normalized()));
+    }
+    if (const auto scale = n.find("scale")) {
+        const Vec3 s = scale->j.is_number() ? Vec3::Constant(scale->number()) : scale->vec3();
+        if ((s.array() == 0.0).any()) scale->fail("must not be 0 (the mesh would have no area)");
+        t.scale(s);
+    }
+    // Eigen's translate/rotate/scale multiply on the right, so building T, then R, then S gives T*R*S:
+    // scale applied first, then rotate, then translate.
+    return t.matrix();
+}
+
+fs::path parse_mesh_file(const Node& n) {
+    const std::string name = n.string();
+    if (name.empty()) n.fail("is empty");
+    fs::path p(name);
+    if (p.is_relative()) p = n.file.parent_path() / p;
+    // The mesh is read by a later stage; checking here reports a bad path with the scene's other errors.
+    std::error_code ec;
+    const fs::file_status st = fs::status(p, ec);
+    if (!fs::exists(st)) n.fail("mesh file " + p.string() + " does not exist");
+    if (!fs::is_regular_file(st)) n.fail("mesh file " + p.string() + " is not a regular file");
+    if (!std::ifstream(p, std::ios::binary)) n.fail("cannot read mesh file " + p.string());
+    return p;
+}
+
+Object parse_object(const Node& n) {
+    const Node type = n.child("type");
+    const std::string name = type.string();
+    Object o;
+    o.json_path = n.path;
+    if (name == "rectangle") {
+        n.check_keys({"type", "origin", "u", "v", "albedo", "emission", "two_sided"});
+        o.shape = parse_rectangle(n);
+    } else if (name == "mesh") {
+        n.check_keys({"type", "file", "transform", "albedo", "emission", "two_sided"});
+        MeshShape m;
+        m.file = parse_mesh_file(n.child("file"));
+        if (const auto transform = n.find("transform")) m.transform = parse_transform(*transform);
+        o.shape = std::move(m);
+    } else {
+        type.fail("unknown object type " + in_quotes(name) + " (expected \"rectangle\" or \"mesh\")");
+    }
+    if (const auto albedo = n.find("albedo")) {
+        o.albedo = albedo->rgb();
+        if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo->fail("must be in [0, 1]");
+    }
+    if (const auto emission = n.find("emission")) o.emission = non_negative_rgb(*emission);
+    if (const auto two_sided = n.find("two_sided")) o.two_sided = two_sided->boolean();
+    return o;
+}
+
+SolverSettings parse_solver(const Node& n) {
+    n.check_keys({"max_bounces", "delay", "bounces"});
+    SolverSettings s;
+    if (const auto max_bounces = n.find("max_bounces")) {
+        s.max_bounces = max_bounces->integer();
+        if (s.max_bounces < 0) max_bounces->fail("must be >= 0");
+    }
+    if (const auto delay = n.find("delay")) {
+        const std::string d = delay->string();
+        if (d == "nearest")
+            s.delay = DelayMode::Nearest;
+        else if (d == "linear")
+            s.delay = DelayMode::Linear;
+        else
+            delay->fail("unknown delay mode " + in_quotes(d) + " (expected \"nearest\" or \"linear\")");
+    }
+    if (const auto bounces = n.find("bounces")) s.bounces = bounces->boolean();
+    return s;
+}
+
+// nlohmann reports a byte offset; users need a line and column to find the mistake in an editor.
+std::string line_column(const std::string& text, std::size_t byte) {
+    const std::size_t before = std::min(byte == 0 ? 0 : byte - 1, text.size());
+    const auto prefix = std::string_view(text).substr(0, before);
+    const std::size_t line = 1 + static_cast<std::size_t>(std::count(prefix.begin(), prefix.end(), '\n'));
+    const std::size_t last_newline = prefix.rfind('\n');
+    const std::size_t column = last_newline == std::string_view::npos ? before + 1 : before - last_newline;
+    return "line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
+// nlohmann's own message starts with an exception id and its own position; keep only the reason.
+std::string reason(const nlohmann::json::exception& e) {
+    const std::string what = e.what();
+    const std::size_t column = what.find("column ");
+    const std::size_t colon = what.find(": ", column == std::string::npos ? 0 : column);
+    return colon == std::string::npos ? what : what.substr(colon + 2);
+}
+
+json parse_json(const std::string& text, const fs::path& file) {
+    try {
+        return json::parse(text);
+    } catch (const json::parse_error& e) {
+        fail_input(file, "", line_column(text, e.byte) + ": malformed JSON: " + reason(e));
+    } catch (const json::exception& e) {
+        // A number too large for a double (1e999) is out_of_range, which carries no position; the
+        // message quotes the token, so locate it.
+        std::string where;
+        const std::string what = e.what();
+        const std::size_t open = what.find('\'');
+        const std::size_t close = what.rfind('\'');
+        if (open != std::string::npos && close > open) {
+            const std::size_t at = text.find(what.substr(open + 1, close - open - 1));
+            if (at != std::string::npos) where = line_column(text, at + 1) + ": ";
+        }
+        fail_input(file, "", where + "invalid JSON: " + what.substr(what.find(']') + 2));
+    }
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
+    const json root = parse_json(text, file);
+    if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
+    const Node n{root, "", file};
+    n.check_keys({"time", "camera", "lights", "objects", "patches", "solver", "sensor"});
+
+    Scene scene;
+    scene.file = file;
+    scene.time = parse_time(n.child("time"));
+    if (const auto camera = n.find("camera")) scene.camera = parse_camera(*camera);
+    if (const auto lights = n.find("lights")) {
+        const std::size_t count = lights->array_size();
+        for (std::size_t i = 0; i < count; ++i) scene.lights.push_back(parse_light(lights->at(i)));
+    }
+    const Node objects = n.child("objects");
+    const std::size_t count = objects.array_size();
+    if (count == 0) objects.fail("must hold at least one object");
+    for (std::size_t i = 0; i < count; ++i) scene.objects.push_back(parse_object(objects.at(i)));
+    if (const auto patches = n.find("patches")) {
+        patches->check_keys({"max_edge"});
+        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = positive(*max_edge);
+    }
+    if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
+    if (const auto sensor = n.find("sensor")) {
+        sensor->expect_object();
+        scene.sensor = sensor->j;
+    }
+    return scene;
+}
+
+Scene load_scene(const std::filesystem::path& file) {
+    std::error_code ec;
+    // An ifstream opens a directory without complaint on POSIX and then reads nothing.
+    if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read scene file (it is a directory)");
+    std::ifstream in(file, std::ios::binary);
+    if (!in) fail_input(file, "", "cannot read scene file");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) fail_input(file, "", "cannot read scene file");
+    return parse_scene(text, file);
+}
+
+}  // namespace tprf
