@@ -76,11 +76,30 @@ int run_info(const std::string& scene_file, int threads, bool quiet) {
     return 0;
 }
 
+int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet) {
+    ProgressBar bar(quiet);
+    options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
+    const tprf::RenderReport r = tprf::render_file(scene_file, options);
+    bar.finish();
+    if (r.dropped_degenerate > 0)
+        std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
+                     r.dropped_degenerate);
+    if (!quiet)
+        std::fprintf(stderr,
+                     "tprf: %zu patches, %zu links, %dx%d pixels x %d bins in %.2f s (patches %.2f, links %.2f, "
+                     "solve %.2f, gather %.2f, write %.2f), peak %.0f MB -> %s\n",
+                     r.patches, r.links, r.width, r.height, r.bins, r.seconds.total, r.seconds.patches,
+                     r.seconds.links, r.seconds.solve, r.seconds.gather, r.seconds.write, r.peak_rss_mb,
+                     options.output.string().c_str());
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     CLI::App app{"tprf: transient radiosity, light in flight"};
     app.require_subcommand(1);
+    app.fallthrough();  // --threads and --quiet may also follow the subcommand
     std::string scene_file;
     int threads = 0;
     bool quiet = false;
@@ -88,6 +107,15 @@ int main(int argc, char** argv) {
     app.add_flag("-q,--quiet", quiet, "no progress bar");
     auto* info = app.add_subcommand("info", "print patch count, link count, link memory and the time window");
     info->add_option("scene", scene_file, "scene JSON file")->required();
+    tprf::RenderOptions render;
+    std::string output;
+    auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
+    rend->add_option("scene", scene_file, "scene JSON file")->required();
+    rend->add_option("-o,--output", output, "output directory (created if missing)")->required();
+    rend->add_flag("--patch-profiles", render.patch_profiles, "also write patches.csv, patch_transient.npy, patch_steady.npy");
+    rend->add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
+    rend->add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
+    rend->add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -96,6 +124,11 @@ int main(int argc, char** argv) {
     }
     try {
         if (info->parsed()) return run_info(scene_file, threads, quiet);
+        if (rend->parsed()) {
+            render.output = output;
+            render.threads = threads;
+            return run_render(scene_file, render, quiet);
+        }
         return 2;
     } catch (const tprf::Error& e) {
         std::fprintf(stderr, "tprf: error: %s\n", e.what());

@@ -1,11 +1,26 @@
 #include "tprf/render.h"
 
+#include "tprf/atomic_file.h"
+#include "tprf/camera.h"
+#include "tprf/emitters.h"
+#include "tprf/error.h"
+#include "tprf/film.h"
+#include "tprf/image_io.h"
 #include "tprf/links.h"
+#include "tprf/npy.h"
 #include "tprf/patches.h"
+#include "tprf/sequences.h"
+#include "tprf/solver.h"
+#include "tprf/steady.h"
 #include "tprf/visibility.h"
+
+#include <nlohmann/json.hpp>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
+#include <fstream>
+#include <memory>
 
 namespace tprf {
 namespace {
@@ -14,7 +29,219 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Outputs are written into a hidden staging folder inside the output directory, then moved into place
+// one by one once every one of them is complete; on failure the folder is removed.
+class Staging {
+public:
+    explicit Staging(const std::filesystem::path& out) : m_out(out) {
+        m_dir = out / (".tprf-staging-" + std::to_string(::getpid()));
+        std::filesystem::remove_all(m_dir);
+        std::filesystem::create_directories(m_dir);
+    }
+    ~Staging() {
+        std::error_code ec;
+        std::filesystem::remove_all(m_dir, ec);
+    }
+    Staging(const Staging&) = delete;
+    Staging& operator=(const Staging&) = delete;
+
+    std::filesystem::path path(const std::string& name) {
+        m_names.push_back(name);
+        return m_dir / name;
+    }
+
+    void publish() {
+        for (const std::string& name : m_names) {
+            const std::filesystem::path to = m_out / name;
+            if (std::filesystem::is_directory(to)) std::filesystem::remove_all(to);
+            std::filesystem::rename(m_dir / name, to);
+        }
+    }
+    const std::vector<std::string>& names() const { return m_names; }
+
+private:
+    std::filesystem::path m_out, m_dir;
+    std::vector<std::string> m_names;
+};
+
+const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
+
+void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
+    AtomicFile file(path);
+    {
+        std::ofstream out(file.temp_path());
+        out.precision(9);
+        out << "id,object,cx,cy,cz,nx,ny,nz,area\n";
+        for (std::size_t i = 0; i < p.size(); ++i)
+            out << i << ',' << p.object[i] << ',' << p.centroid[i].x() << ',' << p.centroid[i].y() << ','
+                << p.centroid[i].z() << ',' << p.normal[i].x() << ',' << p.normal[i].y() << ',' << p.normal[i].z()
+                << ',' << p.area[i] << '\n';
+        if (!out) throw Error(path.string() + ": cannot write");
+    }
+    file.commit();
+}
+
+void write_json(const std::filesystem::path& path, const nlohmann::json& j) {
+    AtomicFile file(path);
+    {
+        std::ofstream out(file.temp_path());
+        out << j.dump(2) << '\n';
+        if (!out) throw Error(path.string() + ": cannot write");
+    }
+    file.commit();
+}
+
 }  // namespace
+
+double peak_rss_mb() {
+    std::ifstream status("/proc/self/status");
+    std::string line;
+    while (std::getline(status, line))
+        if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+    return 0.0;
+}
+
+RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options) {
+    using clock = std::chrono::steady_clock;
+    const auto start = clock::now();
+    RenderReport report;
+    const Scene scene = load_scene(scene_file);
+    if (!scene.camera) fail_input(scene_file, "camera", "missing: tprf render needs a camera");
+    if (options.video && !have_ffmpeg())
+        throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
+    const Camera& camera = *scene.camera;
+    check_output_dir(options.output);
+    report.seconds.load = seconds_since(start);
+
+    auto t = clock::now();
+    PatchStats patch_stats;
+    PatchOptions patch_options;
+    patch_options.progress = options.progress;
+    const PatchSet patches = build_patches(scene, patch_options, &patch_stats);
+    report.patches = patches.size();
+    report.dropped_degenerate = patch_stats.dropped_degenerate;
+    report.seconds.patches = seconds_since(t);
+
+    t = clock::now();
+    const Visibility visibility(patches);
+    LinkOptions link_options;
+    link_options.threads = options.threads;
+    link_options.progress = options.progress;
+    const Links links = compute_links(patches, visibility, link_options);
+    report.links = links.size();
+    report.seconds.links = seconds_since(t);
+
+    t = clock::now();
+    EmitterOptions emitter_options;
+    emitter_options.threads = options.threads;
+    const Emission emission = compute_emission(scene, patches, visibility, emitter_options);
+    CameraOptions camera_options;
+    camera_options.threads = options.threads;
+    camera_options.progress = options.progress;
+    const CameraGather gather = prepare_camera(camera, scene, patches, visibility, camera_options);
+    double gather_seconds = seconds_since(t);
+
+    Staging staging(options.output);
+    const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
+    const std::size_t N = patches.size();
+    report.bins = scene.time.bins;
+    report.width = camera.width;
+    report.height = camera.height;
+    NpyMap cube(staging.path("transient.npy"), {H, W, T, 3});
+    TransientFilm film(gather, emission, scene.time, scene.solver.delay, cube.data(), -1, false, options.threads);
+    std::unique_ptr<NpyMap> patch_cube;
+    if (options.patch_profiles) patch_cube = std::make_unique<NpyMap>(staging.path("patch_transient.npy"),
+                                                                     std::vector<std::size_t>{N, T, 3});
+
+    SolverOptions solver_options;
+    solver_options.delay = scene.solver.delay;
+    solver_options.max_bounces = scene.solver.max_bounces;
+    const int terms = scene.solver.bounces ? (scene.solver.max_bounces >= 0 ? scene.solver.max_bounces + 1 : 5) : 0;
+    solver_options.bounce_terms = terms;
+    solver_options.threads = options.threads;
+    solver_options.progress = options.progress;
+    std::vector<std::unique_ptr<NpyMap>> term_cubes;
+    std::vector<std::unique_ptr<TransientFilm>> term_films;
+    for (int k = 0; k < terms; ++k) {
+        term_cubes.push_back(std::make_unique<NpyMap>(staging.path("transient_bounce_" + std::to_string(k) + ".npy"),
+                                                      std::vector<std::size_t>{H, W, T, 3}));
+        const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
+        term_films.push_back(std::make_unique<TransientFilm>(gather, emission, scene.time, scene.solver.delay,
+                                                             term_cubes.back()->data(), k, tail, options.threads));
+    }
+
+    t = clock::now();
+    double sink_seconds = 0.0;
+    const SolveStats stats = solve_transient(patches, links, emission, scene.time, solver_options, [&](const SolveBlock& b) {
+        const auto s0 = clock::now();
+        film.add_block(b);
+        for (auto& f : term_films) f->add_block(b);
+        if (patch_cube)
+            for (std::size_t i = 0; i < N; ++i)
+                std::copy_n(b.radiosity + i * std::size_t(b.bins) * 3, std::size_t(b.bins) * 3,
+                            patch_cube->data() + (i * T + std::size_t(b.first_bin)) * 3);
+        sink_seconds += seconds_since(s0);
+    });
+    report.link_bin_updates = stats.link_bin_updates;
+    report.seconds.solve = seconds_since(t) - sink_seconds;
+    t = clock::now();
+    film.add_direct();
+    for (auto& f : term_films) f->add_direct();
+    report.seconds.gather = gather_seconds + sink_seconds + seconds_since(t);
+
+    t = clock::now();
+    if (options.progress) options.progress("write", 0.0);
+    const std::vector<Rgb> steady = solve_steady(patches, links, emission, scene.solver.max_bounces);
+    const std::vector<float> image = steady_image(gather, emission, steady);
+    write_npy(staging.path("steady.npy"), {H, W, 3}, image.data());
+    write_exr(staging.path("steady.exr"), camera.width, camera.height, image.data());
+    const std::vector<std::uint8_t> preview = tonemap(camera.width, camera.height, image.data());
+    write_png(staging.path("preview.png"), camera.width, camera.height, preview.data());
+    if (options.patch_profiles) {
+        std::vector<float> flat(N * 3);
+        for (std::size_t i = 0; i < N; ++i)
+            for (int c = 0; c < 3; ++c) flat[i * 3 + std::size_t(c)] = float(steady[i][c]);
+        write_npy(staging.path("patch_steady.npy"), {N, 3}, flat.data());
+        write_patches_csv(staging.path("patches.csv"), patches);
+    }
+    if (options.frames) write_frames(staging.path("frames"), cube.data(), camera.height, camera.width, scene.time.bins);
+    if (options.streaks) write_streaks(staging.path("streaks"), cube.data(), camera.height, camera.width, scene.time.bins);
+    if (options.video) {
+        const std::filesystem::path mp4 = staging.path("light_in_flight.mp4");
+        write_video(mp4, mp4.parent_path() / ".video-frames", cube.data(), camera.height, camera.width, scene.time.bins);
+    }
+    cube.commit();
+    if (patch_cube) patch_cube->commit();
+    for (auto& c : term_cubes) c->commit();
+    report.seconds.write = seconds_since(t);
+    report.seconds.total = seconds_since(start);
+    report.peak_rss_mb = peak_rss_mb();
+
+    nlohmann::json j;
+    j["version"] = TPRF_VERSION;
+    j["scene"] = scene_file.string();
+    j["patches"] = report.patches;
+    j["links"] = report.links;
+    j["bins"] = report.bins;
+    j["time"] = {{"bins", scene.time.bins}, {"bin_width", scene.time.bin_width}, {"start", scene.time.start},
+                 {"unit", unit_name(scene.time.unit)}};
+    j["camera"] = {{"width", camera.width}, {"height", camera.height}, {"spp", camera.spp}, {"unwarp", camera.unwarp}};
+    j["solver"] = {{"delay", scene.solver.delay == DelayMode::Linear ? "linear" : "nearest"},
+                   {"max_bounces", scene.solver.max_bounces}, {"bounce_terms", terms},
+                   {"channels", stats.channels}, {"block_bins", stats.block_bins}, {"ring_bins", stats.ring_bins},
+                   {"working_mb", double(stats.working_bytes) / 1e6}, {"link_bin_updates", stats.link_bin_updates}};
+    j["seconds"] = {{"load", report.seconds.load},   {"patches", report.seconds.patches},
+                    {"links", report.seconds.links}, {"solve", report.seconds.solve},
+                    {"gather", report.seconds.gather}, {"write", report.seconds.write},
+                    {"total", report.seconds.total}};
+    j["peak_rss_mb"] = report.peak_rss_mb;
+    j["dropped_degenerate_faces"] = report.dropped_degenerate;
+    write_json(staging.path("render.json"), j);
+    staging.publish();
+    report.written = staging.names();
+    if (options.progress) options.progress("write", 1.0);
+    return report;
+}
 
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) {
     SceneSummary s;

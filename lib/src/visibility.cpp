@@ -66,6 +66,9 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
     rtcSetDeviceErrorFunction(im.device, embree_error, nullptr);
     im.scene = rtcNewScene(im.device);
     rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_HIGH);
+    // Watertight: a ray through the shared edge of two triangles (a quad's diagonal, a patch border)
+    // must hit one of them, or pixels and visibility rays leak through the surface.
+    rtcSetSceneFlags(im.scene, RTC_SCENE_FLAG_ROBUST);
 
     Eigen::AlignedBox<double, 3> box;
     for (const Vec3& v : patches.vertices) box.extend(v);

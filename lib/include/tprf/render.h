@@ -5,7 +5,9 @@
 #include "tprf/scene.h"
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
+#include <vector>
 
 namespace tprf {
 
@@ -29,6 +31,42 @@ struct SceneSummary {
 
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
+
+/// What `tprf render` writes besides the cube and the steady image (SPEC.md, "Output directory").
+struct RenderOptions : PipelineOptions {
+    std::filesystem::path output;   ///< the output directory (created if missing)
+    bool patch_profiles = false;    ///< patches.csv, patch_transient.npy, patch_steady.npy
+    bool frames = false;            ///< frames/frame_NNNNN.exr, one per bin
+    bool streaks = false;           ///< streaks/row_NNNN.exr, one x-t image per image row
+    bool video = false;             ///< light_in_flight.mp4 through ffmpeg
+};
+
+/// Seconds spent in each phase of a render (render.json's `seconds`).
+struct PhaseSeconds {
+    double load = 0, patches = 0, links = 0, solve = 0, gather = 0, write = 0, total = 0;
+};
+
+/// What a render did.
+struct RenderReport {
+    std::size_t patches = 0;
+    std::size_t links = 0;
+    int bins = 0;
+    int width = 0;
+    int height = 0;
+    int dropped_degenerate = 0;
+    PhaseSeconds seconds;
+    double peak_rss_mb = 0.0;
+    std::uint64_t link_bin_updates = 0;
+    std::vector<std::string> written;  ///< files and folders written, relative to the output directory
+};
+
+/// Renders a scene file into options.output: loads and validates the scene (tprf::Error before any
+/// file is written), builds patches and links, solves, gathers the camera's view, and writes every
+/// output under a staging name first, moving them all into place only once all are complete.
+RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options);
+
+/// Peak resident memory of this process so far, MB (VmHWM).
+double peak_rss_mb();
 
 /// The scene's time window in words, e.g. "1024 bins of 0.005 m from 0 m to 5.12 m (0 to 17.08 ns)".
 std::string describe_time(const TimeAxis& time);
