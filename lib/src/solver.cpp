@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <exception>
 
@@ -81,6 +82,54 @@ bool scene_is_grey(const PatchSet& patches, const Emission& emission) {
         if (!grey(p.energy)) return false;
     return true;
 }
+
+// The long-link kernel for one receiver and one source tile: the block's sums stay in registers
+// (C * BT floats) across all the receiver's links, and go to memory once at the end.
+template <int C, int BT>
+void gather_long(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, double inv_bin,
+                 DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, float* acc) {
+    float local[C * BT] = {};
+    for (; k < end && links.source[k] < source_end; ++k) {
+        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k]);
+        if (t.lag < BT) continue;
+        const float* __restrict h =
+            ring + std::size_t(links.source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * C;
+        for (int e = 0; e < C * BT; ++e) local[e] += t.w0 * h[e + C] + t.w1 * h[e];
+    }
+    for (int e = 0; e < C * BT; ++e) acc[e] += local[e];
+}
+
+// The same for block lengths without a specialisation.
+void gather_long_any(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, double inv_bin,
+                     DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, int C, int bt,
+                     float* __restrict acc) {
+    const int len = C * bt;
+    for (; k < end && links.source[k] < source_end; ++k) {
+        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k]);
+        if (t.lag < bt) continue;
+        const float* __restrict h =
+            ring + std::size_t(links.source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * std::size_t(C);
+        for (int e = 0; e < len; ++e) acc[e] += t.w0 * h[e + C] + t.w1 * h[e];
+    }
+}
+
+using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, double, DelayMode,
+                              const float*, std::size_t, int, std::int64_t, float*);
+
+GatherKernel pick_kernel(int C, int bt) {
+    if (C == 1 && bt == 16) return gather_long<1, 16>;
+    if (C == 1 && bt == 32) return gather_long<1, 32>;
+    if (C == 1 && bt == 64) return gather_long<1, 64>;
+    if (C == 3 && bt == 16) return gather_long<3, 16>;
+    if (C == 3 && bt == 32) return gather_long<3, 32>;
+    return nullptr;
+}
+
+// Tiles of the long-link pass (see step 1 of the march): 32 receivers' block accumulators (at most
+// 32 x 3 x bt floats) and 128 sources' rings (128 x ring x 3 floats, under 1 MB for rings of 512) fit
+// in a core's L2 together.
+constexpr std::size_t kReceiverTile = 32;
+constexpr std::size_t kSourceTile = 128;
 
 int next_pow2(int v) {
     int r = 1;
@@ -175,52 +224,73 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
     // Layer that an emission pulse of order `order` enters, besides the total (-1: none).
     auto exact_layer = [&](int order) { return order < plan.exact ? order : -1; };
 
+    const std::size_t receiver_tiles = (n + kReceiverTile - 1) / kReceiverTile;
+    const GatherKernel kernel = pick_kernel(C, bt);
     std::exception_ptr failure;
     std::atomic<bool> stop{false};
     float jacobi_change = 0.0f, jacobi_largest = 0.0f;  // shared by the threads' max-reductions
     std::atomic<int> worst_iterations{0};
 
+    using clock = std::chrono::steady_clock;
+    auto lap = [](clock::time_point& since) {
+        const auto now = clock::now();
+        const double s = std::chrono::duration<double>(now - since).count();
+        since = now;
+        return s;
+    };
 #pragma omp parallel num_threads(threads)
     for (std::int64_t blk = 0; blk < blocks; ++blk) {
         if (stop.load()) break;
         const std::int64_t b0 = b_begin + blk * bt;
+        // Phase times from thread 0: every phase ends at a barrier, so they are the phases' wall times.
+        const bool timer = omp_get_thread_num() == 0;
+        clock::time_point since = clock::now();
 
         // 1. Per receiver: the block's emission, and every long link (lag >= bt) as one contiguous
-        //    multiply-add over the block, reading history that is already final.
-#pragma omp for schedule(dynamic, 32)
-        for (std::size_t i = 0; i < n; ++i) {
-            for (int l = 0; l < L; ++l) {
-                std::fill_n(acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-                std::fill_n(emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-            }
-            for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
-                const Pulse& p = emission.pulses[k];
-                const std::int64_t b = pulse_bin(p);
-                if (!p.propagates || b < b0 || b >= b0 + bt) continue;
-                const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
-                const int targets[2] = {plan.total, exact_layer(p.order)};
-                for (int l : targets)
-                    if (l >= 0)
-                        for (int c = 0; c < C; ++c) emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
-            }
-            for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-                const Taps t = link_taps(links.distance[k], inv_bin, options.delay, links.ff[k]);
-                if (t.lag < bt) continue;
-                const std::size_t j = links.source[k];
+        //    multiply-add over the block, reading history that is already final. Receivers go in
+        //    tiles and their links (sorted by source) in source tiles, so that the histories one
+        //    source tile reads stay in cache for all the tile's receivers.
+#pragma omp for schedule(dynamic, 1)
+        for (std::size_t tile = 0; tile < receiver_tiles; ++tile) {
+            const std::size_t i0 = tile * kReceiverTile, i1 = std::min(n, i0 + kReceiverTile);
+            std::uint64_t cursor[kReceiverTile];
+            for (std::size_t i = i0; i < i1; ++i) {
                 for (int l = 0; l < L; ++l) {
-                    const int src = plan.source[std::size_t(l)];
-                    if (src < 0) continue;
-                    float* __restrict a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
-                    const float* __restrict h = ring_at(src, j, b0 - t.lag - 1);
-                    const int len = bt * C;
-                    if (t.w1 == 0.0f) {
-                        for (int e = 0; e < len; ++e) a[e] += t.w0 * h[e + C];
-                    } else {
-                        for (int e = 0; e < len; ++e) a[e] += t.w0 * h[e + C] + t.w1 * h[e];
+                    std::fill_n(acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+                    std::fill_n(emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+                }
+                for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
+                    const Pulse& p = emission.pulses[k];
+                    const std::int64_t b = pulse_bin(p);
+                    if (!p.propagates || b < b0 || b >= b0 + bt) continue;
+                    const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
+                    const int targets[2] = {plan.total, exact_layer(p.order)};
+                    for (int l : targets)
+                        if (l >= 0)
+                            for (int c = 0; c < C; ++c) emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
+                }
+            }
+            for (int l = 0; l < L; ++l) {
+                const int src = plan.source[std::size_t(l)];
+                if (src < 0) continue;
+                const float* ring_src = rings[std::size_t(src)].data();
+                for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = links.row[i];
+                for (std::size_t s0 = 0; s0 < n; s0 += kSourceTile) {
+                    const std::uint32_t s1 = std::uint32_t(std::min(n, s0 + kSourceTile));
+                    for (std::size_t i = i0; i < i1; ++i) {
+                        float* a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
+                        if (kernel)
+                            kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin, options.delay, ring_src,
+                                   stride, rmask, b0, a);
+                        else
+                            gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin, options.delay,
+                                            ring_src, stride, rmask, b0, C, bt, a);
                     }
                 }
             }
         }
+
+        if (timer) stats.seconds_long += lap(since);
 
         // 2. Bin by bin: short links, then the same-bin system by Jacobi iteration.
         for (int o = 0; o < bt; ++o) {
@@ -298,6 +368,8 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
             }
         }
 
+        if (timer) stats.seconds_short += lap(since);
+
         // 3. Hand the block's bins inside the window to the sink.
 #pragma omp single
         {
@@ -370,11 +442,13 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
                 stop.store(true);
             }
         }
+        if (timer) stats.seconds_sink += lap(since);
     }
     if (failure) std::rethrow_exception(failure);
 
     stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(fed_layers) * std::uint64_t(blocks) * std::uint64_t(bt);
     stats.max_jacobi_iterations = worst_iterations.load();
+    stats.short_links = short_links.size();
     return stats;
 }
 
