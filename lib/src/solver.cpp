@@ -25,12 +25,14 @@ struct Taps {
     float w1;
 };
 
-inline Taps link_taps(float distance, double inv_bin, DelayMode mode, float ff) {
-    const double d = double(distance) * inv_bin;
-    if (mode == DelayMode::Nearest) return {int(std::floor(d + 0.5)), ff, 0.0f};
-    const double lag = std::floor(d);
-    const double frac = d - lag;
-    return {int(lag), float(double(ff) * (1.0 - frac)), float(double(ff) * frac)};
+// In single precision: it runs once per link and block in the hot loop. Delays stay below 2^24 bins, so
+// the fraction keeps at least a few thousandths of a bin.
+inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
+    const float d = distance * inv_bin;
+    if (mode == DelayMode::Nearest) return {int(d + 0.5f), ff, 0.0f};
+    const int lag = int(d);  // d >= 0: truncation is the floor
+    const float frac = d - float(lag);
+    return {lag, ff * (1.0f - frac), ff * frac};
 }
 
 struct ShortLink {
@@ -86,7 +88,7 @@ bool scene_is_grey(const PatchSet& patches, const Emission& emission) {
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
-void gather_long(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, double inv_bin,
+void gather_long(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, float inv_bin,
                  DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, float* acc) {
     float local[C * BT] = {};
     for (; k < end && links.source[k] < source_end; ++k) {
@@ -100,7 +102,7 @@ void gather_long(const Links& links, std::uint64_t& k, std::uint64_t end, std::u
 }
 
 // The same for block lengths without a specialisation.
-void gather_long_any(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, double inv_bin,
+void gather_long_any(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, float inv_bin,
                      DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, int C, int bt,
                      float* __restrict acc) {
     const int len = C * bt;
@@ -113,7 +115,7 @@ void gather_long_any(const Links& links, std::uint64_t& k, std::uint64_t end, st
     }
 }
 
-using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, double, DelayMode,
+using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, std::size_t, int, std::int64_t, float*);
 
 GatherKernel pick_kernel(int C, int bt) {
@@ -149,6 +151,7 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
     const int C = scene_is_grey(patches, emission) ? 1 : 3;
     const double bin_m = time.bin_width_m(), start_m = time.start_m();
     const double inv_bin = 1.0 / bin_m;
+    const float inv_bin_f = float(inv_bin);
     const LayerPlan plan = plan_layers(options.max_bounces, options.bounce_terms);
     const int L = plan.layers();
 
@@ -159,7 +162,7 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
     int max_lag = 0;
     for (std::size_t i = 0; i < n; ++i) {
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-            const Taps t = link_taps(links.distance[k], inv_bin, options.delay, links.ff[k]);
+            const Taps t = link_taps(links.distance[k], inv_bin_f, options.delay, links.ff[k]);
             max_lag = std::max(max_lag, t.lag);
             if (t.lag >= bt) continue;
             if (t.lag == 0) {
@@ -280,10 +283,10 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
                     for (std::size_t i = i0; i < i1; ++i) {
                         float* a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
                         if (kernel)
-                            kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin, options.delay, ring_src,
+                            kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay, ring_src,
                                    stride, rmask, b0, a);
                         else
-                            gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin, options.delay,
+                            gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay,
                                             ring_src, stride, rmask, b0, C, bt, a);
                     }
                 }
