@@ -36,12 +36,6 @@ void subpixel(int s, int spp, double& sx, double& sy) {
     sy = std::fmod(0.5 + a2 * (s + 1), 1.0);
 }
 
-double circumradius(const PatchSet& patches, std::size_t i) {
-    double r = 0.0;
-    for (std::size_t k = 0; k < patches.corners(i); ++k) r = std::max(r, (patches.polygon(i)[k] - patches.centroid[i]).norm());
-    return r;
-}
-
 }  // namespace
 
 Vec3 camera_ray(const Camera& camera, double column, double row) {
@@ -109,13 +103,7 @@ CameraGather prepare_camera(const Camera& camera, const Scene& scene, const Patc
     if (options.progress) options.progress("camera", 0.6);
 
     // 3. Taps (interpolated profiles) and exact direct light, per pixel.
-    std::vector<LaserSpot> spots;
-    std::vector<Rgb> laser_power;
-    for (const Light& light : scene.lights)
-        if (const auto* laser = std::get_if<Laser>(&light)) {
-            spots.push_back(find_laser_spot(laser->origin, laser->direction, patches, vis));
-            laser_power.push_back(laser->power);
-        }
+    const std::vector<LaserSpot> spots = find_laser_spots(scene, patches, vis);
     // Emissive patches as bounding spheres: a lower bound on their distance to any point.
     std::vector<std::size_t> emissive;
     for (std::size_t i = 0; i < n; ++i)
@@ -182,7 +170,7 @@ CameraGather prepare_camera(const Camera& camera, const Scene& scene, const Patc
             const Vec3& nx = patches.normal[spot.patch];
             const Vec3 source = spot.point + vis.epsilon() * nx;
             const Vec3 towards_x = (hit.point - source).normalized();
-            const Rgb intensity = patches.albedo[spot.patch] * laser_power[l] * std::max(0.0, nx.dot(towards_x)) / M_PI;
+            const Rgb intensity = patches.albedo[spot.patch] * spot.power * std::max(0.0, nx.dot(towards_x)) / M_PI;
             add_point_source(source, spot.path, intensity, 2);
         }
         if (!arrivals.empty()) {

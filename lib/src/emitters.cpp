@@ -15,13 +15,9 @@
 namespace tprf {
 namespace {
 
-// Stratified sample s of n = g * g over the patch (uniform in area for triangles and parallelograms).
+// Stratified sample s of n = g * g over the patch.
 Vec3 sample_patch(const PatchSet& patches, std::size_t i, int s, int g) {
-    const double u = (s % g + 0.5) / g, v = (s / g + 0.5) / g;
-    const Vec3* p = patches.polygon(i);
-    if (patches.corners(i) == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
-    const double su = std::sqrt(u);
-    return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
+    return patch_point(patches, i, (s % g + 0.5) / g, (s / g + 0.5) / g);
 }
 
 // Direct light from a point source at `source` with radiant intensity `intensity(direction)`,
@@ -66,19 +62,23 @@ LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Patch
     return spot;
 }
 
+std::vector<LaserSpot> find_laser_spots(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
+    std::vector<LaserSpot> spots;
+    for (const Light& light : scene.lights)
+        if (const auto* laser = std::get_if<Laser>(&light)) {
+            spots.push_back(find_laser_spot(laser->origin, laser->direction, patches, visibility));
+            spots.back().power = laser->power;
+        }
+    return spots;
+}
+
 Emission compute_emission(const Scene& scene, const PatchSet& patches, const Visibility& vis,
                           const EmitterOptions& options) {
     const std::size_t n = patches.size();
     const int grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.samples, 1))))));
     const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
 
-    std::vector<LaserSpot> spots;
-    std::vector<Rgb> laser_power;
-    for (const Light& light : scene.lights)
-        if (const auto* laser = std::get_if<Laser>(&light)) {
-            spots.push_back(find_laser_spot(laser->origin, laser->direction, patches, vis));
-            laser_power.push_back(laser->power);
-        }
+    const std::vector<LaserSpot> spots = find_laser_spots(scene, patches, vis);
 
     std::vector<std::vector<Pulse>> per_patch(n);
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
@@ -97,7 +97,7 @@ Emission compute_emission(const Scene& scene, const PatchSet& patches, const Vis
         for (std::size_t l = 0; l < spots.size(); ++l) {
             const LaserSpot& spot = spots[l];
             if (!spot.hit) continue;
-            const Rgb reflected = patches.albedo[spot.patch] * laser_power[l];  // W leaving X
+            const Rgb reflected = patches.albedo[spot.patch] * spot.power;  // W leaving X
             if (i == spot.patch) {
                 Pulse p;
                 p.path = spot.path;

@@ -41,17 +41,9 @@ double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
 constexpr std::array<int, 16> kStrataA = {0, 10, 8, 2, 5, 15, 13, 7, 1, 11, 9, 3, 4, 14, 12, 6};
 constexpr std::array<int, 16> kStrataB = {10, 0, 2, 8, 15, 5, 7, 13, 11, 1, 3, 9, 14, 4, 6, 12};
 
-// A point of a triangle or quad from (u, v) in the unit square: bilinear for quads, the
-// square-root map for triangles (uniform in area).
-Vec3 polygon_point(const Vec3* p, std::size_t count, double u, double v) {
-    if (count == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
-    const double su = std::sqrt(u);
-    return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
-}
-
 Vec3 stratified_point(const PatchSet& patches, std::size_t i, int stratum, double ju, double jv, double lift) {
     const double u = ((stratum % 4) + ju) / 4.0, v = ((stratum / 4) + jv) / 4.0;
-    return polygon_point(patches.polygon(i), patches.corners(i), u, v) + lift * patches.normal[i];
+    return patch_point(patches, i, u, v) + lift * patches.normal[i];
 }
 
 // True when some corner of b lies strictly in front of a's plane.
@@ -65,10 +57,8 @@ bool any_in_front(const PatchSet& patches, std::size_t a, std::size_t b, double 
 }
 
 std::vector<double> circumradii(const PatchSet& patches) {
-    std::vector<double> r(patches.size(), 0.0);
-    for (std::size_t i = 0; i < patches.size(); ++i)
-        for (std::size_t k = 0; k < patches.corners(i); ++k)
-            r[i] = std::max(r[i], (patches.polygon(i)[k] - patches.centroid[i]).norm());
+    std::vector<double> r(patches.size());
+    for (std::size_t i = 0; i < patches.size(); ++i) r[i] = circumradius(patches, i);
     return r;
 }
 

@@ -112,6 +112,19 @@ void emit_triangle(PatchSet& patches, const Triangle& t, std::size_t n, const Ob
 
 }  // namespace
 
+Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v) {
+    const Vec3* p = patches.polygon(i);
+    if (patches.corners(i) == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
+    const double su = std::sqrt(u);
+    return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
+}
+
+double circumradius(const PatchSet& patches, std::size_t i) {
+    double r = 0.0;
+    for (std::size_t k = 0; k < patches.corners(i); ++k) r = std::max(r, (patches.polygon(i)[k] - patches.centroid[i]).norm());
+    return r;
+}
+
 void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const Rgb& albedo,
                const Rgb& emission, std::uint32_t object) {
     TPRF_CHECK_LE(std::size_t{3}, count);

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <sstream>
 
 namespace tprf {
 namespace {
@@ -66,29 +67,25 @@ private:
 
 const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
 
-void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
+void write_text(const std::filesystem::path& path, const std::string& text) {
     AtomicFile file(path);
     {
         std::ofstream out(file.temp_path());
-        out.precision(9);
-        out << "id,object,cx,cy,cz,nx,ny,nz,area\n";
-        for (std::size_t i = 0; i < p.size(); ++i)
-            out << i << ',' << p.object[i] << ',' << p.centroid[i].x() << ',' << p.centroid[i].y() << ','
-                << p.centroid[i].z() << ',' << p.normal[i].x() << ',' << p.normal[i].y() << ',' << p.normal[i].z()
-                << ',' << p.area[i] << '\n';
+        out << text;
         if (!out) throw Error(path.string() + ": cannot write");
     }
     file.commit();
 }
 
-void write_json(const std::filesystem::path& path, const nlohmann::json& j) {
-    AtomicFile file(path);
-    {
-        std::ofstream out(file.temp_path());
-        out << j.dump(2) << '\n';
-        if (!out) throw Error(path.string() + ": cannot write");
-    }
-    file.commit();
+void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
+    std::ostringstream out;
+    out.precision(9);
+    out << "id,object,cx,cy,cz,nx,ny,nz,area\n";
+    for (std::size_t i = 0; i < p.size(); ++i)
+        out << i << ',' << p.object[i] << ',' << p.centroid[i].x() << ',' << p.centroid[i].y() << ','
+            << p.centroid[i].z() << ',' << p.normal[i].x() << ',' << p.normal[i].y() << ',' << p.normal[i].z() << ','
+            << p.area[i] << '\n';
+    write_text(path, out.str());
 }
 
 }  // namespace
@@ -236,7 +233,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
                     {"total", report.seconds.total}};
     j["peak_rss_mb"] = report.peak_rss_mb;
     j["dropped_degenerate_faces"] = report.dropped_degenerate;
-    write_json(staging.path("render.json"), j);
+    write_text(staging.path("render.json"), j.dump(2) + "\n");
     staging.publish();
     report.written = staging.names();
     if (options.progress) options.progress("write", 1.0);

@@ -49,11 +49,15 @@ struct LaserSpot {
     std::uint32_t patch = 0;
     Vec3 point = Vec3::Zero();  ///< metres
     double path = 0.0;          ///< |origin - point|, metres
+    Rgb power = Rgb::Zero();    ///< the laser's power, W per channel
 };
 
 /// Where a laser's ray first meets the scene (a back side absorbs: hit stays false).
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const PatchSet& patches,
                           const Visibility& visibility);
+
+/// The spots of every laser of the scene, in the order of `scene.lights` (lasers only).
+std::vector<LaserSpot> find_laser_spots(const Scene& scene, const PatchSet& patches, const Visibility& visibility);
 
 /// Computes the pulses that every emitter of the scene (lights and emissive patches) sends into the
 /// patch system. Shadow rays decide visibility from point lights and the laser point.

@@ -47,6 +47,13 @@ struct PatchOptions {
 /// the scene gives none). A two-sided object yields each patch twice, once per side.
 PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
 
+/// The point of patch i at (u, v) in the unit square: bilinear on a quad (uniform in area for the
+/// parallelograms of rectangle grids), the square-root map on a triangle (uniform in area).
+Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v);
+
+/// Largest distance from patch i's centroid to its corners, metres.
+double circumradius(const PatchSet& patches, std::size_t i);
+
 /// Appends one patch (a convex planar polygon, counter-clockwise about its front) with its attributes;
 /// computes centroid, normal and area. Used by build_patches and by tests that build patch sets by hand.
 void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const Rgb& albedo,
