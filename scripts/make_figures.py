@@ -1,0 +1,254 @@
+#!/usr/bin/python3
+"""Makes light-in-flight figures from a tprf render directory.
+
+Usage: scripts/make_figures.py OUTDIR FIGDIR PREFIX [--frames N] [--energy F] [--scale S]
+                               [--bins-per-frame K] [--row Y] [--streak-energy G]
+
+OUTDIR is a directory written by `tprf render` (transient.npy, preview.png, render.json).
+Writes into FIGDIR:
+
+  PREFIX-streak.png   the x-t slice of the middle image row (or row Y): x runs left to right,
+                      time runs top to bottom (one pixel row per time bin), from just before the
+                      row's first light to the bin by which a fraction G (--streak-energy,
+                      default 0.98) of the row's light has arrived. Ticks in the left
+                      margin mark the bins of the frame strip.
+  PREFIX-frames.png   N frames (default 8) side by side, evenly spaced in time from the first
+                      bin that holds any light to the bin by which a fraction F (default 0.9) of
+                      all the light in the cube has arrived. Every frame is tone-mapped with one
+                      common exposure: the 99th percentile of the cube's non-zero luminance maps
+                      to 1. With --bins-per-frame K each frame sums K consecutive bins.
+  PREFIX-preview.png  a copy of OUTDIR/preview.png (enlarged by S when S > 1).
+
+The streak image uses the same exposure rule applied to its own slice (so a dim middle row is
+still visible). Tone mapping: linear scale, clip to [0, 1], sRGB encoding, 8 bits.
+Images narrower than 200 pixels are enlarged x2 with nearest-neighbour sampling unless
+--scale is given. Uses only numpy and the standard library.
+"""
+
+import argparse
+import json
+import pathlib
+import shutil
+import struct
+import sys
+import zlib
+
+import numpy as np
+
+LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+
+
+# ----------------------------------------------------------------------------------------- PNG I/O
+
+def write_png(path, rgb8):
+    """Writes an (H, W, 3) uint8 array as an 8-bit RGB PNG (atomically)."""
+    rgb8 = np.ascontiguousarray(rgb8, dtype=np.uint8)
+    h, w, c = rgb8.shape
+    assert c == 3
+    raw = np.zeros((h, 1 + 3 * w), dtype=np.uint8)  # filter byte 0 (None) on every row
+    raw[:, 1:] = rgb8.reshape(h, 3 * w)
+
+    def chunk(tag, data):
+        body = tag + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+
+    png = (b"\x89PNG\r\n\x1a\n"
+           + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(raw.tobytes(), 9))
+           + chunk(b"IEND", b""))
+    path = pathlib.Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(png)
+    tmp.replace(path)
+
+
+def read_png(path):
+    """Reads an 8-bit, non-interlaced grey/grey+alpha/RGB/RGBA PNG into (H, W, 3) uint8."""
+    data = pathlib.Path(path).read_bytes()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{path}: not a PNG")
+    pos, idat, ihdr = 8, [], None
+    while pos < len(data):
+        (n,) = struct.unpack(">I", data[pos:pos + 4])
+        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        pos += 12 + n
+        if tag == b"IHDR":
+            ihdr = struct.unpack(">IIBBBBB", body)
+        elif tag == b"IDAT":
+            idat.append(body)
+        elif tag == b"IEND":
+            break
+    w, h, depth, ctype, _, _, interlace = ihdr
+    channels = {0: 1, 2: 3, 4: 2, 6: 4}.get(ctype)
+    if depth != 8 or channels is None or interlace:
+        raise ValueError(f"{path}: unsupported PNG (depth {depth}, colour type {ctype})")
+    raw = np.frombuffer(zlib.decompress(b"".join(idat)), dtype=np.uint8)
+    stride = w * channels
+    out = np.zeros((h, stride), dtype=np.uint8)
+    prev = np.zeros(stride, dtype=np.int32)
+    for y in range(h):
+        ftype = raw[y * (stride + 1)]
+        line = raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)].astype(np.int32)
+        cur = np.zeros(stride, dtype=np.int32)
+        if ftype == 0:
+            cur = line
+        elif ftype == 2:
+            cur = (line + prev) & 0xFF
+        elif ftype in (1, 3, 4):
+            for i in range(stride):  # left-dependent filters: byte by byte
+                a = cur[i - channels] if i >= channels else 0
+                b = prev[i]
+                c = prev[i - channels] if i >= channels else 0
+                if ftype == 1:
+                    pred = a
+                elif ftype == 3:
+                    pred = (a + b) // 2
+                else:
+                    p = a + b - c
+                    pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                    pred = a if (pa <= pb and pa <= pc) else (b if pb <= pc else c)
+                cur[i] = (line[i] + pred) & 0xFF
+        else:
+            raise ValueError(f"{path}: bad PNG filter {ftype}")
+        out[y] = cur
+        prev = cur
+    img = out.reshape(h, w, channels)
+    if channels in (1, 2):
+        return np.repeat(img[:, :, :1], 3, axis=2)
+    return img[:, :, :3].copy()
+
+
+# ------------------------------------------------------------------------------------ tone mapping
+
+def srgb8(linear):
+    """Linear values (already exposed, 1 = white) -> sRGB-encoded uint8."""
+    x = np.clip(linear, 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.round(s * 255.0).astype(np.uint8)
+
+
+def nonzero_percentile(lum, q=99.0):
+    """q-th percentile of the positive entries of lum (1.0 when there are none)."""
+    v = lum[lum > 0]
+    if v.size == 0:
+        return 1.0
+    p = float(np.percentile(v, q))
+    return p if p > 0 else float(v.max())
+
+
+def enlarge(img, s):
+    return img if s == 1 else np.repeat(np.repeat(img, s, axis=0), s, axis=1)
+
+
+# ------------------------------------------------------------------------------------------- main
+
+def main(argv):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("outdir", type=pathlib.Path)
+    ap.add_argument("figdir", type=pathlib.Path)
+    ap.add_argument("prefix")
+    ap.add_argument("--frames", type=int, default=8, help="frames in the strip (default 8)")
+    ap.add_argument("--energy", type=float, default=0.9,
+                    help="the strip ends where this fraction of the light has arrived (default 0.9)")
+    ap.add_argument("--bins-per-frame", type=int, default=1, help="bins summed per frame (default 1)")
+    ap.add_argument("--streak-energy", type=float, default=0.98,
+                    help="the streak ends where this fraction of the row's light has arrived (0.98)")
+    ap.add_argument("--row", type=int, default=-1, help="image row of the streak (default: middle)")
+    ap.add_argument("--scale", type=int, default=0,
+                    help="nearest-neighbour enlargement (default: 2 for images under 200 px wide)")
+    a = ap.parse_args(argv)
+    if a.frames < 1 or a.bins_per_frame < 1 or not 0 < a.energy <= 1 or not 0 < a.streak_energy <= 1:
+        ap.error("--frames and --bins-per-frame must be >= 1, --energy and --streak-energy in (0, 1]")
+
+    cube = np.load(a.outdir / "transient.npy", mmap_mode="r")
+    if cube.ndim != 4 or cube.shape[3] != 3:
+        sys.exit(f"{a.outdir}/transient.npy: expected shape (H, W, T, 3), got {cube.shape}")
+    h, w, t, _ = cube.shape
+    scale = a.scale if a.scale > 0 else (2 if w < 200 else 1)
+    a.figdir.mkdir(parents=True, exist_ok=True)
+
+    # Luminance cube (H, W, T), row block by row block to bound memory.
+    lum = np.empty((h, w, t), dtype=np.float32)
+    for y0 in range(0, h, 16):
+        lum[y0:y0 + 16] = np.asarray(cube[y0:y0 + 16], dtype=np.float32) @ LUMA
+    exposure = nonzero_percentile(lum)
+
+    # Time range: first lit bin .. the bin by which `energy` of the light has arrived.
+    per_bin = lum.sum(axis=(0, 1), dtype=np.float64)
+    lit = np.nonzero(per_bin > 0)[0]
+    if lit.size == 0:
+        sys.exit(f"{a.outdir}/transient.npy holds no light")
+    cum = np.cumsum(per_bin)
+    first = int(lit[0])
+    last = int(min(np.searchsorted(cum, a.energy * cum[-1]), t - 1))
+    last = max(last, first + a.frames * a.bins_per_frame - 1)
+    last = min(last, t - 1)
+    starts = np.linspace(first, max(first, last - a.bins_per_frame + 1), a.frames).round().astype(int)
+
+    # Frame strip.
+    gap = 2 * scale
+    tiles = []
+    for k0 in starts:
+        frame = np.asarray(cube[:, :, k0:k0 + a.bins_per_frame, :], dtype=np.float32).sum(axis=2)
+        tiles.append(enlarge(srgb8(frame / exposure), scale))
+        tiles.append(np.full((h * scale, gap, 3), 40, dtype=np.uint8))
+    strip = np.concatenate(tiles[:-1], axis=1)
+    write_png(a.figdir / f"{a.prefix}-frames.png", strip)
+
+    # Streak image: one row, x across, time down, over the row's own lit range.
+    row = h // 2 if a.row < 0 else a.row
+    if not 0 <= row < h:
+        sys.exit(f"--row {row}: the image has rows 0..{h - 1}")
+    row_bins = lum[row].sum(axis=0, dtype=np.float64)
+    row_lit = np.nonzero(row_bins > 0)[0]
+    if row_lit.size == 0:
+        sys.exit(f"image row {row} holds no light; pick another with --row")
+    row_cum = np.cumsum(row_bins)
+    r_first = int(row_lit[0])
+    r_last = int(min(np.searchsorted(row_cum, a.streak_energy * row_cum[-1]), t - 1))
+    k_lo = max(0, r_first - max(2, (r_last - r_first) // 20))
+    k_hi = max(r_last, r_first + 16) + 1
+    k_hi = min(k_hi, t)
+    xt = np.asarray(cube[row, :, k_lo:k_hi, :], dtype=np.float32)         # (W, K, 3)
+    streak_exposure = nonzero_percentile(xt @ LUMA)
+    streak = srgb8(np.transpose(xt, (1, 0, 2)) / streak_exposure)          # (K, W, 3)
+    margin = np.zeros((streak.shape[0], 4, 3), dtype=np.uint8)
+    for k0 in starts:                                                      # ticks at frame bins
+        if k_lo <= k0 < k_hi:
+            margin[k0 - k_lo:k0 - k_lo + a.bins_per_frame, :3] = 160
+    streak = np.concatenate([margin, streak], axis=1)
+    streak = np.repeat(streak, scale, axis=1)  # widen only: one pixel row per bin
+    write_png(a.figdir / f"{a.prefix}-streak.png", streak)
+
+    # Preview copy.
+    preview = a.outdir / "preview.png"
+    dst = a.figdir / f"{a.prefix}-preview.png"
+    if preview.exists():
+        if scale == 1:
+            shutil.copyfile(preview, dst)
+        else:
+            write_png(dst, enlarge(read_png(preview), scale))
+
+    # Report the time axis of what was drawn.
+    info = {}
+    try:
+        info = json.loads((a.outdir / "render.json").read_text()).get("time", {})
+    except (OSError, ValueError):
+        pass
+    start, width, unit = info.get("start", 0.0), info.get("bin_width", 1.0), info.get("unit", "bin")
+
+    def when(k):
+        return f"bin {k} ({start + k * width:.4g} {unit})"
+
+    print(f"{a.prefix}: cube {h}x{w}x{t}, exposure (99th pct of non-zero luminance) {exposure:.4g}")
+    print(f"  frames at " + ", ".join(when(int(k)) for k in starts)
+          + (f", {a.bins_per_frame} bins each" if a.bins_per_frame > 1 else ""))
+    print(f"  streak: image row {row}, {when(k_lo)} .. {when(k_hi - 1)}, exposure {streak_exposure:.4g}")
+    for name in ("streak", "frames", "preview"):
+        p = a.figdir / f"{a.prefix}-{name}.png"
+        if p.exists():
+            print(f"  wrote {p} ({p.stat().st_size // 1024} KB)")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
