@@ -316,18 +316,18 @@ TEST_F(Io, WritersRejectEmptyImages) {
 }
 
 TEST_F(Io, TonemapMapsTheHighPercentileToWhite) {
-    // 199 grey pixels 0.01, 0.02, ..., 1.99 and one outlier of 100 (200 pixels in all): the nearest
-    // rank of the 99.5th percentile is ceil(0.995 * 200) = 199, the value 1.99, so 1.99 is white
-    // (255) and 1.98 just below (1.98 / 1.99 encodes to 254.4); the outlier saturates.
+    // 194 grey pixels 0.01, 0.02, ..., 1.94 and six outliers of 100 (200 pixels in all): the nearest
+    // rank of the 97th percentile is ceil(0.97 * 200) = 194, the value 1.94, so 1.94 is white (255)
+    // and 1.93 just below (1.93 / 1.94 encodes to 254.4); the outliers saturate.
     std::vector<float> rgb;
-    for (int i = 1; i < 200; ++i) rgb.insert(rgb.end(), 3, static_cast<float>(i) * 0.01f);
-    rgb.insert(rgb.end(), 3, 100.0f);
+    for (int i = 1; i < 195; ++i) rgb.insert(rgb.end(), 3, static_cast<float>(i) * 0.01f);
+    for (int i = 0; i < 6; ++i) rgb.insert(rgb.end(), 3, 100.0f);
     const std::vector<std::uint8_t> out = tprf::tonemap(200, 1, rgb.data());
     ASSERT_EQ(out.size(), 600u);
-    EXPECT_EQ(out[3 * 198], 255);
-    EXPECT_EQ(out[3 * 197], 254);
+    EXPECT_EQ(out[3 * 193], 255);
+    EXPECT_EQ(out[3 * 192], 254);
     EXPECT_EQ(out[3 * 199], 255);
-    EXPECT_EQ(out[0], std::lround(255.0 * srgb(0.01 / 1.99)));
+    EXPECT_EQ(out[0], std::lround(255.0 * srgb(0.01 / 1.94)));
 }
 
 TEST_F(Io, TonemapWeighsLuminanceAndHonoursAFixedExposure) {

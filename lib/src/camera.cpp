@@ -36,6 +36,23 @@ void subpixel(int s, int spp, double& sx, double& sy) {
     sy = std::fmod(0.5 + a2 * (s + 1), 1.0);
 }
 
+// Distance from x to a convex planar polygon: to its plane when x projects inside, else to the
+// nearest edge.
+double distance_to_polygon(const Vec3& x, const Vec3* poly, std::size_t count, const Vec3& normal) {
+    const Vec3 projected = x - normal.dot(x - poly[0]) * normal;
+    bool inside = true;
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < count; ++k) {
+        const Vec3& a = poly[k];
+        const Vec3& b = poly[(k + 1) % count];
+        if ((b - a).cross(projected - a).dot(normal) < 0) inside = false;
+        const Vec3 ab = b - a;
+        const double s = std::clamp((x - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+        best = std::min(best, (a + s * ab - x).norm());
+    }
+    return inside ? (x - projected).norm() : best;
+}
+
 }  // namespace
 
 Vec3 camera_ray(const Camera& camera, double column, double row) {
@@ -104,7 +121,6 @@ CameraGather prepare_camera(const Camera& camera, const Scene& scene, const Patc
 
     // 3. Taps (interpolated profiles) and exact direct light, per pixel.
     const std::vector<LaserSpot> spots = find_laser_spots(scene, patches, vis);
-    // Emissive patches as bounding spheres: a lower bound on their distance to any point.
     std::vector<std::size_t> emissive;
     for (std::size_t i = 0; i < n; ++i)
         if ((patches.emission[i] > 0.0).any()) emissive.push_back(i);
@@ -114,7 +130,7 @@ CameraGather prepare_camera(const Camera& camera, const Scene& scene, const Patc
             if (const auto* point = std::get_if<PointLight>(&light)) best = std::min(best, (point->position - x).norm());
         for (const LaserSpot& spot : spots)
             if (spot.hit) best = std::min(best, spot.path + (spot.point - x).norm());
-        for (std::size_t e : emissive) best = std::min(best, std::max(0.0, (patches.centroid[e] - x).norm() - radius[e]));
+        for (std::size_t e : emissive) best = std::min(best, distance_to_polygon(x, patches.polygon(e), patches.corners(e), patches.normal[e]));
         return std::isfinite(best) ? best : 0.0;
     };
     const double per_sample = 1.0 / spp;

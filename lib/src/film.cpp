@@ -7,6 +7,7 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace tprf {
@@ -50,7 +51,9 @@ void TransientFilm::add_block(const SolveBlock& block) {
             const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
             float* v = m_indirect.data() + (i * bins + std::size_t(b)) * 3;
-            for (int c = 0; c < 3; ++c) v[c] -= float(p.energy[c]);
+            // What is left is the light of other orders in that bin; float cancellation must not
+            // turn an exact zero into a small negative radiance.
+            for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(p.energy[c]));
         }
 
     const std::int64_t T = m_time.bins;

@@ -94,8 +94,8 @@ std::vector<std::uint8_t> tonemap(int width, int height, const float* rgb, doubl
             if (finite_pixel(p) && luminance(p) > 0.0) lum.push_back(luminance(p));
         }
         if (lum.empty()) return out;
-        // Nearest rank: the smallest value with at least 99.5% of the values at or below it.
-        const std::size_t rank = (995 * lum.size() + 999) / 1000;
+        // Nearest rank: the smallest value with at least 97% of the values at or below it.
+        const std::size_t rank = (970 * lum.size() + 999) / 1000;
         const auto nth = lum.begin() + static_cast<std::ptrdiff_t>(rank - 1);
         std::nth_element(lum.begin(), nth, lum.end());
         scale = 1.0 / *nth;

@@ -22,9 +22,10 @@ void write_png(const std::filesystem::path& path, int width, int height, const s
 ///
 /// Each channel is multiplied by a scale, clamped to [0, 1], encoded with the sRGB transfer curve
 /// (IEC 61966-2-1) and rounded to 0..255. With `exposure_scale` > 0 that is the scale. Otherwise the
-/// scale is automatic: 1 / L, where L is the 99.5th percentile (nearest rank) of the luminance
-/// 0.2126 R + 0.7152 G + 0.0722 B over the pixels whose luminance is positive, so that a few very
-/// bright pixels (a light source, a laser spot) saturate rather than darken the whole image; an
+/// scale is automatic: 1 / L, where L is the 97th percentile (nearest rank) of the luminance
+/// 0.2126 R + 0.7152 G + 0.0722 B over the pixels whose luminance is positive, so that the bright
+/// pixels of a light source or a laser spot (a few percent of a view into a lit room) saturate
+/// rather than darken the whole image; an
 /// image without any positive luminance stays black. A pixel with a NaN or infinite channel becomes
 /// black and is left out of the percentile, so that one bad sample never blanks or crashes a preview.
 std::vector<std::uint8_t> tonemap(int width, int height, const float* rgb, double exposure_scale = 0.0);
