@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <numeric>
 
 namespace tprf {
@@ -27,7 +28,7 @@ Prepared prepare(const Scene& scene) {
     p.patches = build_patches(scene);
     const Visibility vis(p.patches);
     p.links = compute_links(p.patches, vis);
-    p.emission = compute_emission(scene, p.patches, vis);
+    p.emission = compute_emission(scene, p.patches, p.links, vis);
     return p;
 }
 
@@ -192,8 +193,8 @@ TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
 }
 
 TEST(Solver, LinearDelaysKeepTheMeanArrivalTimeExact) {
-    // Two small facing squares 1.2345 bins apart; the emitter fires at path 0 (bin 0, whose mean is
-    // taken as the bin's start, as a delay is counted in whole bins from there).
+    // Two small facing squares 12.345 bins apart; a pulse at path 0 on the lower one (bin 0) travels
+    // through their link, so the upper one's mean arrival bin must be the delay itself.
     const double w = 0.1, d = 1.2345 * w * 10;  // 12.345 bins
     PatchSet patches;
     const Vec3 lo[4] = {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0.01, 0.01, 0), Vec3(0, 0.01, 0)};
@@ -204,8 +205,12 @@ TEST(Solver, LinearDelaysKeepTheMeanArrivalTimeExact) {
     Prepared p;
     p.patches = patches;
     p.links = compute_links(patches, vis);
-    Scene scene;
-    p.emission = compute_emission(scene, patches, vis);
+    // The pulse by hand, so that it goes through the link (an emissive patch's own light would be
+    // sent with exact point-to-point paths instead).
+    p.emission.row = {0, 1, 1};
+    Pulse pulse;
+    pulse.energy = Rgb::Constant(M_PI);
+    p.emission.pulses = {pulse};
     ASSERT_EQ(p.links.size(), 2u);
     for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
         SolverOptions options;
@@ -224,6 +229,46 @@ TEST(Solver, LinearDelaysKeepTheMeanArrivalTimeExact) {
         else
             EXPECT_NEAR(moment / mass, std::round(bins), 1e-9);
     }
+}
+
+TEST(Solver, AreaLightPulsesCarryExactPathsAndTheFormFactorsEnergy) {
+    // A 0.4 m emitter square facing down at height 1, a 0.4 m receiver on the floor offset by 0.6:
+    // each one patch, so a centroid delay would put all light at one path.
+    Scene scene;
+    scene.max_edge = 0.5;
+    scene.objects.push_back(test::rectangle(Vec3(0.6, 0, 0), 0.4 * Vec3::UnitX(), 0.4 * Vec3::UnitY(), 0.5));
+    scene.objects.push_back(test::rectangle(Vec3(0, 0, 1), 0.4 * Vec3::UnitY(), 0.4 * Vec3::UnitX(), 0.5, 2.0));
+    const Prepared p = prepare(scene);
+    ASSERT_EQ(p.patches.size(), 2u);
+    ASSERT_EQ(p.links.size(), 2u);
+    // The receiver's pulses: order 1, between the nearest and farthest corner pairs, many paths.
+    double lo = 1e9, hi = 0.0;
+    for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b) {
+            const double d = (p.patches.polygon(0)[a] - p.patches.polygon(1)[b]).norm();
+            lo = std::min(lo, d);
+            hi = std::max(hi, d);
+        }
+    Rgb total = Rgb::Zero();
+    std::vector<double> paths;
+    for (std::uint64_t k = p.emission.row[0]; k < p.emission.row[1]; ++k) {
+        const Pulse& pulse = p.emission.pulses[k];
+        EXPECT_EQ(pulse.order, 1);
+        EXPECT_GE(pulse.path, lo);
+        EXPECT_LE(pulse.path, hi);
+        paths.push_back(pulse.path);
+        total += pulse.energy;
+    }
+    // Not one centroid path: 2 x 2 points per side give distinct paths (7 here, by symmetry in y)
+    // spanning a good part of the geometric range.
+    std::sort(paths.begin(), paths.end());
+    EXPECT_GE(std::unique(paths.begin(), paths.end()) - paths.begin(), 4);
+    EXPECT_GT(paths.back() - paths.front(), 0.4 * (hi - lo));  // points at 1/4 and 3/4 of each side
+    // Energy: albedo F B_e with the exact (link) form factor, to float precision.
+    EXPECT_NEAR(total[0], 0.5 * p.links.ff[0] * M_PI * 2.0, 1e-6 * total[0]);
+    // The emitter shows its own exitance at path 0 and does not send it through the links again.
+    ASSERT_EQ(p.emission.row[2] - p.emission.row[1], 1u);
+    EXPECT_FALSE(p.emission.pulses[p.emission.row[1]].propagates);
 }
 
 TEST(Solver, LaserEnergyIsCountedOnce) {

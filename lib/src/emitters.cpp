@@ -1,6 +1,7 @@
 #include "tprf/emitters.h"
 
 #include "tprf/error.h"
+#include "tprf/links.h"
 #include "tprf/patches.h"
 #include "tprf/scene.h"
 #include "tprf/visibility.h"
@@ -48,6 +49,45 @@ void light_from_point(const PatchSet& patches, const Visibility& vis, std::size_
     }
 }
 
+// The direct light of emissive patch e at patch i through link k: the energy the exact form factor
+// gives, spread over the paths between g x g points of each patch by the point-to-point kernel.
+void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t i, std::size_t e, double ff,
+                     int g, std::vector<Pulse>& out) {
+    const Rgb energy = patches.albedo[i] * ff * M_PI * patches.emission[e];  // albedo F B_e
+    if (!(energy > 0.0).any()) return;
+    const Vec3 &ni = patches.normal[i], &ne = patches.normal[e];
+    const double lift = vis.epsilon();
+    const std::size_t first = out.size();
+    double total = 0.0;
+    for (int s = 0; s < g * g; ++s) {
+        const Vec3 x = sample_patch(patches, i, s, g);
+        for (int k = 0; k < g * g; ++k) {
+            const Vec3 y = sample_patch(patches, e, k, g);
+            const Vec3 d = y - x;
+            const double r2 = d.squaredNorm();
+            const double w = std::max(0.0, ni.dot(d)) * std::max(0.0, -ne.dot(d)) / (r2 * r2);
+            if (!(w > 0.0) || vis.occluded(x + lift * ni, y + lift * ne)) continue;
+            Pulse p;
+            p.path = std::sqrt(r2);
+            p.energy = Rgb::Constant(w);
+            p.order = 1;
+            out.push_back(p);
+            total += w;
+        }
+    }
+    if (total <= 0.0) {
+        // Every sampled pair is blocked, yet the link's rays found a gap: the centroid path carries it.
+        out.resize(first);
+        Pulse p;
+        p.path = (patches.centroid[i] - patches.centroid[e]).norm();
+        p.energy = energy;
+        p.order = 1;
+        out.push_back(p);
+        return;
+    }
+    for (std::size_t k = first; k < out.size(); ++k) out[k].energy = energy * (out[k].energy[0] / total);
+}
+
 }  // namespace
 
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const PatchSet& /*patches*/,
@@ -72,11 +112,12 @@ std::vector<LaserSpot> find_laser_spots(const Scene& scene, const PatchSet& patc
     return spots;
 }
 
-Emission compute_emission(const Scene& scene, const PatchSet& patches, const Visibility& vis,
+Emission compute_emission(const Scene& scene, const PatchSet& patches, const Links& links, const Visibility& vis,
                           const EmitterOptions& options) {
     const std::size_t n = patches.size();
     const int grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.samples, 1))))));
     const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+    const int area_grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.area_samples, 1))))));
 
     const std::vector<LaserSpot> spots = find_laser_spots(scene, patches, vis);
 
@@ -85,11 +126,16 @@ Emission compute_emission(const Scene& scene, const PatchSet& patches, const Vis
     for (std::size_t i = 0; i < n; ++i) {
         std::vector<Pulse>& out = per_patch[i];
         if ((patches.emission[i] > 0.0).any()) {
+            // Seen at path 0; its onward light is sent below with exact paths, not through the links.
             Pulse p;
             p.energy = M_PI * patches.emission[i];  // exitance of a Lambertian emitter: pi L_e
             p.order = 0;
+            p.propagates = false;
             out.push_back(p);
         }
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
+            if ((patches.emission[links.source[k]] > 0.0).any())
+                light_from_area(patches, vis, i, links.source[k], links.ff[k], area_grid, out);
         for (const Light& light : scene.lights)
             if (const auto* point = std::get_if<PointLight>(&light))
                 light_from_point(patches, vis, i, point->position, 0.0, 1, grid,

@@ -131,7 +131,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     t = clock::now();
     EmitterOptions emitter_options;
     emitter_options.threads = options.threads;
-    const Emission emission = compute_emission(scene, patches, visibility, emitter_options);
+    const Emission emission = compute_emission(scene, patches, links, visibility, emitter_options);
     CameraOptions camera_options;
     camera_options.threads = options.threads;
     camera_options.progress = options.progress;

@@ -2,10 +2,13 @@
 /// Emitters: the light that enters the patch system, as sparse pulses with exact arrival times.
 ///
 /// Every emitter fires one delta pulse at t = 0 (SPEC). What reaches patch i is a handful of pulses,
-/// each at its own exact optical path (not the patch centroid's): an emissive patch starts its own
-/// pulse at path 0; a point light's pulse reaches each stratified sample point of a patch at
-/// |light - x|; a laser deposits its power at the point X it hits, and X then lights the other
-/// patches as a Lambertian point source, with delays |origin - X| + |X - x|.
+/// each at its own exact optical path (not the patch centroid's): a point light's pulse reaches each
+/// stratified sample point x of a patch at |light - x|; a laser deposits its power at the point X it
+/// hits, and X then lights the other patches as a Lambertian point source, with delays
+/// |origin - X| + |X - x|; an emissive patch shows its own pulse at path 0, and its direct light
+/// reaches each linked patch with the energy of the exact form factor, spread over the paths
+/// |y - x| between stratified points y of the emitter and x of the receiver in proportion to the
+/// point-to-point kernel cos cos / r^2 (visibility included).
 
 #include "tprf/geometry.h"
 #include "tprf/progress.h"
@@ -17,6 +20,7 @@ namespace tprf {
 
 struct Scene;
 struct PatchSet;
+struct Links;
 class Visibility;
 
 /// One pulse of exitance at a patch.
@@ -40,6 +44,7 @@ struct Emission {
 /// Options of the emitter stage.
 struct EmitterOptions {
     int samples = 16;           ///< stratified points per patch for point lights and the laser point
+    int area_samples = 4;       ///< stratified points per patch on each side of an emitter's link
     int threads = 0;            ///< 0: all cores
 };
 
@@ -61,7 +66,7 @@ std::vector<LaserSpot> find_laser_spots(const Scene& scene, const PatchSet& patc
 
 /// Computes the pulses that every emitter of the scene (lights and emissive patches) sends into the
 /// patch system. Shadow rays decide visibility from point lights and the laser point.
-Emission compute_emission(const Scene& scene, const PatchSet& patches, const Visibility& visibility,
-                          const EmitterOptions& options = {});
+Emission compute_emission(const Scene& scene, const PatchSet& patches, const Links& links,
+                          const Visibility& visibility, const EmitterOptions& options = {});
 
 }  // namespace tprf
