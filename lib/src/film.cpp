@@ -76,16 +76,32 @@ void TransientFilm::add_block(const SolveBlock& block) {
             }
             // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
             const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
+            const std::int64_t base = block.first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
             const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
-            for (std::size_t t = 0; t < bins; ++t) {
-                const std::int64_t to0 = std::max(block.first_bin + std::int64_t(t) + whole, first);
-                const std::int64_t to1 = std::max(block.first_bin + std::int64_t(t) + whole + 1, first);
-                if (to0 >= T) break;
-                if (to0 >= 0)
-                    for (int c = 0; c < 3; ++c) out[std::size_t(to0) * 3 + std::size_t(c)] += w0 * b[t * 3 + std::size_t(c)];
-                if (w1 != 0.0f && to1 >= 0 && to1 < T)
-                    for (int c = 0; c < 3; ++c) out[std::size_t(to1) * 3 + std::size_t(c)] += w1 * b[t * 3 + std::size_t(c)];
+            // Bins t whose w0 target base + t lies before `first` (and their w1 targets up to it).
+            const std::int64_t early = std::clamp<std::int64_t>(first - base, 0, std::int64_t(bins));
+            if (early > 0 && first >= 0 && first < T) {
+                float carried[3] = {0, 0, 0};
+                for (std::int64_t t = 0; t < early; ++t) {
+                    const float w = w0 + (base + t + 1 <= first ? w1 : 0.0f);
+                    for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
+                }
+                for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += carried[c];
             }
+            // The rest: two contiguous multiply-adds over bins, each clipped to the window [0, T).
+            auto add = [&](float w, std::int64_t shift, std::int64_t from) {
+                if (w == 0.0f) return;
+                const std::int64_t lo = std::max<std::int64_t>(from, -(base + shift));
+                const std::int64_t hi = std::min<std::int64_t>(std::int64_t(bins), T - (base + shift));
+                if (lo >= hi) return;
+                float* __restrict o = out + std::size_t(base + shift + lo) * 3;
+                const float* __restrict in = b + std::size_t(lo) * 3;
+                const std::size_t len = std::size_t(hi - lo) * 3;
+                for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
+            };
+            add(w0, 0, early);
+            // A w1 tap at base + t + 1 was carried above when it fell at or before `first`.
+            add(w1, 1, std::max<std::int64_t>(0, first - base));
         }
     }
 }

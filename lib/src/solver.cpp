@@ -130,8 +130,8 @@ GatherKernel pick_kernel(int C, int bt) {
 // Tiles of the long-link pass (see step 1 of the march): 32 receivers' block accumulators (at most
 // 32 x 3 x bt floats) and 128 sources' rings (128 x ring x 3 floats, under 1 MB for rings of 512) fit
 // in a core's L2 together.
-constexpr std::size_t kReceiverTile = 32;
-constexpr std::size_t kSourceTile = 128;
+constexpr std::size_t kReceiverTile = 256;
+constexpr std::size_t kSourceTile = 64;
 
 int next_pow2(int v) {
     int r = 1;
