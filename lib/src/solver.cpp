@@ -88,31 +88,42 @@ bool scene_is_grey(const PatchSet& patches, const Emission& emission) {
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
-void gather_long(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, float inv_bin,
+void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end, float inv_bin,
                  DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, float* acc) {
+    // Locals, not the reference and the vectors: a store through `cursor` would make the compiler
+    // reload every array pointer once per link.
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
     float local[C * BT] = {};
-    for (; k < end && links.source[k] < source_end; ++k) {
-        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k]);
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
-        const float* __restrict h =
-            ring + std::size_t(links.source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * C;
+        const float* __restrict h = ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * C;
         for (int e = 0; e < C * BT; ++e) local[e] += t.w0 * h[e + C] + t.w1 * h[e];
     }
+    cursor = k;
     for (int e = 0; e < C * BT; ++e) acc[e] += local[e];
 }
 
 // The same for block lengths without a specialisation.
-void gather_long_any(const Links& links, std::uint64_t& k, std::uint64_t end, std::uint32_t source_end, float inv_bin,
-                     DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, int C, int bt,
-                     float* __restrict acc) {
+void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
+                     float inv_bin, DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0,
+                     int C, int bt, float* __restrict acc) {
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
     const int len = C * bt;
-    for (; k < end && links.source[k] < source_end; ++k) {
-        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k]);
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < bt) continue;
         const float* __restrict h =
-            ring + std::size_t(links.source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * std::size_t(C);
+            ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * std::size_t(C);
         for (int e = 0; e < len; ++e) acc[e] += t.w0 * h[e + C] + t.w1 * h[e];
     }
+    cursor = k;
 }
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
