@@ -1,0 +1,64 @@
+#pragma once
+/// What the link and solver benchmarks share: the Cornell box at a chosen patch count, and the
+/// process's resident memory.
+
+#include "tprf/scene.h"
+
+#include <sys/resource.h>
+
+#include <cstddef>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+
+namespace tprf::bench {
+
+/// The patch counts the benchmarks are run at, and the patches.max_edge (metres) that gives about
+/// that many patches of meshes/cornell-box.json (found by trying; the cases report the exact count).
+inline double cornell_max_edge(int target_patches) {
+    switch (target_patches) {
+        case 1000: return 0.11;     // 1088 patches
+        case 4000: return 0.054;    // 3941
+        case 16000: return 0.0265;  // 16160
+        default: throw std::invalid_argument("no max_edge for " + std::to_string(target_patches) + " patches");
+    }
+}
+
+/// meshes/cornell-box.json with patches.max_edge set for about `target_patches` patches.
+inline Scene cornell_box(int target_patches) {
+    Scene scene = load_scene(std::string(TPRF_SOURCE_DIR) + "/meshes/cornell-box.json");
+    scene.max_edge = cornell_max_edge(target_patches);
+    return scene;
+}
+
+/// A field of /proc/self/status in bytes ("VmRSS", "VmHWM"); 0 when it cannot be read.
+inline double proc_status_bytes(const std::string& field) {
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.compare(0, field.size() + 1, field + ":") != 0) continue;
+        return std::stod(line.substr(field.size() + 1)) * 1024.0;  // the kernel writes kB
+    }
+    return 0.0;
+}
+
+/// CPU time (user + system) used so far by every thread of the process, seconds. Set against
+/// threads x wall time it tells whether a case had its cores to itself: another job on the machine
+/// lowers the ratio (so do the stage's own serial parts, which are the same from run to run).
+inline double process_cpu_seconds() {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    auto seconds = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+    return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
+/// Resets the process's peak RSS (VmHWM) to its current RSS (Linux >= 4.0), so that the next
+/// VmHWM reading is the peak of what follows. False when the kernel refuses.
+inline bool reset_peak_rss() {
+    std::ofstream out("/proc/self/clear_refs");
+    out << "5";
+    out.flush();
+    return bool(out);
+}
+
+}  // namespace tprf::bench

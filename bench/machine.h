@@ -1,0 +1,16 @@
+#pragma once
+/// Machine ceilings that the benchmarks compare their kernels against, measured in the same run.
+
+namespace tprf::bench {
+
+/// Peak single-precision fused multiply-add rate on `threads` OpenMP threads, GFMA/s (fused
+/// multiply-adds per second / 1e9, each SIMD lane counted): a register-resident loop of independent
+/// 8-lane AVX2 FMA chains, best of a few repeats. 0 when the CPU lacks AVX2 + FMA.
+double measure_fma_peak_gflops(int threads);
+
+/// Sustained memory bandwidth on `threads` OpenMP threads, GB/s (1e9 bytes/s): a STREAM triad
+/// a[i] = b[i] + s * c[i] over three 256 MB arrays, counting the bytes read and written (24 per
+/// element; the write-allocate read of `a` is not counted, as in STREAM), best of a few passes.
+double measure_memory_bandwidth_gbs(int threads);
+
+}  // namespace tprf::bench

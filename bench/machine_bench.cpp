@@ -1,0 +1,113 @@
+// Machine ceilings for the benchmarks (see machine.h). No BENCHMARK cases here: the kernels' own
+// cases call these so that a kernel and its ceiling are measured in the same run, under the same load.
+#include "machine.h"
+
+#include <immintrin.h>
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+
+namespace tprf::bench {
+namespace {
+
+double now_seconds() {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+// Independent FMA chains: a Skylake-class core issues two 8-lane FMAs per cycle with a latency of
+// four, so at least eight chains must be in flight; twelve leave slack and still fit, with the two
+// constants, in the sixteen ymm registers.
+constexpr int kChains = 12;
+constexpr int kLanes = 8;
+constexpr std::int64_t kIterations = 40'000'000;  // ~0.1 s per thread at 40 GFMA/s
+constexpr int kRepeats = 5;
+
+// The chains converge to a / (1 - m) instead of overflowing; without -ffast-math the compiler may
+// neither reassociate nor drop them, and the sum they return is kept in a volatile.
+__attribute__((target("avx2,fma"))) float fma_chains(std::int64_t iterations, float seed) {
+    __m256 acc[kChains];
+    for (int k = 0; k < kChains; ++k) acc[k] = _mm256_set1_ps(seed + float(k));
+    const __m256 m = _mm256_set1_ps(0.999999f);
+    const __m256 a = _mm256_set1_ps(1e-6f);
+    for (std::int64_t i = 0; i < iterations; ++i) {
+#pragma GCC unroll 12
+        for (int k = 0; k < kChains; ++k) acc[k] = _mm256_fmadd_ps(acc[k], m, a);
+    }
+    __m256 sum = acc[0];
+    for (int k = 1; k < kChains; ++k) sum = _mm256_add_ps(sum, acc[k]);
+    alignas(32) float lanes[kLanes];
+    _mm256_store_ps(lanes, sum);
+    float total = 0.0f;
+    for (float v : lanes) total += v;
+    return total;
+}
+
+volatile float g_fma_sink = 0.0f;
+volatile double g_stream_sink = 0.0;
+
+}  // namespace
+
+double measure_fma_peak_gflops(int threads) {
+    if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return 0.0;
+    threads = std::max(threads, 1);
+    const volatile float seed_source = 1.0f;  // opaque to the optimiser
+    double best = 0.0;
+    for (int r = 0; r < kRepeats; ++r) {
+        double t0 = 0.0, t1 = 0.0;
+        float sum = 0.0f;
+#pragma omp parallel num_threads(threads) reduction(+ : sum)
+        {
+            const float seed = seed_source + float(omp_get_thread_num());
+#pragma omp barrier
+#pragma omp master
+            t0 = now_seconds();
+            sum += fma_chains(kIterations, seed);
+#pragma omp barrier
+#pragma omp master
+            t1 = now_seconds();
+        }
+        g_fma_sink = sum;
+        const double fmas = double(threads) * double(kIterations) * double(kChains * kLanes);
+        best = std::max(best, fmas / (t1 - t0) / 1e9);
+    }
+    return best;
+}
+
+double measure_memory_bandwidth_gbs(int threads) {
+    threads = std::max(threads, 1);
+    constexpr std::size_t kBytesPerArray = std::size_t(256) << 20;
+    constexpr std::size_t n = kBytesPerArray / sizeof(double);
+    constexpr int kPasses = 5;
+    // new[] without value-initialisation, then a parallel first touch: the pages are faulted in
+    // before the timed passes.
+    std::unique_ptr<double[]> a(new double[n]), b(new double[n]), c(new double[n]);
+    double* __restrict pa = a.get();
+    double* __restrict pb = b.get();
+    double* __restrict pc = c.get();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (std::size_t i = 0; i < n; ++i) {
+        pa[i] = 0.0;
+        pb[i] = 1.0;
+        pc[i] = 2.0;
+    }
+    const volatile double scale_source = 3.0;
+    const double s = scale_source;
+    double best = 0.0;
+    for (int pass = 0; pass < kPasses; ++pass) {
+        const double t0 = now_seconds();
+#pragma omp parallel for schedule(static) num_threads(threads)
+        for (std::size_t i = 0; i < n; ++i) pa[i] = pb[i] + s * pc[i];
+        const double t1 = now_seconds();
+        best = std::max(best, 3.0 * double(kBytesPerArray) / (t1 - t0) / 1e9);
+    }
+    g_stream_sink = pa[n / 2];
+    if (g_stream_sink != 7.0) throw std::logic_error("stream triad produced a wrong value");
+    return best;
+}
+
+}  // namespace tprf::bench

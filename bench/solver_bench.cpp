@@ -1,0 +1,140 @@
+// The transient solve on the Cornell box at about 4k patches x 2048 bins, against the machine's FMA
+// peak and memory bandwidth measured in the same run, and a sweep of the time-block length.
+#include "bench_util.h"
+#include "machine.h"
+
+#include "tprf/emitters.h"
+#include "tprf/links.h"
+#include "tprf/patches.h"
+#include "tprf/solver.h"
+#include "tprf/visibility.h"
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+namespace {
+
+constexpr int kThreads = 2;
+constexpr int kPatches = 4000;
+constexpr int kBins = 2048;
+constexpr double kBinWidth = 0.005;  // metres of optical path
+
+// Scene, patches, links and emission, built once for every solver case (the link stage alone
+// takes seconds at this size and is measured in links_bench.cpp).
+struct Problem {
+    tprf::Scene scene;
+    tprf::PatchSet patches;
+    tprf::Links links;
+    tprf::Emission emission;
+};
+
+const Problem& problem() {
+    static const std::unique_ptr<Problem> p = [] {
+        auto out = std::make_unique<Problem>();
+        out->scene = tprf::bench::cornell_box(kPatches);
+        out->scene.time.bins = kBins;
+        out->scene.time.bin_width = kBinWidth;
+        out->scene.time.start = 0.0;
+        out->scene.time.unit = tprf::TimeUnit::Metres;
+        out->patches = tprf::build_patches(out->scene);
+        const tprf::Visibility visibility(out->patches);
+        tprf::LinkOptions link_options;
+        link_options.threads = kThreads;
+        out->links = tprf::compute_links(out->patches, visibility, link_options);
+        tprf::EmitterOptions emitter_options;
+        emitter_options.threads = kThreads;
+        out->emission = tprf::compute_emission(out->scene, out->patches, out->links, visibility, emitter_options);
+        return out;
+    }();
+    return *p;
+}
+
+// The machine's ceilings, measured once per run by the first solver case and reused by the sweep.
+struct Ceilings {
+    double fma_gflops = 0.0;
+    double bandwidth_gbs = 0.0;
+};
+
+const Ceilings& ceilings() {
+    static const Ceilings c{tprf::bench::measure_fma_peak_gflops(kThreads),
+                            tprf::bench::measure_memory_bandwidth_gbs(kThreads)};
+    return c;
+}
+
+void run_solve(benchmark::State& state, const tprf::SolverOptions& options) {
+    const Problem& p = problem();
+    const Ceilings& machine = ceilings();
+    tprf::SolveStats stats;
+    double seconds = 0.0, cpu_seconds = 0.0;
+    for (auto _ : state) {
+        const double cpu0 = tprf::bench::process_cpu_seconds();
+        const auto t0 = std::chrono::steady_clock::now();
+        stats = tprf::solve_transient(p.patches, p.links, p.emission, p.scene.time, options,
+                                      [](const tprf::SolveBlock&) {});
+        seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        cpu_seconds = tprf::bench::process_cpu_seconds() - cpu0;
+    }
+    // The long-link kernel is a[e] += w0 * h[e + C] + w1 * h[e] per bin and channel: two FMAs with
+    // linear delays, one (w1 = 0) with nearest.
+    const double fma_per_update = (options.delay == tprf::DelayMode::Linear ? 2.0 : 1.0) * double(stats.channels);
+    const double updates_per_s = double(stats.link_bin_updates) / seconds;
+    const double gflops = updates_per_s * fma_per_update / 1e9;
+    // Links shorter than a block are applied bin by bin from scattered history, not by the kernel above.
+    const double inv_bin = 1.0 / p.scene.time.bin_width_m();
+    std::size_t short_links = 0;
+    for (float d : p.links.distance)
+        if (std::floor(double(d) * inv_bin) < double(stats.block_bins)) ++short_links;
+    // Every block streams each link's source, form factor and distance once (12 bytes).
+    const double blocks = std::ceil(double(kBins) / double(stats.block_bins));
+    const double link_stream_gbs = 12.0 * double(p.links.size()) * blocks / seconds / 1e9;
+
+    state.counters["patches"] = double(p.patches.size());
+    state.counters["bins"] = double(p.scene.time.bins);
+    state.counters["links"] = double(p.links.size());
+    state.counters["channels"] = double(stats.channels);
+    state.counters["seconds"] = seconds;
+    state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
+    state.counters["link_bin_updates"] = double(stats.link_bin_updates);
+    state.counters["updates_per_s"] = updates_per_s;
+    state.counters["fma_per_update"] = fma_per_update;
+    state.counters["achieved_GFMA_s"] = gflops;
+    state.counters["peak_GFMA_s"] = machine.fma_gflops;
+    state.counters["fraction_of_peak"] = machine.fma_gflops > 0.0 ? gflops / machine.fma_gflops : 0.0;
+    state.counters["bandwidth_GB_s"] = machine.bandwidth_gbs;
+    state.counters["link_stream_GB_s"] = link_stream_gbs;
+    state.counters["short_link_fraction"] = double(short_links) / double(p.links.size());
+    state.counters["working_MB"] = double(stats.working_bytes) / 1e6;
+    state.counters["ring_bins"] = double(stats.ring_bins);
+    state.counters["block_bins"] = double(stats.block_bins);
+    state.counters["jacobi_max"] = double(stats.max_jacobi_iterations);
+}
+
+// Default options: linear delays, every bounce, the default block length.
+void BM_TransientSolve(benchmark::State& state) {
+    tprf::SolverOptions options;
+    options.threads = kThreads;
+    run_solve(state, options);
+}
+BENCHMARK(BM_TransientSolve)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
+// The same solve with block_bins = range(0): the block length that the default should take.
+void BM_TransientSolveBlockBins(benchmark::State& state) {
+    tprf::SolverOptions options;
+    options.threads = kThreads;
+    options.block_bins = int(state.range(0));
+    run_solve(state, options);
+}
+BENCHMARK(BM_TransientSolveBlockBins)
+    ->Arg(8)
+    ->Arg(16)
+    ->Arg(32)
+    ->Arg(64)
+    ->Arg(128)
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime();
+
+}  // namespace
