@@ -5,7 +5,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include <array>
 #include <chrono>
+#include <optional>
 #include <cstdio>
 #include <exception>
 #include <string>
@@ -94,6 +96,24 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     return 0;
 }
 
+int run_sensor(const tprf::SensorRunOptions& options, bool quiet) {
+    const tprf::SensorReport r = tprf::apply_sensor_file(options);
+    if (!quiet)
+        std::fprintf(stderr, "tprf: %dx%d pixels x %d measurements in %.2f s -> %s\n", r.width, r.height,
+                     r.measurements, r.seconds, options.render_dir.string().c_str());
+    return 0;
+}
+
+// "X,Y" -> {X, Y}, for --plot-pixel.
+std::string parse_pixel(const std::string& text, std::optional<std::array<int, 2>>& out) {
+    int x = 0, y = 0;
+    char comma = 0, extra = 0;
+    if (std::sscanf(text.c_str(), "%d %c %d %c", &x, &comma, &y, &extra) != 3 || comma != ',')
+        return "expected X,Y (column, row), got \"" + text + "\"";
+    out = std::array<int, 2>{x, y};
+    return "";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -116,6 +136,21 @@ int main(int argc, char** argv) {
     rend->add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
     rend->add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
     rend->add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
+    auto pixel_option = [](std::optional<std::array<int, 2>>& target) {
+        return [&target](const std::string& text) {
+            const std::string error = parse_pixel(text, target);
+            if (!error.empty()) throw CLI::ValidationError("--plot-pixel", error);
+        };
+    };
+    rend->add_option_function<std::string>("--plot-pixel", pixel_option(render.plot_pixel),
+                                           "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
+    tprf::SensorRunOptions sensor;
+    std::string render_dir, sensor_file;
+    auto* sens = app.add_subcommand("sensor", "apply a sensor block to an existing render: measurements.npy, ...");
+    sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
+    sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
+    sens->add_option_function<std::string>("--plot-pixel", pixel_option(sensor.plot_pixel),
+                                           "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -128,6 +163,12 @@ int main(int argc, char** argv) {
             render.output = output;
             render.threads = threads;
             return run_render(scene_file, render, quiet);
+        }
+        if (sens->parsed()) {
+            sensor.render_dir = render_dir;
+            sensor.sensor_file = sensor_file;
+            sensor.threads = threads;
+            return run_sensor(sensor, quiet);
         }
         return 2;
     } catch (const tprf::Error& e) {

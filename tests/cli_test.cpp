@@ -1,5 +1,7 @@
 // The command line's contract (SPEC.md, "Command line"): exit status 2 and one message for bad input,
 // and nothing written for it.
+#include "tprf/npy.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -84,6 +86,61 @@ TEST_F(Cli, GoodSceneRendersAndInfoPrints) {
     EXPECT_EQ(r.status, 0) << r.err;
     for (const char* f : {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json"})
         EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / f)) << f;
+}
+
+TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
+    // The same gates through `tprf sensor` on a plain render and through the scene's own sensor block.
+    const std::string gates = R"({"type": "gates", "start": 0.0, "width": 0.3, "step": 0.3, "count": 5})";
+    std::ofstream(m_dir / "sensor.json") << R"({"exposure": )" << gates << "}";
+    std::ifstream in(m_dir / "good.json");
+    std::string scene((std::istreambuf_iterator<char>(in)), {});
+    scene.insert(scene.rfind('}'), R"(, "sensor": {"exposure": )" + gates + "}");
+    std::ofstream(m_dir / "with_sensor.json") << scene;
+
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "a").string()).status, 0);
+    const Outcome r = run("sensor " + (m_dir / "a").string() + " " + (m_dir / "sensor.json").string() + " --plot-pixel 2,3");
+    ASSERT_EQ(r.status, 0) << r.err;
+    const Outcome s = run("render " + (m_dir / "with_sensor.json").string() + " -o " + (m_dir / "b").string());
+    ASSERT_EQ(s.status, 0) << s.err;
+    for (const char* f : {"measurements.npy", "sensor_plot.png", "sensor.json"}) {
+        EXPECT_TRUE(fs::is_regular_file(m_dir / "a" / f)) << f;
+        EXPECT_TRUE(fs::is_regular_file(m_dir / "b" / f)) << f;
+    }
+    const tprf::NpyArray a = tprf::read_npy(m_dir / "a" / "measurements.npy");
+    const tprf::NpyArray b = tprf::read_npy(m_dir / "b" / "measurements.npy");
+    EXPECT_EQ(a.shape, (std::vector<std::size_t>{8, 8, 5, 3}));
+    EXPECT_EQ(a.data, b.data);
+    // The gates tile [0, 1.5 m), the first 15 of the 16 bins of 0.1 m: together they hold those bins.
+    const tprf::NpyArray cube = tprf::read_npy(m_dir / "a" / "transient.npy");
+    for (std::size_t p = 0; p < 64; ++p)
+        for (std::size_t c = 0; c < 3; ++c) {
+            double sum_cube = 0.0, sum_m = 0.0;
+            for (std::size_t t = 0; t < 15; ++t) sum_cube += cube.data[(p * 16 + t) * 3 + c];
+            for (std::size_t k = 0; k < 5; ++k) sum_m += a.data[(p * 5 + k) * 3 + c];
+            EXPECT_NEAR(sum_m, sum_cube, 1e-5 * (1.0 + sum_cube));
+        }
+}
+
+TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+    std::ofstream(m_dir / "bad_sensor.json") << R"({"exposure": {"type": "gates", "start": 0, "width": -1, "step": 1, "count": 2}})";
+    Outcome r = run("sensor " + (m_dir / "out").string() + " " + (m_dir / "bad_sensor.json").string());
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("bad_sensor.json: exposure.width: must be > 0"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
+
+    std::ofstream(m_dir / "sensor.json") << R"({"sensor": {"exposure": {"type": "amcw", "frequency_mhz": 30}}})";
+    r = run("sensor " + m_dir.string() + " " + (m_dir / "sensor.json").string());  // not a render directory
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("no render.json"), std::string::npos) << r.err;
+    r = run("sensor " + (m_dir / "out").string() + " " + (m_dir / "sensor.json").string() + " --plot-pixel 8,0");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("outside the 8 x 8 image"), std::string::npos) << r.err;
+    r = run("sensor " + (m_dir / "out").string() + " " + (m_dir / "sensor.json").string() + " --plot-pixel 3");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "depth.npy"));
 }
 
 }  // namespace

@@ -52,6 +52,13 @@ json spec_scene() {
     })");
 }
 
+// A valid gates exposure for the SPEC scene's window (600 bins of 0.01 m), with `changes` applied.
+json gates(const json& changes = json::object()) {
+    json g = {{"type", "gates"}, {"start", 0.0}, {"width", 0.05}, {"step", 0.05}, {"count", 40}};
+    g.update(changes);
+    return g;
+}
+
 Vec3 apply(const Eigen::Matrix4d& m, const Vec3& p) { return (m * p.homogeneous()).head<3>(); }
 
 }  // namespace
@@ -60,7 +67,10 @@ TEST(Scene, SpecExampleParsesToItsValues) {
     TempDir dir;
     json j = spec_scene();
     j["solver"] = {{"max_bounces", 3}, {"delay", "nearest"}, {"bounces", true}};
-    j["sensor"] = {{"clamp", true}};
+    // The SPEC's sensor example.
+    j["sensor"] = json::parse(R"({"pulse": {"shape": "gaussian", "fwhm": 0.03},
+        "exposure": {"type": "gates", "start": 0.0, "width": 0.05, "step": 0.05, "count": 40},
+        "noise": {"sigma": 0.001, "seed": 7}, "clamp": true})");
     const fs::path file = dir.path / "scene.json";
     std::ofstream(file) << j.dump(2);
     const tprf::Scene s = tprf::load_scene(file);
@@ -120,7 +130,16 @@ TEST(Scene, SpecExampleParsesToItsValues) {
     EXPECT_EQ(s.solver.delay, tprf::DelayMode::Nearest);
     EXPECT_TRUE(s.solver.bounces);
     ASSERT_TRUE(s.sensor.has_value());
-    EXPECT_EQ(*s.sensor, json({{"clamp", true}}));
+    EXPECT_EQ(s.sensor->pulse.shape, tprf::PulseShape::Gaussian);
+    EXPECT_EQ(s.sensor->pulse.fwhm, 0.03);
+    EXPECT_EQ(s.sensor->exposure.type, tprf::ExposureType::Gates);
+    ASSERT_EQ(s.sensor->exposure.windows.size(), 40u);
+    EXPECT_DOUBLE_EQ(s.sensor->exposure.windows[39][0], 39 * 0.05);
+    EXPECT_EQ(s.sensor->exposure.windows[39][1], 0.05);
+    EXPECT_EQ(s.sensor->noise.sigma, 0.001);
+    EXPECT_EQ(s.sensor->noise.seed, 7u);
+    EXPECT_TRUE(s.sensor->clamp);
+    EXPECT_EQ(s.sensor->json_path, "sensor");
 }
 
 TEST(Scene, OptionalBlocksTakeTheirDefaults) {
@@ -420,6 +439,53 @@ std::vector<BadCase> bad_cases() {
         edit("bounces not a bool", [](json& s) { s["solver"] = {{"bounces", "yes"}}; },
              {"solver.bounces: expected true or false"}),
         edit("sensor not an object", [](json& s) { s["sensor"] = {1, 2}; }, {"sensor: expected an object"}),
+        edit("sensor without exposure", [](json& s) { s["sensor"] = {{"clamp", true}}; },
+             {"sensor: missing key \"exposure\""}),
+        edit("sensor unknown key", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"gain", 2}}; },
+             {"sensor.gain: unknown key"}),
+        edit("unknown pulse shape", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"pulse", {{"shape", "sinc"}}}}; },
+             {"sensor.pulse.shape: unknown pulse shape \"sinc\""}),
+        edit("gaussian without fwhm", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"pulse", {{"shape", "gaussian"}}}}; },
+             {"sensor.pulse: missing key \"fwhm\""}),
+        edit("box width zero",
+             [](json& s) { s["sensor"] = {{"exposure", gates()}, {"pulse", {{"shape", "box"}, {"width", 0}}}}; },
+             {"sensor.pulse.width: must be > 0"}),
+        edit("pulse table missing",
+             [](json& s) { s["sensor"] = {{"exposure", gates()}, {"pulse", {{"shape", "table"}, {"file", "nope.csv"}}}}; },
+             {"sensor.pulse.file: cannot read pulse table"}),
+        edit("gate width negative", [](json& s) { s["sensor"] = {{"exposure", gates({{"width", -1}})}}; },
+             {"sensor.exposure.width: must be > 0"}),
+        edit("gate count zero", [](json& s) { s["sensor"] = {{"exposure", gates({{"count", 0}})}}; },
+             {"sensor.exposure.count: must be > 0"}),
+        edit("gates outside the window", [](json& s) { s["sensor"] = {{"exposure", gates({{"start", 100.0}})}}; },
+             {"sensor.exposure: every gate lies outside the render's time window"}),
+        edit("unknown exposure", [](json& s) { s["sensor"] = {{"exposure", {{"type", "streak"}}}}; },
+             {"sensor.exposure.type: unknown exposure type \"streak\""}),
+        edit("window not a pair",
+             [](json& s) { s["sensor"] = {{"exposure", {{"type", "windows"}, {"windows", {{0.1, 0.2, 0.3}}}}}}; },
+             {"sensor.exposure.windows[0]: expected [start, width]"}),
+        edit("amcw phases degenerate",
+             [](json& s) {
+                 s["sensor"] = {{"exposure", {{"type", "amcw"}, {"frequency_mhz", 20}, {"phases_deg", {0, 180}}}}};
+             },
+             {"sensor.exposure.phases_deg: needs at least 3 phases"}),
+        edit("amcw frequency zero",
+             [](json& s) { s["sensor"] = {{"exposure", {{"type", "amcw"}, {"frequency_mhz", 0}}}}; },
+             {"sensor.exposure.frequency_mhz: must be > 0"}),
+        edit("spad without photons", [](json& s) { s["sensor"] = {{"exposure", {{"type", "spad"}}}}; },
+             {"sensor.exposure: missing key \"photons\""}),
+        edit("spad with noise",
+             [](json& s) {
+                 s["sensor"] = {{"exposure", {{"type", "spad"}, {"photons", 10}}}, {"noise", {{"sigma", 1}}}};
+             },
+             {"sensor.noise: a SPAD counts photons"}),
+        edit("noise sigma negative", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"noise", {{"sigma", -1}}}}; },
+             {"sensor.noise.sigma: must be >= 0"}),
+        edit("noise seed negative",
+             [](json& s) { s["sensor"] = {{"exposure", gates()}, {"noise", {{"sigma", 1}, {"seed", -3}}}}; },
+             {"sensor.noise.seed: must be an integer"}),
+        edit("clamp not a bool", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"clamp", 1}}; },
+             {"sensor.clamp: expected true or false"}),
     };
 }
 

@@ -257,7 +257,18 @@ void NpyMap::commit() {
     m_file.commit();
 }
 
-NpyArray read_npy(const fs::path& path) {
+namespace {
+
+// What a .npy header says: the shape, the element count and where the payload starts. Checks that the
+// file holds exactly that payload.
+struct NpyLayout {
+    std::vector<std::size_t> shape;
+    std::size_t count = 0;
+    std::size_t offset = 0;
+    std::size_t bytes = 0;
+};
+
+NpyLayout read_layout(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in) fail_input(path, "", "cannot open");
     char prefix[kMagicSize + 2] = {};
@@ -281,18 +292,49 @@ NpyArray read_npy(const fs::path& path) {
     in.read(text.data(), static_cast<std::streamsize>(header_size));
     if (!in) fail_input(path, "", "truncated .npy header");
 
+    NpyLayout layout;
+    layout.shape = parse_header(path, text);
+    layout.bytes = payload_bytes(path, layout.shape, layout.count);
+    layout.offset = kMagicSize + 2 + length_size + header_size;
+    if (file_size != layout.offset + layout.bytes)
+        fail_input(path, "", "file size does not match the shape: expected " +
+                                 std::to_string(layout.offset + layout.bytes) + " bytes, found " +
+                                 std::to_string(file_size));
+    return layout;
+}
+
+}  // namespace
+
+NpyArray read_npy(const fs::path& path) {
+    const NpyLayout layout = read_layout(path);
+    std::ifstream in(path, std::ios::binary);
+    in.seekg(static_cast<std::streamoff>(layout.offset));
     NpyArray array;
-    array.shape = parse_header(path, text);
-    std::size_t count = 0;
-    const std::size_t bytes = payload_bytes(path, array.shape, count);
-    const std::size_t offset = kMagicSize + 2 + length_size + header_size;
-    if (file_size != offset + bytes)
-        fail_input(path, "", "file size does not match the shape: expected " + std::to_string(offset + bytes) +
-                                 " bytes, found " + std::to_string(file_size));
-    array.data.resize(count);
-    in.read(reinterpret_cast<char*>(array.data.data()), static_cast<std::streamsize>(bytes));
+    array.shape = layout.shape;
+    array.data.resize(layout.count);
+    in.read(reinterpret_cast<char*>(array.data.data()), static_cast<std::streamsize>(layout.bytes));
     if (!in) fail_input(path, "", "cannot read the data");
     return array;
+}
+
+NpyView::NpyView(const fs::path& path) {
+    const NpyLayout layout = read_layout(path);
+    m_shape = layout.shape;
+    m_size = layout.count;
+    if (layout.offset % alignof(float) != 0) fail_input(path, "", "payload is not aligned for float32 access");
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) fail_errno(path, "cannot open", errno);
+    m_map_bytes = layout.offset + layout.bytes;
+    void* map = ::mmap(nullptr, m_map_bytes, PROT_READ, MAP_SHARED, fd, 0);
+    const int err = errno;
+    ::close(fd);
+    if (map == MAP_FAILED) fail_errno(path, "cannot map", err);
+    m_map = map;
+    m_data = reinterpret_cast<const float*>(static_cast<const char*>(m_map) + layout.offset);
+}
+
+NpyView::~NpyView() {
+    if (m_map != nullptr) ::munmap(m_map, m_map_bytes);
 }
 
 }  // namespace tprf

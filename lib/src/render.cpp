@@ -9,6 +9,8 @@
 #include "tprf/links.h"
 #include "tprf/npy.h"
 #include "tprf/patches.h"
+#include "tprf/json_node.h"
+#include "tprf/sensor.h"
 #include "tprf/sequences.h"
 #include "tprf/solver.h"
 #include "tprf/steady.h"
@@ -88,6 +90,60 @@ void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
     write_text(path, out.str());
 }
 
+// The plot pixel: the image centre by default; one outside the image is a bad flag.
+std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, int width, int height) {
+    if (!asked) return {width / 2, height / 2};
+    const auto [x, y] = *asked;
+    if (x < 0 || y < 0 || x >= width || y >= height)
+        throw Error("--plot-pixel " + std::to_string(x) + "," + std::to_string(y) + " is outside the " +
+                    std::to_string(width) + " x " + std::to_string(height) + " image (x is the column, y the row)");
+    return *asked;
+}
+
+// What the k-th measurement is, for sensor.json.
+nlohmann::json measurement_axis(const SensorSettings& s, const TimeAxis& time) {
+    nlohmann::json axis = nlohmann::json::array();
+    const int K = measurement_count(s, time);
+    for (int k = 0; k < K; ++k) {
+        switch (s.exposure.type) {
+            case ExposureType::Gates:
+            case ExposureType::Windows: axis.push_back(s.exposure.windows[std::size_t(k)]); break;
+            case ExposureType::Amcw: axis.push_back(s.exposure.phases_deg[std::size_t(k)]); break;
+            case ExposureType::Spad: axis.push_back(time.start + k * time.bin_width); break;
+        }
+    }
+    return axis;
+}
+
+// measurements.npy, depth.npy (amcw), sensor_plot.png and sensor.json: what a sensor block turns a
+// cube (H, W, T, 3) into. Returns K.
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
+                         int height, int width, std::array<int, 2> pixel, int threads) {
+    const int K = measurement_count(sensor, time);
+    const std::size_t H = std::size_t(height), W = std::size_t(width);
+    NpyMap measurements(staging.path("measurements.npy"), {H, W, std::size_t(K), 3});
+    std::unique_ptr<NpyMap> depth;
+    if (sensor.exposure.type == ExposureType::Amcw)
+        depth = std::make_unique<NpyMap>(staging.path("depth.npy"), std::vector<std::size_t>{H, W});
+    SensorOptions options;
+    options.threads = threads;
+    apply_sensor(sensor, time, cube, height, width, measurements.data(), depth ? depth->data() : nullptr, options);
+    const std::size_t p = std::size_t(pixel[1]) * W + std::size_t(pixel[0]);
+    write_sensor_plot(staging.path("sensor_plot.png"), sensor, time, cube + p * std::size_t(time.bins) * 3,
+                      measurements.data() + p * std::size_t(K) * 3, pixel[0], pixel[1]);
+    nlohmann::json j;
+    j["exposure"] = exposure_name(sensor.exposure.type);
+    j["measurements"] = K;
+    j["axis"] = measurement_axis(sensor, time);
+    j["clamp"] = sensor.clamp;
+    j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
+    j["plot_pixel"] = pixel;
+    write_text(staging.path("sensor.json"), j.dump(2) + "\n");
+    measurements.commit();
+    if (depth) depth->commit();
+    return K;
+}
+
 }  // namespace
 
 double peak_rss_mb() {
@@ -107,6 +163,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     if (options.video && !have_ffmpeg())
         throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
     const Camera& camera = *scene.camera;
+    const std::array<int, 2> pixel = plot_pixel(options.plot_pixel, camera.width, camera.height);
     check_output_dir(options.output);
     report.seconds.load = seconds_since(start);
 
@@ -203,6 +260,9 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     }
     if (options.frames) write_frames(staging.path("frames"), cube.data(), camera.height, camera.width, scene.time.bins);
     if (options.streaks) write_streaks(staging.path("streaks"), cube.data(), camera.height, camera.width, scene.time.bins);
+    if (scene.sensor)
+        report.measurements = write_sensor_outputs(staging, *scene.sensor, scene.time, cube.data(), camera.height,
+                                                   camera.width, pixel, options.threads);
     if (options.video) {
         const std::filesystem::path mp4 = staging.path("light_in_flight.mp4");
         write_video(mp4, mp4.parent_path() / ".video-frames", cube.data(), camera.height, camera.width, scene.time.bins);
@@ -231,6 +291,8 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
                     {"links", report.seconds.links}, {"solve", report.seconds.solve},
                     {"gather", report.seconds.gather}, {"write", report.seconds.write},
                     {"total", report.seconds.total}};
+    if (scene.sensor)
+        j["sensor"] = {{"exposure", exposure_name(scene.sensor->exposure.type)}, {"measurements", report.measurements}};
     j["peak_rss_mb"] = report.peak_rss_mb;
     j["dropped_degenerate_faces"] = report.dropped_degenerate;
     write_text(staging.path("render.json"), j.dump(2) + "\n");
@@ -264,6 +326,38 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     s.pairs_tested = link_stats.pairs_tested;
     s.seconds_links = seconds_since(t0);
     return s;
+}
+
+SensorReport apply_sensor_file(const SensorRunOptions& options) {
+    const auto start = std::chrono::steady_clock::now();
+    const std::filesystem::path& dir = options.render_dir;
+    // The sensor file first: its mistakes are the likelier ones.
+    const SensorSettings sensor = load_sensor(options.sensor_file);
+    const std::filesystem::path info_file = dir / "render.json";
+    if (!std::filesystem::exists(info_file))
+        throw Error(dir.string() + ": not a tprf render directory (no render.json)");
+    const nlohmann::json info = read_json_file(info_file, "render.json");
+    const JsonNode root{info, "", info_file};
+    const TimeAxis time = parse_time(root.child("time"));
+    check_sensor(sensor, time);
+    const NpyView cube(dir / "transient.npy");
+    const std::vector<std::size_t>& shape = cube.shape();
+    if (shape.size() != 4 || shape[2] != std::size_t(time.bins) || shape[3] != 3 || shape[0] == 0 || shape[1] == 0)
+        fail_input(dir / "transient.npy", "", "expected shape (H, W, " + std::to_string(time.bins) +
+                                                  ", 3) to match render.json's time axis");
+    SensorReport report;
+    report.height = int(shape[0]);
+    report.width = int(shape[1]);
+    const std::array<int, 2> pixel = plot_pixel(options.plot_pixel, report.width, report.height);
+    Staging staging(dir);
+    if (options.progress) options.progress("sensor", 0.0);
+    report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width, pixel,
+                                               options.threads);
+    staging.publish();
+    report.written = staging.names();
+    if (options.progress) options.progress("sensor", 1.0);
+    report.seconds = seconds_since(start);
+    return report;
 }
 
 std::string describe_time(const TimeAxis& time) {

@@ -1,6 +1,8 @@
 #include "tprf/scene.h"
 
 #include "tprf/error.h"
+#include "tprf/json_node.h"
+#include "tprf/sensor.h"
 
 #include <algorithm>
 #include <cmath>
@@ -33,141 +35,9 @@ using nlohmann::json;
 // camera frame is numerically meaningless although not exactly degenerate.
 constexpr double kParallelTol = 1e-9;
 
-// Built by append: GCC 12 warns falsely (-Wrestrict) on `"\"" + std::string(s)`.
-std::string in_quotes(std::string_view s) {
-    std::string out;
-    out.reserve(s.size() + 2);
-    out.push_back('"');
-    out.append(s);
-    out.push_back('"');
-    return out;
-}
-
 bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
 
-// One JSON value with its path, so that every check can say where it failed.
-struct Node {
-    const json& j;
-    std::string path;
-    const fs::path& file;
-
-    [[noreturn]] void fail(std::string_view what) const { fail_input(file, path, what); }
-
-    void expect_object() const {
-        if (!j.is_object()) fail(std::string("expected an object, got ") + j.type_name());
-    }
-
-    std::size_t array_size() const {
-        if (!j.is_array()) fail(std::string("expected an array, got ") + j.type_name());
-        return j.size();
-    }
-
-    bool has(std::string_view key) const { return j.contains(key); }
-
-    Node child(std::string_view key) const {
-        expect_object();
-        const auto it = j.find(key);
-        if (it == j.end()) fail("missing key " + in_quotes(key));
-        return member(key, *it);
-    }
-
-    std::optional<Node> find(std::string_view key) const {
-        expect_object();
-        const auto it = j.find(key);
-        if (it == j.end()) return std::nullopt;
-        return member(key, *it);
-    }
-
-    Node at(std::size_t i) const { return Node{j.at(i), path + "[" + std::to_string(i) + "]", file}; }
-
-    // Unknown keys are errors rather than ignored, so that a misspelt optional key cannot silently fall
-    // back to its default.
-    void check_keys(std::initializer_list<std::string_view> allowed) const {
-        expect_object();
-        for (const auto& [key, value] : j.items()) {
-            if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
-            std::string list;
-            for (const std::string_view a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-            member(key, value).fail("unknown key (allowed here: " + list + ")");
-        }
-    }
-
-    double number() const {
-        if (!j.is_number()) fail(std::string("expected a number, got ") + j.type_name());
-        const double v = j.get<double>();
-        if (!std::isfinite(v)) fail("expected a finite number");
-        return v;
-    }
-
-    int integer() const {
-        const double v = number();
-        if (v != std::floor(v)) fail("expected an integer");
-        if (v < std::numeric_limits<int>::min() || v > std::numeric_limits<int>::max()) fail("integer out of range");
-        return static_cast<int>(v);
-    }
-
-    bool boolean() const {
-        if (!j.is_boolean()) fail(std::string("expected true or false, got ") + j.type_name());
-        return j.get<bool>();
-    }
-
-    std::string string() const {
-        if (!j.is_string()) fail(std::string("expected a string, got ") + j.type_name());
-        return j.get<std::string>();
-    }
-
-    Vec3 vec3() const {
-        if (!j.is_array() || j.size() != 3) fail("expected an array of 3 numbers");
-        return Vec3(at(0).number(), at(1).number(), at(2).number());
-    }
-
-    // Colours are a grey number or an RGB triple (SPEC, "Scene file").
-    Rgb rgb() const {
-        if (j.is_number()) return Rgb::Constant(number());
-        if (!j.is_array() || j.size() != 3) fail("expected a number or an array of 3 numbers");
-        return Rgb(at(0).number(), at(1).number(), at(2).number());
-    }
-
-    Node member(std::string_view key, const json& value) const {
-        return Node{value, path.empty() ? std::string(key) : path + "." + std::string(key), file};
-    }
-};
-
-Rgb non_negative_rgb(const Node& n) {
-    const Rgb c = n.rgb();
-    if ((c < 0.0).any()) n.fail("must be >= 0");
-    return c;
-}
-
-double positive(const Node& n) {
-    const double v = n.number();
-    if (v <= 0.0) n.fail("must be > 0");
-    return v;
-}
-
-int positive_int(const Node& n) {
-    const int v = n.integer();
-    if (v <= 0) n.fail("must be > 0");
-    return v;
-}
-
-TimeAxis parse_time(const Node& n) {
-    n.check_keys({"bins", "bin_width", "start", "unit"});
-    TimeAxis t;
-    t.bins = positive_int(n.child("bins"));
-    t.bin_width = positive(n.child("bin_width"));
-    if (const auto start = n.find("start")) t.start = start->number();
-    if (const auto unit = n.find("unit")) {
-        const std::string u = unit->string();
-        if (u == "m")
-            t.unit = TimeUnit::Metres;
-        else if (u == "ps")
-            t.unit = TimeUnit::Picoseconds;
-        else
-            unit->fail("unknown time unit " + in_quotes(u) + " (expected \"m\" or \"ps\")");
-    }
-    return t;
-}
+using Node = JsonNode;
 
 Camera parse_camera(const Node& n) {
     n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
@@ -183,9 +53,9 @@ Camera parse_camera(const Node& n) {
     const Node fov = n.child("fov");
     c.fov_deg = fov.number();
     if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
-    c.width = positive_int(n.child("width"));
-    c.height = positive_int(n.child("height"));
-    if (const auto spp = n.find("spp")) c.spp = positive_int(*spp);
+    c.width = n.child("width").positive_int();
+    c.height = n.child("height").positive_int();
+    if (const auto spp = n.find("spp")) c.spp = spp->positive_int();
     if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
     return c;
 }
@@ -208,7 +78,7 @@ Light parse_laser(const Node& n) {
     } else {
         n.fail("missing key \"direction\" or \"target\"");
     }
-    l.power = non_negative_rgb(n.child("power"));
+    l.power = n.child("power").non_negative_rgb();
     return l;
 }
 
@@ -220,7 +90,7 @@ Light parse_light(const Node& n) {
     n.check_keys({"type", "position", "intensity"});
     PointLight p;
     p.position = n.child("position").vec3();
-    p.intensity = non_negative_rgb(n.child("intensity"));
+    p.intensity = n.child("intensity").non_negative_rgb();
     return p;
 }
 
@@ -312,7 +182,7 @@ Object parse_object(const Node& n) {
         o.albedo = albedo->rgb();
         if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo->fail("must be in [0, 1]");
     }
-    if (const auto emission = n.find("emission")) o.emission = non_negative_rgb(*emission);
+    if (const auto emission = n.find("emission")) o.emission = emission->non_negative_rgb();
     if (const auto two_sided = n.find("two_sided")) o.two_sided = two_sided->boolean();
     return o;
 }
@@ -337,48 +207,31 @@ SolverSettings parse_solver(const Node& n) {
     return s;
 }
 
-// nlohmann reports a byte offset; users need a line and column to find the mistake in an editor.
-std::string line_column(const std::string& text, std::size_t byte) {
-    const std::size_t before = std::min(byte == 0 ? 0 : byte - 1, text.size());
-    const auto prefix = std::string_view(text).substr(0, before);
-    const std::size_t line = 1 + static_cast<std::size_t>(std::count(prefix.begin(), prefix.end(), '\n'));
-    const std::size_t last_newline = prefix.rfind('\n');
-    const std::size_t column = last_newline == std::string_view::npos ? before + 1 : before - last_newline;
-    return "line " + std::to_string(line) + ", column " + std::to_string(column);
-}
-
-// nlohmann's own message starts with an exception id and its own position; keep only the reason.
-std::string reason(const nlohmann::json::exception& e) {
-    const std::string what = e.what();
-    const std::size_t column = what.find("column ");
-    const std::size_t colon = what.find(": ", column == std::string::npos ? 0 : column);
-    return colon == std::string::npos ? what : what.substr(colon + 2);
-}
-
-json parse_json(const std::string& text, const fs::path& file) {
-    try {
-        return json::parse(text);
-    } catch (const json::parse_error& e) {
-        fail_input(file, "", line_column(text, e.byte) + ": malformed JSON: " + reason(e));
-    } catch (const json::exception& e) {
-        // A number too large for a double (1e999) is out_of_range, which carries no position; the
-        // message quotes the token, so locate it.
-        std::string where;
-        const std::string what = e.what();
-        const std::size_t open = what.find('\'');
-        const std::size_t close = what.rfind('\'');
-        if (open != std::string::npos && close > open) {
-            const std::size_t at = text.find(what.substr(open + 1, close - open - 1));
-            if (at != std::string::npos) where = line_column(text, at + 1) + ": ";
-        }
-        fail_input(file, "", where + "invalid JSON: " + what.substr(what.find(']') + 2));
-    }
-}
-
 }  // namespace
 
+TimeAxis parse_time(const JsonNode& n) {
+    n.check_keys({"bins", "bin_width", "start", "unit"});
+    TimeAxis t;
+    t.bins = n.child("bins").positive_int();
+    t.bin_width = n.child("bin_width").positive();
+    if (const auto start = n.find("start")) t.start = start->number();
+    if (const auto unit = n.find("unit")) {
+        const std::string u = unit->string();
+        if (u == "m")
+            t.unit = TimeUnit::Metres;
+        else if (u == "ps")
+            t.unit = TimeUnit::Picoseconds;
+        else
+            unit->fail("unknown time unit " + in_quotes(u) + " (expected \"m\" or \"ps\")");
+    }
+    return t;
+}
+
 Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
-    const json root = parse_json(text, file);
+    return build_scene(parse_json_text(text, file), file);
+}
+
+Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file) {
     if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
     const Node n{root, "", file};
     n.check_keys({"time", "camera", "lights", "objects", "patches", "solver", "sensor"});
@@ -397,25 +250,16 @@ Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
     for (std::size_t i = 0; i < count; ++i) scene.objects.push_back(parse_object(objects.at(i)));
     if (const auto patches = n.find("patches")) {
         patches->check_keys({"max_edge"});
-        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = positive(*max_edge);
+        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = max_edge->positive();
     }
     if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
     if (const auto sensor = n.find("sensor")) {
-        sensor->expect_object();
-        scene.sensor = sensor->j;
+        scene.sensor = parse_sensor(*sensor);
+        check_sensor(*scene.sensor, scene.time);
     }
     return scene;
 }
 
-Scene load_scene(const std::filesystem::path& file) {
-    std::error_code ec;
-    // An ifstream opens a directory without complaint on POSIX and then reads nothing.
-    if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read scene file (it is a directory)");
-    std::ifstream in(file, std::ios::binary);
-    if (!in) fail_input(file, "", "cannot read scene file");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) fail_input(file, "", "cannot read scene file");
-    return parse_scene(text, file);
-}
+Scene load_scene(const std::filesystem::path& file) { return build_scene(read_json_file(file, "scene file"), file); }
 
 }  // namespace tprf

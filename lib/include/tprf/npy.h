@@ -74,4 +74,25 @@ struct NpyArray {
 /// format version, or a truncated file throws tprf::Error naming the file and what is unsupported.
 NpyArray read_npy(const std::filesystem::path& path);
 
+/// A float32 C-order .npy mapped read-only (checked as read_npy), so that a cube larger than memory
+/// can be read without a copy.
+class NpyView {
+public:
+    explicit NpyView(const std::filesystem::path& path);
+    ~NpyView();
+    NpyView(const NpyView&) = delete;
+    NpyView& operator=(const NpyView&) = delete;
+
+    [[nodiscard]] const float* data() const { return m_data; }
+    [[nodiscard]] std::size_t size() const { return m_size; }
+    [[nodiscard]] const std::vector<std::size_t>& shape() const { return m_shape; }
+
+private:
+    std::vector<std::size_t> m_shape;
+    std::size_t m_size = 0;
+    void* m_map = nullptr;
+    std::size_t m_map_bytes = 0;
+    const float* m_data = nullptr;
+};
+
 }  // namespace tprf

@@ -4,7 +4,9 @@
 #include "tprf/progress.h"
 #include "tprf/scene.h"
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -39,6 +41,9 @@ struct RenderOptions : PipelineOptions {
     bool frames = false;            ///< frames/frame_NNNNN.exr, one per bin
     bool streaks = false;           ///< streaks/row_NNNN.exr, one x-t image per image row
     bool video = false;             ///< light_in_flight.mp4 through ffmpeg
+    /// The pixel (column x, row y) of sensor_plot.png when the scene has a sensor block; default:
+    /// the image centre.
+    std::optional<std::array<int, 2>> plot_pixel;
 };
 
 /// Seconds spent in each phase of a render (render.json's `seconds`).
@@ -57,6 +62,7 @@ struct RenderReport {
     PhaseSeconds seconds;
     double peak_rss_mb = 0.0;
     std::uint64_t link_bin_updates = 0;
+    int measurements = 0;           ///< sensor measurements per pixel and channel (0: no sensor block)
     std::vector<std::string> written;  ///< files and folders written, relative to the output directory
 };
 
@@ -64,6 +70,26 @@ struct RenderReport {
 /// file is written), builds patches and links, solves, gathers the camera's view, and writes every
 /// output under a staging name first, moving them all into place only once all are complete.
 RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options);
+
+/// What `tprf sensor OUTDIR SENSOR.json` does.
+struct SensorRunOptions : PipelineOptions {
+    std::filesystem::path render_dir;   ///< a directory written by `tprf render` (render.json, transient.npy)
+    std::filesystem::path sensor_file;  ///< the sensor block, or {"sensor": block}
+    std::optional<std::array<int, 2>> plot_pixel;  ///< as RenderOptions::plot_pixel
+};
+
+/// What a sensor run did.
+struct SensorReport {
+    int measurements = 0;               ///< K
+    int width = 0, height = 0;
+    double seconds = 0.0;
+    std::vector<std::string> written;   ///< relative to the render directory
+};
+
+/// Applies a sensor block to an existing render (its time axis from render.json, its cube from
+/// transient.npy, memory-mapped) and writes measurements.npy, depth.npy (amcw), sensor_plot.png
+/// and sensor.json into the render directory, each atomically. Bad input throws tprf::Error first.
+SensorReport apply_sensor_file(const SensorRunOptions& options);
 
 /// Peak resident memory of this process so far, MB (VmHWM).
 double peak_rss_mb();

@@ -5,6 +5,8 @@
 /// the JSON path (`objects[2].u`) and what is wrong, and is thrown as tprf::Error.
 
 #include "tprf/geometry.h"
+#include "tprf/sensor.h"
+#include "tprf/time_axis.h"
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -16,24 +18,6 @@
 #include <vector>
 
 namespace tprf {
-
-/// The unit the scene's time axis is written in.
-enum class TimeUnit { Metres, Picoseconds };
-
-/// The time axis: bin k holds optical paths with start + k*bin_width <= path < start + (k+1)*bin_width.
-struct TimeAxis {
-    int bins = 0;                        ///< T > 0
-    double bin_width = 0.0;              ///< > 0, in `unit`
-    double start = 0.0;                  ///< in `unit`
-    TimeUnit unit = TimeUnit::Metres;
-
-    /// Bin width as an optical path length, metres.
-    double bin_width_m() const;
-    /// Start of bin 0 as an optical path length, metres.
-    double start_m() const;
-    /// Converts a length in `unit` to metres of optical path.
-    double to_metres(double value_in_unit) const;
-};
 
 /// Pinhole camera (SPEC: vertical fov in degrees, row 0 at the top).
 struct Camera {
@@ -103,13 +87,21 @@ struct Scene {
     std::vector<Object> objects;
     double max_edge = 0.0;              ///< patches.max_edge, metres; 0 when absent (build_patches picks one)
     SolverSettings solver;
-    std::optional<nlohmann::json> sensor;  ///< the raw `sensor` block, validated by the sensor stage
+    std::optional<SensorSettings> sensor;  ///< the optional `sensor` block
 };
+
+struct JsonNode;
+
+/// Validates a `time` block (also render.json's `time`, for `tprf sensor`).
+TimeAxis parse_time(const JsonNode& n);
 
 /// Reads and validates a scene file. Throws tprf::Error naming the file, the JSON path and the problem.
 Scene load_scene(const std::filesystem::path& file);
 
 /// Validates scene JSON text; `file` is used in messages and to resolve relative mesh paths.
 Scene parse_scene(const std::string& text, const std::filesystem::path& file);
+
+/// Validates an already parsed scene document (as parse_scene).
+Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file);
 
 }  // namespace tprf

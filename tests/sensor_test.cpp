@@ -1,0 +1,334 @@
+// The TPRF sensor model: gates sum what arrives inside them, a pulse keeps energy and mean arrival,
+// noise and photon counts have the statistics they claim, and a CW-ToF camera recovers geometry
+// (and its multipath error) from a render.
+#include "tprf/sensor.h"
+
+#include "tprf/camera.h"
+#include "tprf/error.h"
+#include "tprf/json_node.h"
+#include "tprf/npy.h"
+#include "tprf/patches.h"
+#include "tprf/render.h"
+#include "tprf/scene.h"
+#include "tprf/visibility.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <numeric>
+#include <random>
+#include <vector>
+
+namespace tprf {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+SensorSettings sensor_from(const json& block) {
+    static const fs::path file = "test.json";
+    return parse_sensor(JsonNode{block, "sensor", file});
+}
+
+TimeAxis axis(int bins, double width, double start = 0.0) {
+    TimeAxis t;
+    t.bins = bins;
+    t.bin_width = width;
+    t.start = start;
+    return t;
+}
+
+// A cube (H, W, T, 3) of independent uniform values in [0, 1).
+std::vector<float> random_cube(int h, int w, int t, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    std::vector<float> cube(std::size_t(h * w * t * 3));
+    for (float& v : cube) v = u(rng);
+    return cube;
+}
+
+std::vector<float> measure(const SensorSettings& s, const TimeAxis& time, const std::vector<float>& cube, int h, int w,
+                           std::vector<float>* depth = nullptr, int threads = 0) {
+    std::vector<float> m(std::size_t(h * w * measurement_count(s, time) * 3));
+    if (depth) depth->resize(std::size_t(h * w));
+    SensorOptions o;
+    o.threads = threads;
+    apply_sensor(s, time, cube.data(), h, w, m.data(), depth ? depth->data() : nullptr, o);
+    return m;
+}
+
+TEST(Sensor, DeltaPulseGatesSumTheBinsInsideEachGate) {
+    const int H = 2, W = 3, T = 50;
+    const TimeAxis time = axis(T, 0.01, 0.1);
+    const std::vector<float> cube = random_cube(H, W, T, 1);
+    // Gates aligned with bins: gate k covers bins 3 + 5k .. 7 + 5k.
+    const SensorSettings s = sensor_from(
+        {{"exposure", {{"type", "gates"}, {"start", 0.13}, {"width", 0.05}, {"step", 0.05}, {"count", 8}}}});
+    const std::vector<float> m = measure(s, time, cube, H, W);
+    for (int p = 0; p < H * W; ++p)
+        for (int k = 0; k < 8; ++k)
+            for (int c = 0; c < 3; ++c) {
+                double sum = 0.0;
+                for (int i = 3 + 5 * k; i < 8 + 5 * k; ++i) sum += cube[std::size_t((p * T + i) * 3 + c)];
+                // float inputs, double sums: agreement to float rounding of the result.
+                EXPECT_NEAR(m[std::size_t((p * 8 + k) * 3 + c)], sum, 1e-5 * sum) << "pixel " << p << " gate " << k;
+            }
+}
+
+TEST(Sensor, PartialBinsAtWindowEdgesAreWeightedByOverlap) {
+    const int T = 20;
+    const TimeAxis time = axis(T, 0.01);
+    const std::vector<float> cube = random_cube(1, 1, T, 2);
+    // [0.035, 0.0725): half of bin 3, bins 4..6, a quarter of bin 7.
+    const SensorSettings s = sensor_from({{"exposure", {{"type", "windows"}, {"windows", {{0.035, 0.0375}}}}}});
+    const std::vector<float> m = measure(s, time, cube, 1, 1);
+    for (int c = 0; c < 3; ++c) {
+        auto e = [&](int i) { return double(cube[std::size_t(i * 3 + c)]); };
+        const double expected = 0.5 * e(3) + e(4) + e(5) + e(6) + 0.25 * e(7);
+        EXPECT_NEAR(m[std::size_t(c)], expected, 1e-6);
+    }
+}
+
+TEST(Sensor, GaussianPulseKeepsEnergyAndMeanArrival) {
+    const int T = 400;
+    const double dt = 0.005;
+    const TimeAxis time = axis(T, dt, 1.0);
+    std::vector<float> profile(T, 0.0f);
+    profile[100] = 2.0f;
+    profile[101] = 1.0f;
+    profile[250] = 0.5f;
+    profile[253] = 0.25f;
+    SensorPulse pulse;
+    pulse.shape = PulseShape::Gaussian;
+    pulse.fwhm = 0.06;  // 12 bins
+    const ConvolvedProfile out = convolve_with_pulse(pulse, time, profile.data());
+    double e_in = 0.0, t_in = 0.0, e_out = 0.0, t_out = 0.0;
+    for (int i = 0; i < T; ++i) {
+        e_in += profile[std::size_t(i)];
+        t_in += profile[std::size_t(i)] * (i + 0.5);
+    }
+    for (std::size_t m = 0; m < out.energy.size(); ++m) {
+        e_out += out.energy[m];
+        t_out += out.energy[m] * (out.first_bin + double(m) + 0.5);
+    }
+    EXPECT_NEAR(e_out, e_in, 1e-12 * e_in);
+    // Mean arrival in bins; exact up to rounding (the kernel is symmetric, the bin split linear).
+    EXPECT_NEAR(t_out / e_out, t_in / e_in, 1e-9);
+
+    // The peak of an isolated spike's response is the Gaussian's 1 / (sigma sqrt(2 pi)) per unit time,
+    // which fixes the fwhm -> sigma conversion; spreading over one bin lowers it by (dt/sigma)^2 / 24 (0.3%).
+    std::vector<float> spike(T, 0.0f);
+    spike[200] = 1.0f;
+    const ConvolvedProfile s = convolve_with_pulse(pulse, time, spike.data());
+    const double peak = *std::max_element(s.energy.begin(), s.energy.end()) / dt;
+    const double sigma = 0.06 / (2.0 * std::sqrt(2.0 * std::log(2.0)));
+    EXPECT_NEAR(peak, 1.0 / (sigma * std::sqrt(2.0 * M_PI)), 0.01 * peak);
+
+    // The same through the measurement path: windows of one bin each over an extended axis.
+    json windows = json::array();
+    for (int i = -30; i < T + 30; ++i) windows.push_back({1.0 + i * dt, dt});
+    const SensorSettings sensor =
+        sensor_from({{"pulse", {{"shape", "gaussian"}, {"fwhm", 0.06}}}, {"exposure", {{"type", "windows"}, {"windows", windows}}}});
+    std::vector<float> cube(std::size_t(T) * 3);
+    for (int i = 0; i < T; ++i)
+        for (int c = 0; c < 3; ++c) cube[std::size_t(i * 3 + c)] = profile[std::size_t(i)];
+    const std::vector<float> m = measure(sensor, time, cube, 1, 1);
+    double e_m = 0.0, t_m = 0.0;
+    for (int k = 0; k < T + 60; ++k) {
+        e_m += m[std::size_t(k * 3)];
+        t_m += m[std::size_t(k * 3)] * (k - 30 + 0.5);
+    }
+    EXPECT_NEAR(e_m, e_in, 1e-6 * e_in);  // float measurements
+    EXPECT_NEAR(t_m / e_m, t_in / e_in, 1e-4);
+}
+
+TEST(Sensor, PulseNarrowerThanABinIsExact) {
+    // A box pulse a tenth of a bin wide (shifts uniform in +-dt/20), through gates of ten whole bins. A bin
+    // even over its width, shifted by tau, moves max(0, tau) / dt of itself across its upper edge; the mean
+    // of that over the box is (dt/20) / 4 / dt = 1/80. So each gate gains 1/80 of the bins beside it and
+    // loses 1/80 of its own first and last bins; the first gate's loss below t = 0 and the last gate's
+    // beyond the window are lost for good.
+    const int T = 30;
+    const TimeAxis time = axis(T, 0.01);
+    const std::vector<float> cube = random_cube(1, 1, T, 3);
+    const SensorSettings s = sensor_from({{"pulse", {{"shape", "box"}, {"width", 0.001}}},
+                                          {"exposure", {{"type", "gates"}, {"start", 0.0}, {"width", 0.1}, {"step", 0.1}, {"count", 3}}}});
+    const std::vector<float> m = measure(s, time, cube, 1, 1);
+    auto e = [&](int i) { return i >= 0 && i < T ? double(cube[std::size_t(i * 3)]) : 0.0; };
+    for (int k = 0; k < 3; ++k) {
+        double expected = 0.0;
+        for (int i = 10 * k; i < 10 * k + 10; ++i) expected += e(i);
+        expected += (e(10 * k - 1) + e(10 * k + 10) - e(10 * k) - e(10 * k + 9)) / 80.0;
+        EXPECT_NEAR(m[std::size_t(k * 3)], expected, 1e-5) << "gate " << k;
+    }
+}
+
+TEST(Sensor, TablePulseIsNormalisedAndKeepsItsMean) {
+    const fs::path dir = fs::temp_directory_path() / ("tprf_sensor_table_" + std::to_string(std::random_device{}()));
+    fs::create_directories(dir);
+    // A right triangle rising from 0 at t=0 to 4 at t=0.02: area 0.04, centroid 2/3 of the way.
+    std::ofstream(dir / "pulse.csv") << "time,value\n0,0\n0.02,4\n0.0200001,0\n";
+    const json block = {{"pulse", {{"shape", "table"}, {"file", "pulse.csv"}}},
+                        {"exposure", {{"type", "gates"}, {"start", 0}, {"width", 1}, {"step", 1}, {"count", 1}}}};
+    const SensorSettings s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
+    const TimeKernel k = pulse_kernel(s.pulse, 0.005);
+    double total = 0.0, mean = 0.0;
+    for (std::size_t q = 0; q < k.mass.size(); ++q) {
+        total += k.mass[q];
+        mean += k.mass[q] * (k.first + double(q)) * k.step;
+    }
+    EXPECT_NEAR(total, 1.0, 1e-12);
+    EXPECT_NEAR(mean, 2.0 / 3.0 * 0.02, 1e-7);
+    fs::remove_all(dir);
+}
+
+TEST(Sensor, NoiseHasTheRequestedSigmaAndIsReproducible) {
+    const int H = 32, W = 32, T = 40, K = 10;
+    const TimeAxis time = axis(T, 0.01);
+    const std::vector<float> cube(std::size_t(H * W * T * 3), 0.0f);
+    const double sigma = 0.25;
+    json block = {{"exposure", {{"type", "gates"}, {"start", 0}, {"width", 0.04}, {"step", 0.04}, {"count", K}}},
+                  {"noise", {{"sigma", sigma}, {"seed", 7}}},
+                  {"clamp", false}};
+    const std::vector<float> m = measure(sensor_from(block), time, cube, H, W, nullptr, 2);
+    const double n = double(m.size());
+    const double mean = std::accumulate(m.begin(), m.end(), 0.0) / n;
+    double var = 0.0;
+    for (const float v : m) var += (v - mean) * (v - mean);
+    const double sd = std::sqrt(var / (n - 1));
+    // Four standard errors: the sample mean's sigma/sqrt(n), the sample sd's sigma/sqrt(2n).
+    EXPECT_NEAR(mean, 0.0, 4 * sigma / std::sqrt(n));
+    EXPECT_NEAR(sd, sigma, 4 * sigma / std::sqrt(2 * n));
+
+    EXPECT_EQ(measure(sensor_from(block), time, cube, H, W, nullptr, 1), m) << "thread count changed the noise";
+    block["noise"]["seed"] = 8;
+    EXPECT_NE(measure(sensor_from(block), time, cube, H, W), m) << "another seed gave the same noise";
+
+    // Clamped (the default): no negative measurement, and half of the zero-mean noise becomes 0.
+    block.erase("clamp");
+    const std::vector<float> c = measure(sensor_from(block), time, cube, H, W);
+    EXPECT_GE(*std::min_element(c.begin(), c.end()), 0.0f);
+    const double zeros = double(std::count(c.begin(), c.end(), 0.0f)) / n;
+    EXPECT_NEAR(zeros, 0.5, 4 * 0.5 / std::sqrt(n));
+}
+
+TEST(Sensor, SpadCountsArePoisson) {
+    const int H = 8, W = 8, T = 64;
+    const TimeAxis time = axis(T, 0.01);
+    const std::vector<float> cube(std::size_t(H * W * T * 3), 1.0f);
+    const double lambda = 5.0;
+    const std::vector<float> m = measure(
+        sensor_from({{"exposure", {{"type", "spad"}, {"photons", lambda}, {"seed", 3}}}}), time, cube, H, W);
+    ASSERT_EQ(m.size(), cube.size());  // K = T
+    const double n = double(m.size());
+    double mean = 0.0, var = 0.0;
+    for (const float v : m) {
+        EXPECT_EQ(v, std::floor(v)) << "counts are whole numbers";
+        mean += v;
+    }
+    mean /= n;
+    for (const float v : m) var += (v - mean) * (v - mean);
+    var /= n - 1;
+    // Four standard errors: sqrt(lambda/n) for the mean; sqrt((mu4 - sigma^4)/n) for the variance,
+    // with a Poisson's mu4 = lambda (1 + 3 lambda).
+    EXPECT_NEAR(mean, lambda, 4 * std::sqrt(lambda / n));
+    EXPECT_NEAR(var, lambda, 4 * std::sqrt((lambda + 2 * lambda * lambda) / n));
+
+    // Dark counts alone: dark_rate counts per second of bin time; a bin of 0.01 m lasts 0.01/c s.
+    const double per_bin = 2.0;
+    const double dark_rate = per_bin / (0.01 / kSpeedOfLight);
+    const std::vector<float> zero(cube.size(), 0.0f);
+    const std::vector<float> d = measure(
+        sensor_from({{"exposure", {{"type", "spad"}, {"photons", 1}, {"dark_rate", dark_rate}, {"seed", 4}}}}), time, zero, H, W);
+    const double dark_mean = std::accumulate(d.begin(), d.end(), 0.0) / n;
+    EXPECT_NEAR(dark_mean, per_bin, 4 * std::sqrt(per_bin / n));
+}
+
+TEST(Sensor, SpadJitterSpreadsCountsAroundTheArrival) {
+    const int T = 200;
+    const TimeAxis time = axis(T, 0.01);
+    std::vector<float> cube(std::size_t(T) * 3, 0.0f);
+    for (int c = 0; c < 3; ++c) cube[std::size_t(100 * 3 + c)] = 1.0f;
+    const double photons = 1e6, fwhm = 0.05;  // 5 bins
+    const std::vector<float> m = measure(
+        sensor_from({{"exposure", {{"type", "spad"}, {"photons", photons}, {"jitter_fwhm", fwhm}, {"seed", 1}}}}), time,
+        cube, 1, 1);
+    double total = 0.0, mean = 0.0, var = 0.0;
+    for (int i = 0; i < T; ++i) total += m[std::size_t(i * 3)];
+    for (int i = 0; i < T; ++i) mean += m[std::size_t(i * 3)] * (i + 0.5) / total;
+    for (int i = 0; i < T; ++i) var += m[std::size_t(i * 3)] * (i + 0.5 - mean) * (i + 0.5 - mean) / total;
+    // Poisson total: sd 1000. The mean stays at the arrival bin's centre; the variance is the jitter's
+    // plus the bin's own spread (1/12) and the histogram's linear split (1/6 at most), in bins^2.
+    EXPECT_NEAR(total, photons, 5 * std::sqrt(photons));
+    EXPECT_NEAR(mean, 100.5, 0.02);
+    const double sigma_bins = fwhm / 0.01 / (2.0 * std::sqrt(2.0 * std::log(2.0)));
+    EXPECT_GT(var, sigma_bins * sigma_bins);
+    EXPECT_LT(var, sigma_bins * sigma_bins + 1.0 / 12 + 1.0 / 6 + 0.05);
+}
+
+// Path lengths up to 10 m in 5 mm bins.
+json amcw_scene(const json& objects, const Vec3& eye, const Vec3& look) {
+    return {{"time", {{"bins", 2000}, {"bin_width", 0.005}}},
+            {"camera", {{"position", {eye.x(), eye.y(), eye.z()}}, {"look_at", {look.x(), look.y(), look.z()}},
+                        {"up", {0, 0, 1}}, {"fov", 40}, {"width", 12}, {"height", 10}, {"spp", 1}}},
+            {"lights", {{{"type", "point"}, {"position", {eye.x(), eye.y(), eye.z()}}, {"intensity", 1.0}}}},
+            {"objects", objects},
+            {"patches", {{"max_edge", 0.1}}},
+            {"sensor", {{"exposure", {{"type", "amcw"}, {"frequency_mhz", 20}}}}}};
+}
+
+// Renders the scene and returns (depth - true distance) for every pixel that sees a surface, where the
+// true distance is from the camera to the point the pixel centre sees.
+std::vector<double> depth_errors(const json& j, const std::string& name) {
+    const fs::path dir = fs::temp_directory_path() / ("tprf_amcw_" + name + "_" + std::to_string(std::random_device{}()));
+    fs::create_directories(dir);
+    const fs::path file = dir / "scene.json";
+    std::ofstream(file) << j.dump(2);
+    RenderOptions o;
+    o.output = dir / "out";
+    render_file(file, o);
+    const NpyArray depth = read_npy(dir / "out" / "depth.npy");
+    const Scene scene = load_scene(file);
+    const Camera& cam = *scene.camera;
+    EXPECT_EQ(depth.shape, (std::vector<std::size_t>{std::size_t(cam.height), std::size_t(cam.width)}));
+    const PatchSet patches = build_patches(scene);
+    const Visibility vis(patches);
+    std::vector<double> errors;
+    for (int r = 0; r < cam.height; ++r)
+        for (int c = 0; c < cam.width; ++c) {
+            const RayHit h = vis.intersect(cam.position, camera_ray(cam, c + 0.5, r + 0.5), 1e30);
+            if (h.hit && h.front) errors.push_back(depth.data[std::size_t(r * cam.width + c)] - h.distance);
+        }
+    fs::remove_all(dir);
+    return errors;
+}
+
+TEST(Sensor, AmcwDepthOfAPlaneLitFromTheCameraIsItsDistance) {
+    // One plane, nothing else: single-bounce light only, so the phase is the distance's.
+    const json plane = {{{"type", "rectangle"}, {"origin", {0, -1, -1}}, {"u", {0, 2, 0}}, {"v", {0, 0, 2}}}};
+    const std::vector<double> e = depth_errors(amcw_scene(plane, Vec3(2.5, 0.1, 0.2), Vec3(0, 0, 0)), "plane");
+    ASSERT_GT(e.size(), 100u);
+    for (const double err : e) EXPECT_NEAR(err, 0.0, 0.01);
+}
+
+TEST(Sensor, AmcwDepthInACornerIsTooLong) {
+    // Floor and wall: light that bounces between them arrives later, so its phasor pulls every pixel's
+    // phase later (at 20 MHz the extra path, under 3 m, is less than half the 15 m wavelength).
+    const json corner = {
+        {{"type", "rectangle"}, {"origin", {0, 0, 0}}, {"u", {1, 0, 0}}, {"v", {0, 1, 0}}, {"albedo", 0.8}},
+        {{"type", "rectangle"}, {"origin", {0, 0, 0}}, {"u", {0, 1, 0}}, {"v", {0, 0, 1}}, {"albedo", 0.8}}};
+    const std::vector<double> e = depth_errors(amcw_scene(corner, Vec3(1.6, 0.5, 0.6), Vec3(0.3, 0.5, 0.3)), "corner");
+    ASSERT_GT(e.size(), 60u);
+    double mean = 0.0;
+    for (const double err : e) {
+        EXPECT_GT(err, -0.01) << "multipath cannot make a depth shorter than the plane test's tolerance";
+        mean += err / double(e.size());
+    }
+    EXPECT_GT(mean, 0.01) << "the corner's interreflections should lengthen the depth beyond the 1 cm tolerance";
+}
+
+}  // namespace
+}  // namespace tprf
