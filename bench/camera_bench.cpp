@@ -1,0 +1,101 @@
+// The camera stage on the Cornell box at about 4k patches: tracing the camera's samples into taps
+// (prepare_camera), and filming one solved block of 32 bins (TransientFilm::add_block), the per-block
+// work of the gather, at 96 x 96 and 256 x 256 pixels with the scene's 4 samples per pixel.
+#include "bench_util.h"
+
+#include "tprf/camera.h"
+#include "tprf/emitters.h"
+#include "tprf/film.h"
+#include "tprf/links.h"
+#include "tprf/patches.h"
+#include "tprf/solver.h"
+#include "tprf/visibility.h"
+
+#include <benchmark/benchmark.h>
+
+#include <memory>
+#include <vector>
+
+namespace {
+
+constexpr int kThreads = 2;
+constexpr int kBins = 2048;
+constexpr int kBlockBins = 32;
+
+struct Stage {
+    tprf::Scene scene;
+    tprf::PatchSet patches;
+    std::unique_ptr<tprf::Visibility> visibility;
+    tprf::Links links;
+    tprf::Emission emission;
+};
+
+const Stage& stage() {
+    static const std::unique_ptr<Stage> s = [] {
+        auto out = std::make_unique<Stage>();
+        out->scene = tprf::bench::cornell_box(4000);
+        out->scene.time.bins = kBins;
+        out->patches = tprf::build_patches(out->scene);
+        out->visibility = std::make_unique<tprf::Visibility>(out->patches);
+        tprf::LinkOptions link_options;
+        link_options.threads = kThreads;
+        out->links = tprf::compute_links(out->patches, *out->visibility, link_options);
+        tprf::EmitterOptions emitter_options;
+        emitter_options.threads = kThreads;
+        out->emission = tprf::compute_emission(out->scene, out->patches, out->links, *out->visibility, emitter_options);
+        return out;
+    }();
+    return *s;
+}
+
+tprf::Camera camera_of_size(int pixels) {
+    tprf::Camera camera = *stage().scene.camera;
+    camera.width = camera.height = pixels;
+    return camera;
+}
+
+// Primary rays, FLANN neighbours and interpolation weights for every sample.
+void BM_PrepareCamera(benchmark::State& state) {
+    const Stage& s = stage();
+    const tprf::Camera camera = camera_of_size(int(state.range(0)));
+    tprf::CameraOptions options;
+    options.threads = kThreads;
+    std::size_t taps = 0;
+    for (auto _ : state) {
+        const tprf::CameraGather gather = tprf::prepare_camera(camera, s.scene, s.patches, *s.visibility, options);
+        taps = gather.taps.size();
+        benchmark::DoNotOptimize(gather.taps.data());
+    }
+    const double samples = double(camera.width) * camera.height * camera.spp;
+    state.counters["samples"] = samples;
+    state.counters["taps"] = double(taps);
+    state.counters["samples_per_s"] = benchmark::Counter(samples, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_PrepareCamera)->Arg(96)->Arg(256)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// One block of patch profiles (made-up values: the cost does not depend on them) filmed into the cube.
+void BM_FilmBlock(benchmark::State& state) {
+    const Stage& s = stage();
+    const tprf::Camera camera = camera_of_size(int(state.range(0)));
+    tprf::CameraOptions options;
+    options.threads = kThreads;
+    const tprf::CameraGather gather = tprf::prepare_camera(camera, s.scene, s.patches, *s.visibility, options);
+    std::vector<float> cube(std::size_t(camera.width) * camera.height * kBins * 3, 0.0f);
+    tprf::TransientFilm film(gather, s.emission, s.scene.time, s.scene.solver.delay, cube.data(), -1, false, kThreads);
+    std::vector<float> radiosity(s.patches.size() * kBlockBins * 3, 1e-3f);
+    tprf::SolveBlock block;
+    block.first_bin = kBins / 2;
+    block.bins = kBlockBins;
+    block.patches = s.patches.size();
+    block.radiosity = radiosity.data();
+    for (auto _ : state) {
+        film.add_block(block);
+        benchmark::DoNotOptimize(cube.data());
+    }
+    state.counters["taps"] = double(gather.taps.size());
+    state.counters["tap_bins_per_s"] = benchmark::Counter(double(gather.taps.size()) * kBlockBins,
+                                                          benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_FilmBlock)->Arg(96)->Arg(256)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
