@@ -13,8 +13,6 @@
 namespace tprf {
 namespace {
 
-using SparseRows = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
-
 // y = diag(albedo_c) F x for one channel.
 Eigen::VectorXd gather(const PatchSet& patches, const Links& links, const Eigen::VectorXd& x, int c) {
     const Eigen::Index n = Eigen::Index(patches.size());
@@ -29,30 +27,64 @@ Eigen::VectorXd gather(const PatchSet& patches, const Links& links, const Eigen:
     return y;
 }
 
-SparseRows system_matrix(const PatchSet& patches, const Links& links, int c) {
-    const int n = int(patches.size());
-    SparseRows m(n, n);
-    Eigen::VectorXi sizes(n);
-    for (int i = 0; i < n; ++i) sizes[i] = int(links.row[std::size_t(i) + 1] - links.row[std::size_t(i)]) + 1;
-    m.reserve(sizes);
-    for (int i = 0; i < n; ++i) {
-        const double a = patches.albedo[std::size_t(i)][c];
-        bool diagonal = false;
-        for (std::uint64_t k = links.row[std::size_t(i)]; k < links.row[std::size_t(i) + 1]; ++k) {
-            const int j = int(links.source[k]);
-            if (!diagonal && j > i) {
-                m.insert(i, i) = 1.0;
-                diagonal = true;
-            }
-            m.insert(i, j) = -a * double(links.ff[k]);
-        }
-        if (!diagonal) m.insert(i, i) = 1.0;
-    }
-    m.makeCompressed();
-    return m;
-}
-
 }  // namespace
+
+class SteadyOperator;
+
+}  // namespace tprf
+
+template <>
+struct Eigen::internal::traits<tprf::SteadyOperator> : public Eigen::internal::traits<Eigen::SparseMatrix<double>> {};
+
+namespace tprf {
+
+/// The system matrix I - diag(albedo_c) F of one channel, applied straight from the links (Eigen's
+/// matrix-free solver interface): a sparse copy of F would cost 12 more bytes per link, as much again
+/// as the links themselves.
+class SteadyOperator : public Eigen::EigenBase<SteadyOperator> {
+public:
+    using Scalar = double;
+    using RealScalar = double;
+    using StorageIndex = int;
+    enum { ColsAtCompileTime = Eigen::Dynamic, MaxColsAtCompileTime = Eigen::Dynamic, IsRowMajor = false };
+
+    SteadyOperator(const PatchSet& patches, const Links& links, int channel)
+        : m_patches(patches), m_links(links), m_channel(channel) {}
+
+    Eigen::Index rows() const { return Eigen::Index(m_patches.size()); }
+    Eigen::Index cols() const { return Eigen::Index(m_patches.size()); }
+
+    template <typename Rhs>
+    Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct> operator*(const Eigen::MatrixBase<Rhs>& x) const {
+        return Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct>(*this, x.derived());
+    }
+
+    /// (I - diag(albedo) F) x.
+    Eigen::VectorXd apply(const Eigen::VectorXd& x) const { return x - gather(m_patches, m_links, x, m_channel); }
+
+private:
+    const PatchSet& m_patches;
+    const Links& m_links;
+    int m_channel;
+};
+
+}  // namespace tprf
+
+namespace Eigen::internal {
+
+template <typename Rhs>
+struct generic_product_impl<tprf::SteadyOperator, Rhs, SparseShape, DenseShape, GemvProduct>
+    : generic_product_impl_base<tprf::SteadyOperator, Rhs, generic_product_impl<tprf::SteadyOperator, Rhs>> {
+    using Scalar = typename Product<tprf::SteadyOperator, Rhs>::Scalar;
+    template <typename Dest>
+    static void scaleAndAddTo(Dest& dst, const tprf::SteadyOperator& lhs, const Rhs& rhs, const Scalar& alpha) {
+        dst.noalias() += alpha * lhs.apply(rhs);
+    }
+};
+
+}  // namespace Eigen::internal
+
+namespace tprf {
 
 std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
                               int max_bounces) {
@@ -91,8 +123,9 @@ std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const
             if (e.squaredNorm() == 0.0) {
                 result = e;
             } else {
-                const SparseRows m = system_matrix(patches, links, c);
-                Eigen::BiCGSTAB<SparseRows, Eigen::DiagonalPreconditioner<double>> solver;
+                // A patch never links to itself, so the diagonal is 1 and needs no preconditioner.
+                const SteadyOperator m(patches, links, c);
+                Eigen::BiCGSTAB<SteadyOperator, Eigen::IdentityPreconditioner> solver;
                 solver.setTolerance(1e-8);
                 solver.setMaxIterations(10000);
                 solver.compute(m);
