@@ -11,7 +11,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <exception>
 
 namespace tprf {
 namespace {
@@ -240,8 +239,6 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
 
     const std::size_t receiver_tiles = (n + kReceiverTile - 1) / kReceiverTile;
     const GatherKernel kernel = pick_kernel(C, bt);
-    std::exception_ptr failure;
-    std::atomic<bool> stop{false};
     float jacobi_change = 0.0f, jacobi_largest = 0.0f;  // shared by the threads' max-reductions
     std::atomic<int> worst_iterations{0};
 
@@ -252,213 +249,211 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
         since = now;
         return s;
     };
-#pragma omp parallel num_threads(threads)
     for (std::int64_t blk = 0; blk < blocks; ++blk) {
-        if (stop.load()) break;
         const std::int64_t b0 = b_begin + blk * bt;
-        // Phase times from thread 0: every phase ends at a barrier, so they are the phases' wall times.
-        const bool timer = omp_get_thread_num() == 0;
         clock::time_point since = clock::now();
+        double long_seconds = 0.0;
+        // One parallel region per block, so that the sink below runs outside it and can use every
+        // thread itself (inside, a nested region would get one thread). Phase times from thread 0:
+        // every phase ends at a barrier, so they are the phases' wall times.
+#pragma omp parallel num_threads(threads)
+        {
+            const bool timer = omp_get_thread_num() == 0;
 
-        // 1. Per receiver: the block's emission, and every long link (lag >= bt) as one contiguous
-        //    multiply-add over the block, reading history that is already final. Receivers go in
-        //    tiles and their links (sorted by source) in source tiles, so that the histories one
-        //    source tile reads stay in cache for all the tile's receivers.
+            // 1. Per receiver: the block's emission, and every long link (lag >= bt) as one contiguous
+            //    multiply-add over the block, reading history that is already final. Receivers go in
+            //    tiles and their links (sorted by source) in source tiles, so that the histories one
+            //    source tile reads stay in cache for all the tile's receivers.
 #pragma omp for schedule(dynamic, 1)
-        for (std::size_t tile = 0; tile < receiver_tiles; ++tile) {
-            const std::size_t i0 = tile * kReceiverTile, i1 = std::min(n, i0 + kReceiverTile);
-            std::uint64_t cursor[kReceiverTile];
-            for (std::size_t i = i0; i < i1; ++i) {
-                for (int l = 0; l < L; ++l) {
-                    std::fill_n(acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-                    std::fill_n(emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+            for (std::size_t tile = 0; tile < receiver_tiles; ++tile) {
+                const std::size_t i0 = tile * kReceiverTile, i1 = std::min(n, i0 + kReceiverTile);
+                std::uint64_t cursor[kReceiverTile];
+                for (std::size_t i = i0; i < i1; ++i) {
+                    for (int l = 0; l < L; ++l) {
+                        std::fill_n(acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+                        std::fill_n(emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+                    }
+                    for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
+                        const Pulse& p = emission.pulses[k];
+                        const std::int64_t b = pulse_bin(p);
+                        if (!p.propagates || b < b0 || b >= b0 + bt) continue;
+                        const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
+                        const int targets[2] = {plan.total, exact_layer(p.order)};
+                        for (int l : targets)
+                            if (l >= 0)
+                                for (int c = 0; c < C; ++c) emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
+                    }
                 }
+                for (int l = 0; l < L; ++l) {
+                    const int src = plan.source[std::size_t(l)];
+                    if (src < 0) continue;
+                    const float* ring_src = rings[std::size_t(src)].data();
+                    for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = links.row[i];
+                    for (std::size_t s0 = 0; s0 < n; s0 += kSourceTile) {
+                        const std::uint32_t s1 = std::uint32_t(std::min(n, s0 + kSourceTile));
+                        for (std::size_t i = i0; i < i1; ++i) {
+                            float* a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
+                            if (kernel)
+                                kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay, ring_src,
+                                       stride, rmask, b0, a);
+                            else
+                                gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay,
+                                                ring_src, stride, rmask, b0, C, bt, a);
+                        }
+                    }
+                }
+            }
+
+            if (timer) long_seconds = lap(since);
+
+            // 2. Bin by bin: short links, then the same-bin system by Jacobi iteration.
+            for (int o = 0; o < bt; ++o) {
+                const std::int64_t bin = b0 + o;
+#pragma omp for schedule(static)
+                for (std::size_t i = 0; i < n; ++i) {
+                    for (int l = 0; l < L; ++l) {
+                        const int src = plan.source[std::size_t(l)];
+                        float g[3] = {0, 0, 0};
+                        const std::size_t at = i * std::size_t(bt * C) + std::size_t(o * C);
+                        if (src >= 0) {
+                            for (int c = 0; c < C; ++c) g[c] = acc[std::size_t(l)][at + std::size_t(c)];
+                            for (std::uint64_t k = short_row[i]; k < short_row[i + 1]; ++k) {
+                                const ShortLink& s = short_links[k];
+                                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
+                                if (s.lag > 0) {
+                                    const float* h0 = ring_at(src, s.source, bin - s.lag);
+                                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
+                                } else {
+                                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
+                                }
+                            }
+                        }
+                        float b[3];
+                        for (int c = 0; c < C; ++c)
+                            b[c] = emit[std::size_t(l)][at + std::size_t(c)] + float(patches.albedo[i][c]) * g[c];
+                        float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
+                        for (int c = 0; c < C; ++c) keep[c] = b[c];
+                        store(l, i, bin, b);
+                    }
+                }
+                if (has_same_bin) {
+                    for (int iteration = 1; iteration <= 200; ++iteration) {
+#pragma omp single
+                        {
+                            jacobi_change = 0.0f;
+                            jacobi_largest = 0.0f;
+                        }
+#pragma omp for schedule(static) reduction(max : jacobi_change, jacobi_largest)
+                        for (std::size_t i = 0; i < n; ++i) {
+                            for (int l = 0; l < L; ++l) {
+                                const int src = plan.source[std::size_t(l)];
+                                const float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
+                                float* next = iterate.data() + (std::size_t(l) * n + i) * std::size_t(C);
+                                float g[3] = {0, 0, 0};
+                                if (src >= 0)
+                                    for (std::uint64_t k = same_row[i]; k < same_row[i + 1]; ++k) {
+                                        const float* h = ring_at(src, same_links[k].source, bin);
+                                        for (int c = 0; c < C; ++c) g[c] += same_links[k].w * h[c];
+                                    }
+                                const float* now = ring_at(l, i, bin);
+                                for (int c = 0; c < C; ++c) {
+                                    next[c] = keep[c] + float(patches.albedo[i][c]) * g[c];
+                                    jacobi_change = std::max(jacobi_change, std::abs(next[c] - now[c]));
+                                    jacobi_largest = std::max(jacobi_largest, std::abs(next[c]));
+                                }
+                            }
+                        }
+                        // Read the shared result before the barrier that ends the next loop, so that the
+                        // next iteration's reset cannot overtake a slow thread.
+                        const bool converged = jacobi_change <= 1e-7f * jacobi_largest;
+#pragma omp for schedule(static)
+                        for (std::size_t i = 0; i < n; ++i)
+                            for (int l = 0; l < L; ++l)
+                                store(l, i, bin, iterate.data() + (std::size_t(l) * n + i) * std::size_t(C));
+                        // Float resolution: further sweeps cannot change the stored values meaningfully.
+                        if (converged) {
+#pragma omp single
+                            {
+                                if (iteration > worst_iterations.load()) worst_iterations.store(iteration);
+                            }
+                            break;
+                        }
+                    }
+                }
+            }
+
+        }  // omp parallel
+        stats.seconds_long += long_seconds;
+        stats.seconds_short += lap(since);
+
+        // 3. Hand the block's bins inside the window to the sink.
+        const std::int64_t lo = std::max<std::int64_t>(b0, 0), hi = std::min<std::int64_t>(b0 + bt, T);
+        if (lo < hi) {
+            const int count = int(hi - lo);
+            auto put = [&](float* out, std::size_t i, int o, int c, float v) {
+                out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
+            };
+#pragma omp parallel for schedule(static) num_threads(threads)
+            for (std::size_t i = 0; i < n; ++i) {
+                for (int o = 0; o < count; ++o) {
+                    const std::int64_t bin = lo + o;
+                    float total[3] = {0, 0, 0};
+                    if (plan.total >= 0) {
+                        const float* v = ring_at(plan.total, i, bin);
+                        for (int c = 0; c < C; ++c) total[c] = v[c];
+                    } else {
+                        for (int l = 0; l < L; ++l) {
+                            const float* v = ring_at(l, i, bin);
+                            for (int c = 0; c < C; ++c) total[c] += v[c];
+                        }
+                    }
+                    for (int c = 0; c < 3; ++c) put(out_total.data(), i, o, c, total[C == 1 ? 0 : c]);
+                    for (int k = 0; k < plan.terms; ++k) {
+                        float* term = out_terms.data() + std::size_t(k) * n * std::size_t(count) * 3;
+                        float v[3] = {0, 0, 0};
+                        if (k < plan.exact) {
+                            const float* r = ring_at(k, i, bin);
+                            for (int c = 0; c < C; ++c) v[c] = r[c];
+                        } else {  // the tail: every order from k on
+                            for (int c = 0; c < C; ++c) v[c] = total[c];
+                            for (int l = 0; l < plan.exact; ++l) {
+                                const float* r = ring_at(l, i, bin);
+                                for (int c = 0; c < C; ++c) v[c] -= r[c];
+                            }
+                        }
+                        for (int c = 0; c < 3; ++c) put(term, i, o, c, v[C == 1 ? 0 : c]);
+                    }
+                }
+                // Pulses seen but not propagated (the laser spot) join the output only.
                 for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
                     const Pulse& p = emission.pulses[k];
                     const std::int64_t b = pulse_bin(p);
-                    if (!p.propagates || b < b0 || b >= b0 + bt) continue;
-                    const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
-                    const int targets[2] = {plan.total, exact_layer(p.order)};
-                    for (int l : targets)
-                        if (l >= 0)
-                            for (int c = 0; c < C; ++c) emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
-                }
-            }
-            for (int l = 0; l < L; ++l) {
-                const int src = plan.source[std::size_t(l)];
-                if (src < 0) continue;
-                const float* ring_src = rings[std::size_t(src)].data();
-                for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = links.row[i];
-                for (std::size_t s0 = 0; s0 < n; s0 += kSourceTile) {
-                    const std::uint32_t s1 = std::uint32_t(std::min(n, s0 + kSourceTile));
-                    for (std::size_t i = i0; i < i1; ++i) {
-                        float* a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
-                        if (kernel)
-                            kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay, ring_src,
-                                   stride, rmask, b0, a);
-                        else
-                            gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay,
-                                            ring_src, stride, rmask, b0, C, bt, a);
+                    if (p.propagates || b < lo || b >= hi) continue;
+                    if (plan.total < 0 && p.order >= plan.exact) continue;  // beyond max_bounces
+                    const int o = int(b - lo);
+                    for (int c = 0; c < 3; ++c) {
+                        out_total[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] += float(p.energy[c]);
+                        if (plan.terms > 0) {
+                            const int term = std::min<int>(p.order, plan.terms - 1);
+                            out_terms[((std::size_t(term) * n + i) * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] +=
+                                float(p.energy[c]);
+                        }
                     }
                 }
             }
+            SolveBlock block;
+            block.first_bin = int(lo);
+            block.bins = count;
+            block.patches = n;
+            block.radiosity = out_total.data();
+            block.terms = plan.terms;
+            block.per_order = plan.terms > 0 ? out_terms.data() : nullptr;
+            if (sink) sink(block);
         }
-
-        if (timer) stats.seconds_long += lap(since);
-
-        // 2. Bin by bin: short links, then the same-bin system by Jacobi iteration.
-        for (int o = 0; o < bt; ++o) {
-            const std::int64_t bin = b0 + o;
-#pragma omp for schedule(static)
-            for (std::size_t i = 0; i < n; ++i) {
-                for (int l = 0; l < L; ++l) {
-                    const int src = plan.source[std::size_t(l)];
-                    float g[3] = {0, 0, 0};
-                    const std::size_t at = i * std::size_t(bt * C) + std::size_t(o * C);
-                    if (src >= 0) {
-                        for (int c = 0; c < C; ++c) g[c] = acc[std::size_t(l)][at + std::size_t(c)];
-                        for (std::uint64_t k = short_row[i]; k < short_row[i + 1]; ++k) {
-                            const ShortLink& s = short_links[k];
-                            const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
-                            if (s.lag > 0) {
-                                const float* h0 = ring_at(src, s.source, bin - s.lag);
-                                for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
-                            } else {
-                                for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
-                            }
-                        }
-                    }
-                    float b[3];
-                    for (int c = 0; c < C; ++c)
-                        b[c] = emit[std::size_t(l)][at + std::size_t(c)] + float(patches.albedo[i][c]) * g[c];
-                    float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                    for (int c = 0; c < C; ++c) keep[c] = b[c];
-                    store(l, i, bin, b);
-                }
-            }
-            if (has_same_bin) {
-                for (int iteration = 1; iteration <= 200; ++iteration) {
-#pragma omp single
-                    {
-                        jacobi_change = 0.0f;
-                        jacobi_largest = 0.0f;
-                    }
-#pragma omp for schedule(static) reduction(max : jacobi_change, jacobi_largest)
-                    for (std::size_t i = 0; i < n; ++i) {
-                        for (int l = 0; l < L; ++l) {
-                            const int src = plan.source[std::size_t(l)];
-                            const float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                            float* next = iterate.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                            float g[3] = {0, 0, 0};
-                            if (src >= 0)
-                                for (std::uint64_t k = same_row[i]; k < same_row[i + 1]; ++k) {
-                                    const float* h = ring_at(src, same_links[k].source, bin);
-                                    for (int c = 0; c < C; ++c) g[c] += same_links[k].w * h[c];
-                                }
-                            const float* now = ring_at(l, i, bin);
-                            for (int c = 0; c < C; ++c) {
-                                next[c] = keep[c] + float(patches.albedo[i][c]) * g[c];
-                                jacobi_change = std::max(jacobi_change, std::abs(next[c] - now[c]));
-                                jacobi_largest = std::max(jacobi_largest, std::abs(next[c]));
-                            }
-                        }
-                    }
-                    // Read the shared result before the barrier that ends the next loop, so that the
-                    // next iteration's reset cannot overtake a slow thread.
-                    const bool converged = jacobi_change <= 1e-7f * jacobi_largest;
-#pragma omp for schedule(static)
-                    for (std::size_t i = 0; i < n; ++i)
-                        for (int l = 0; l < L; ++l)
-                            store(l, i, bin, iterate.data() + (std::size_t(l) * n + i) * std::size_t(C));
-                    // Float resolution: further sweeps cannot change the stored values meaningfully.
-                    if (converged) {
-#pragma omp single
-                        {
-                            if (iteration > worst_iterations.load()) worst_iterations.store(iteration);
-                        }
-                        break;
-                    }
-                }
-            }
-        }
-
-        if (timer) stats.seconds_short += lap(since);
-
-        // 3. Hand the block's bins inside the window to the sink.
-#pragma omp single
-        {
-            try {
-                const std::int64_t lo = std::max<std::int64_t>(b0, 0), hi = std::min<std::int64_t>(b0 + bt, T);
-                if (lo < hi) {
-                    const int count = int(hi - lo);
-                    auto put = [&](float* out, std::size_t i, int o, int c, float v) {
-                        out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
-                    };
-                    for (std::size_t i = 0; i < n; ++i) {
-                        for (int o = 0; o < count; ++o) {
-                            const std::int64_t bin = lo + o;
-                            float total[3] = {0, 0, 0};
-                            if (plan.total >= 0) {
-                                const float* v = ring_at(plan.total, i, bin);
-                                for (int c = 0; c < C; ++c) total[c] = v[c];
-                            } else {
-                                for (int l = 0; l < L; ++l) {
-                                    const float* v = ring_at(l, i, bin);
-                                    for (int c = 0; c < C; ++c) total[c] += v[c];
-                                }
-                            }
-                            for (int c = 0; c < 3; ++c) put(out_total.data(), i, o, c, total[C == 1 ? 0 : c]);
-                            for (int k = 0; k < plan.terms; ++k) {
-                                float* term = out_terms.data() + std::size_t(k) * n * std::size_t(count) * 3;
-                                float v[3] = {0, 0, 0};
-                                if (k < plan.exact) {
-                                    const float* r = ring_at(k, i, bin);
-                                    for (int c = 0; c < C; ++c) v[c] = r[c];
-                                } else {  // the tail: every order from k on
-                                    for (int c = 0; c < C; ++c) v[c] = total[c];
-                                    for (int l = 0; l < plan.exact; ++l) {
-                                        const float* r = ring_at(l, i, bin);
-                                        for (int c = 0; c < C; ++c) v[c] -= r[c];
-                                    }
-                                }
-                                for (int c = 0; c < 3; ++c) put(term, i, o, c, v[C == 1 ? 0 : c]);
-                            }
-                        }
-                        // Pulses seen but not propagated (the laser spot) join the output only.
-                        for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
-                            const Pulse& p = emission.pulses[k];
-                            const std::int64_t b = pulse_bin(p);
-                            if (p.propagates || b < lo || b >= hi) continue;
-                            if (plan.total < 0 && p.order >= plan.exact) continue;  // beyond max_bounces
-                            const int o = int(b - lo);
-                            for (int c = 0; c < 3; ++c) {
-                                out_total[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] += float(p.energy[c]);
-                                if (plan.terms > 0) {
-                                    const int term = std::min<int>(p.order, plan.terms - 1);
-                                    out_terms[((std::size_t(term) * n + i) * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] +=
-                                        float(p.energy[c]);
-                                }
-                            }
-                        }
-                    }
-                    SolveBlock block;
-                    block.first_bin = int(lo);
-                    block.bins = count;
-                    block.patches = n;
-                    block.radiosity = out_total.data();
-                    block.terms = plan.terms;
-                    block.per_order = plan.terms > 0 ? out_terms.data() : nullptr;
-                    if (sink) sink(block);
-                }
-                if (options.progress) options.progress("solve", double(blk + 1) / double(blocks));
-            } catch (...) {
-                failure = std::current_exception();
-                stop.store(true);
-            }
-        }
-        if (timer) stats.seconds_sink += lap(since);
+        if (options.progress) options.progress("solve", double(blk + 1) / double(blocks));
+        stats.seconds_sink += lap(since);
     }
-    if (failure) std::rethrow_exception(failure);
+
 
     stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(fed_layers) * std::uint64_t(blocks) * std::uint64_t(bt);
     stats.max_jacobi_iterations = worst_iterations.load();
