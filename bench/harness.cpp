@@ -334,17 +334,6 @@ Accuracy compare(const fs::path& dir, const fs::path& ref) {
     return a;
 }
 
-/// Writes `text` to `path` atomically (a reader sees the old file or the whole new one).
-void write_text(const fs::path& path, const std::string& text) {
-    tprf::AtomicFile file(path);
-    {
-        std::ofstream out(file.temp_path(), std::ios::binary);
-        out << text;
-        if (!out.flush()) throw std::runtime_error(file.temp_path().string() + ": cannot write");
-    }
-    file.commit();
-}
-
 std::string harness_csv(const std::vector<Run>& runs, double peak_gfma) {
     std::ostringstream os;
     os << "label,max_edge,patches,links,bins,width,height";
@@ -561,7 +550,7 @@ void update_results(const fs::path& file, const std::string& section) {
     } else {
         text.replace(b, e + end.size() - b, block);
     }
-    write_text(file, text);
+    tprf::write_text_file(file, text);
 }
 
 }  // namespace
@@ -619,8 +608,8 @@ int main(int argc, char** argv) {
             fs::remove_all(ref.dir);
         }
 
-        write_text(out / "harness.csv", harness_csv(runs, peak_gfma));
-        write_text(out / "accuracy.csv", accuracy_csv(accuracy));
+        tprf::write_text_file(out / "harness.csv", harness_csv(runs, peak_gfma));
+        tprf::write_text_file(out / "accuracy.csv", accuracy_csv(accuracy));
         const fs::path png = out / "scaling.png";
         const std::vector<Fit> fits = plot_scaling(png, plan, runs, accuracy);
         std::fprintf(stderr, "wrote %s, %s, %s\n", (out / "harness.csv").c_str(), (out / "accuracy.csv").c_str(),

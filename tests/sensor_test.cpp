@@ -12,6 +12,8 @@
 #include "tprf/scene.h"
 #include "tprf/visibility.h"
 
+#include "test_scenes.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -33,13 +35,7 @@ SensorSettings sensor_from(const json& block) {
     return parse_sensor(JsonNode{block, "sensor", file});
 }
 
-TimeAxis axis(int bins, double width, double start = 0.0) {
-    TimeAxis t;
-    t.bins = bins;
-    t.bin_width = width;
-    t.start = start;
-    return t;
-}
+TimeAxis axis(int bins, double width, double start = 0.0) { return test::time_axis(bins, width, start); }
 
 // A cube (H, W, T, 3) of independent uniform values in [0, 1).
 std::vector<float> random_cube(int h, int w, int t, unsigned seed) {

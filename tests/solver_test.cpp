@@ -68,13 +68,7 @@ Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = 
     return out;
 }
 
-TimeAxis axis(int bins, double width, double start = 0.0) {
-    TimeAxis t;
-    t.bins = bins;
-    t.bin_width = width;
-    t.start = start;
-    return t;
-}
+TimeAxis axis(int bins, double width, double start = 0.0) { return test::time_axis(bins, width, start); }
 
 TEST(Solver, FurnaceSteadyStateIsEmissionOverOneMinusAlbedo) {
     const double a = 0.6, le = 1.0;

@@ -7,6 +7,15 @@
 
 namespace tprf::test {
 
+/// A time axis of `bins` bins of `width` metres from `start`.
+inline TimeAxis time_axis(int bins, double width, double start = 0.0) {
+    TimeAxis t;
+    t.bins = bins;
+    t.bin_width = width;
+    t.start = start;
+    return t;
+}
+
 inline Object rectangle(const Vec3& origin, const Vec3& u, const Vec3& v, double albedo = 0.5,
                         double emission = 0.0) {
     Object o;

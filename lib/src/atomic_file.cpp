@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <fstream>
 #include <string>
 #include <system_error>
 #include <utility>
@@ -106,6 +107,16 @@ void check_output_dir(const fs::path& dir) {
     if (const int err = create_unique(where, ".tprf-probe.", probe))
         throw Error(dir.string() + ": cannot write: " + std::system_category().message(err));
     fs::remove(probe, ec);
+}
+
+void write_text_file(const fs::path& path, const std::string& text) {
+    AtomicFile file(path);
+    {
+        std::ofstream out(file.temp_path(), std::ios::binary);
+        out << text;
+        if (!out.flush()) throw Error(file.temp_path().string() + ": cannot write");
+    }
+    file.commit();
 }
 
 }  // namespace tprf

@@ -69,16 +69,6 @@ private:
 
 const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
 
-void write_text(const std::filesystem::path& path, const std::string& text) {
-    AtomicFile file(path);
-    {
-        std::ofstream out(file.temp_path());
-        out << text;
-        if (!out) throw Error(path.string() + ": cannot write");
-    }
-    file.commit();
-}
-
 void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
     std::ostringstream out;
     out.precision(9);
@@ -87,7 +77,7 @@ void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
         out << i << ',' << p.object[i] << ',' << p.centroid[i].x() << ',' << p.centroid[i].y() << ','
             << p.centroid[i].z() << ',' << p.normal[i].x() << ',' << p.normal[i].y() << ',' << p.normal[i].z() << ','
             << p.area[i] << '\n';
-    write_text(path, out.str());
+    write_text_file(path, out.str());
 }
 
 // The plot pixel: the image centre by default; one outside the image is a bad flag.
@@ -138,7 +128,7 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const T
     j["clamp"] = sensor.clamp;
     j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
     j["plot_pixel"] = pixel;
-    write_text(staging.path("sensor.json"), j.dump(2) + "\n");
+    write_text_file(staging.path("sensor.json"), j.dump(2) + "\n");
     measurements.commit();
     if (depth) depth->commit();
     return K;
@@ -295,7 +285,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
         j["sensor"] = {{"exposure", exposure_name(scene.sensor->exposure.type)}, {"measurements", report.measurements}};
     j["peak_rss_mb"] = report.peak_rss_mb;
     j["dropped_degenerate_faces"] = report.dropped_degenerate;
-    write_text(staging.path("render.json"), j.dump(2) + "\n");
+    write_text_file(staging.path("render.json"), j.dump(2) + "\n");
     staging.publish();
     report.written = staging.names();
     if (options.progress) options.progress("write", 1.0);

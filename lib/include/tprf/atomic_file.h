@@ -6,6 +6,7 @@
 /// reader sees either the old file, or no file, or the complete new one.
 
 #include <filesystem>
+#include <string>
 
 namespace tprf {
 
@@ -52,5 +53,8 @@ private:
 /// an unwritable output directory is reported before minutes of rendering rather than after.
 /// Throws tprf::Error "DIR: cannot write: REASON".
 void check_output_dir(const std::filesystem::path& dir);
+
+/// Writes `text` to `path` atomically (through an AtomicFile). Throws tprf::Error when it cannot.
+void write_text_file(const std::filesystem::path& path, const std::string& text);
 
 }  // namespace tprf
