@@ -484,6 +484,12 @@ std::vector<BadCase> bad_cases() {
         edit("noise seed negative",
              [](json& s) { s["sensor"] = {{"exposure", gates()}, {"noise", {{"sigma", 1}, {"seed", -3}}}}; },
              {"sensor.noise.seed: must be an integer"}),
+        edit("pulse far longer than the window",
+             [](json& s) { s["sensor"] = {{"exposure", gates()}, {"pulse", {{"shape", "gaussian"}, {"fwhm", 1000}}}}; },
+             {"sensor.pulse.fwhm: reaches"}),
+        edit("spad jitter far longer than the window",
+             [](json& s) { s["sensor"] = {{"exposure", {{"type", "spad"}, {"photons", 1}, {"jitter_fwhm", 1e300}}}}; },
+             {"sensor.exposure.jitter_fwhm: reaches"}),
         edit("clamp not a bool", [](json& s) { s["sensor"] = {{"exposure", gates()}, {"clamp", 1}}; },
              {"sensor.clamp: expected true or false"}),
     };

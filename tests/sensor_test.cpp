@@ -88,6 +88,23 @@ TEST(Sensor, PartialBinsAtWindowEdgesAreWeightedByOverlap) {
     }
 }
 
+TEST(Sensor, WindowsFarOutsideTheAxisMeasureNothing) {
+    const TimeAxis time = axis(20, 0.01);
+    const std::vector<float> cube = random_cube(1, 1, 20, 5);
+    const SensorSettings s = sensor_from(
+        {{"pulse", {{"shape", "box"}, {"width", 0.02}}},
+         {"exposure", {{"type", "windows"}, {"windows", {{-1e300, 1.0}, {0.0, 0.2}, {1e300, 1e300}}}}}});
+    check_sensor(s, time);
+    const std::vector<float> m = measure(s, time, cube, 1, 1);
+    EXPECT_EQ(m[0], 0.0f);
+    EXPECT_EQ(m[6], 0.0f);
+    // The middle window holds the whole axis but the box moves half of a bin's worth (w/4 of the first
+    // and last bins' contents) out of it at each end.
+    double all = 0.0;
+    for (int i = 0; i < 20; ++i) all += cube[std::size_t(i * 3)];
+    EXPECT_NEAR(m[3], all - (cube[0] + cube[19 * 3]) * 0.25, 1e-5);
+}
+
 TEST(Sensor, GaussianPulseKeepsEnergyAndMeanArrival) {
     const int T = 400;
     const double dt = 0.005;

@@ -31,6 +31,10 @@ constexpr double kGaussianReach = 6.0;
 constexpr double kStepsPerFeature = 16.0;
 // Upper bound on kernel points, so that a pulse table spanning millions of bins stays tractable.
 constexpr double kMaxKernelPoints = 65536.0;
+// A pulse or jitter may reach at most this many render windows away from t = 0: beyond, its kernel
+// and the convolved profile would be sized by the pulse rather than by the render.
+constexpr double kMaxReachInWindows = 64.0;
+constexpr double kMaxPoissonMean = 1e15;
 // Measurements per pixel beyond which the measurements alone would dwarf any render.
 constexpr int kMaxMeasurements = 1 << 20;
 
@@ -264,22 +268,26 @@ TimeKernel exposure_kernel(const SensorSettings& s, double bin_width) {
     return k;
 }
 
+// A bin index from a real position, clamped in floating point first, so that a window far outside the
+// axis cannot overflow the conversion.
+int bin_clamped(double x, int lo, int hi) { return int(std::clamp(x, double(lo), double(hi))); }
+
 // Weights of the source bins for a box window [a, b): each bin's energy, spread evenly over the bin
 // and shifted by every kernel offset, counted by its overlap with the window.
 void box_window_weights(const TimeKernel& k, const TimeAxis& time, double a, double b, int& first,
                         std::vector<double>& w) {
     const double dt = time.bin_width;
     const double tau_lo = k.first * k.step, tau_hi = (k.first + double(k.mass.size())) * k.step;
-    const int i0 = std::max(0, int(std::floor((a - tau_hi - time.start) / dt)) - 1);
-    const int i1 = std::min(time.bins - 1, int(std::ceil((b - tau_lo - time.start) / dt)) + 1);
+    const int i0 = std::max(0, bin_clamped(std::floor((a - tau_hi - time.start) / dt), -2, time.bins) - 1);
+    const int i1 = std::min(time.bins - 1, bin_clamped(std::ceil((b - tau_lo - time.start) / dt), -2, time.bins) + 1);
     first = i0;
     w.assign(i1 >= i0 ? std::size_t(i1 - i0 + 1) : 0, 0.0);
     for (std::size_t q = 0; q < k.mass.size(); ++q) {
         const double m = k.mass[q];
         if (m == 0.0) continue;
         const double tau = (k.first + double(q)) * k.step;
-        const int lo = std::max(i0, int(std::floor((a - tau - time.start) / dt)) - 1);
-        const int hi = std::min(i1, int(std::ceil((b - tau - time.start) / dt)));
+        const int lo = std::max(i0, bin_clamped(std::floor((a - tau - time.start) / dt), -2, time.bins) - 1);
+        const int hi = std::min(i1, bin_clamped(std::ceil((b - tau - time.start) / dt), -2, time.bins));
         for (int i = lo; i <= hi; ++i) {
             const double s = time.start + i * dt + tau;
             const double overlap = std::min(b, s + dt) - std::max(a, s);
@@ -348,13 +356,32 @@ SensorSettings load_sensor(const fs::path& file) {
 }
 
 void check_sensor(const SensorSettings& s, const TimeAxis& time) {
+    const std::string root = s.json_path.empty() ? "" : s.json_path + ".";
+    const double limit = kMaxReachInWindows * time.bins * time.bin_width;
+    auto check_reach = [&](double reach, const std::string& path) {
+        if (reach <= limit) return;
+        std::ostringstream os;
+        os << "reaches " << reach << " from t = 0, more than " << kMaxReachInWindows
+           << " times the render's window (" << time.bins * time.bin_width << "): render a longer window";
+        fail_input(s.file, root + path, os.str());
+    };
+    switch (s.pulse.shape) {
+        case PulseShape::Delta: break;
+        case PulseShape::Gaussian: check_reach(kGaussianReach * s.pulse.fwhm / kFwhmPerSigma, "pulse.fwhm"); break;
+        case PulseShape::Box: check_reach(0.5 * s.pulse.width, "pulse.width"); break;
+        case PulseShape::Table:
+            check_reach(std::max(std::abs(s.pulse.table_time.front()), std::abs(s.pulse.table_time.back())), "pulse.file");
+            break;
+    }
+    if (s.exposure.type == ExposureType::Spad)
+        check_reach(kGaussianReach * s.exposure.jitter_fwhm / kFwhmPerSigma, "exposure.jitter_fwhm");
     if (s.exposure.type != ExposureType::Gates && s.exposure.type != ExposureType::Windows) return;
     const TimeKernel k = pulse_kernel(s.pulse, time.bin_width);
     const double reach_lo = time.start + k.first * k.step;
     const double reach_hi = time.start + time.bins * time.bin_width + (k.first + double(k.mass.size())) * k.step;
     for (const auto& [start, width] : s.exposure.windows)
         if (start < reach_hi && start + width > reach_lo) return;
-    const std::string path = s.json_path.empty() ? "exposure" : s.json_path + ".exposure";
+    const std::string path = root + "exposure";
     std::ostringstream os;
     os << "every " << (s.exposure.type == ExposureType::Gates ? "gate" : "window")
        << " lies outside the render's time window [" << time.start << ", "
@@ -494,7 +521,12 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
                 double v = acc[c];
                 if (spad) {
                     const double mean = s.exposure.photons * std::max(0.0, v) + dark;
-                    v = mean > 0.0 ? double(std::poisson_distribution<std::int64_t>(mean)(rng)) : 0.0;
+                    // Beyond 1e15 expected counts the Poisson spread (1/sqrt(mean)) is below float
+                    // precision, and a draw could overflow the integer: the count is its mean.
+                    if (mean > kMaxPoissonMean)
+                        v = mean;
+                    else
+                        v = mean > 0.0 ? double(std::poisson_distribution<std::int64_t>(mean)(rng)) : 0.0;
                 } else {
                     if (s.noise.sigma > 0.0) v += s.noise.sigma * normal(rng);
                     if (s.clamp) v = std::max(0.0, v);

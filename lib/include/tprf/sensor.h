@@ -72,9 +72,10 @@ SensorSettings parse_sensor(const JsonNode& block);
 /// Reads a sensor file for `tprf sensor`: either the block itself or an object {"sensor": block}.
 SensorSettings load_sensor(const std::filesystem::path& file);
 
-/// Checks the block against a render's time axis: at least one gate or window must be able to
-/// receive light of the window (a sensor that can measure nothing is a mistake). Throws tprf::Error
-/// naming the block's file and JSON path.
+/// Checks the block against a render's time axis: the pulse (and a SPAD's jitter) must reach no more
+/// than 64 windows from t = 0, and at least one gate or window must be able to receive light of the
+/// window (a sensor that can measure nothing is a mistake). Throws tprf::Error naming the block's file
+/// and JSON path. The functions below assume a checked block.
 void check_sensor(const SensorSettings& sensor, const TimeAxis& time);
 
 /// Measurements per pixel and channel, K: one per gate, window or phase; T for a SPAD histogram.
