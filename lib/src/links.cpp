@@ -18,11 +18,12 @@ namespace tprf {
 namespace {
 
 // One unordered pair's result, kept by its lower-numbered patch until the CSR is assembled.
+// One unordered pair while the links are collected: 8 bytes, so that the collection costs less than
+// the CSR arrays it becomes (12 bytes a link, 24 a pair). F_ji follows by reciprocity and the
+// distance from the centroids.
 struct PairLink {
     std::uint32_t other;  // j > i
     float ff_ij;          // i -> j
-    float ff_ji;          // j -> i
-    float distance;       // metres
 };
 
 // Deterministic per-pair jitter (threads must not change the answer): a 64-bit mix of the inputs.
@@ -170,9 +171,8 @@ Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOp
                 const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
                 const double v = visible_fraction(patches, vis, i, j, options, my_rays);
                 if (v <= 0.0) continue;
-                const double f_ij = (i_outer ? f_st : f_ts) * v, f_ji = (i_outer ? f_ts : f_st) * v;
-                row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij), static_cast<float>(f_ji),
-                               static_cast<float>((patches.centroid[i] - patches.centroid[j]).norm())});
+                const double f_ij = (i_outer ? f_st : f_ts) * v;
+                row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij)});
             }
             row.shrink_to_fit();
             const std::uint64_t work = done_work.fetch_add(n - i) + (n - i);
@@ -207,12 +207,13 @@ Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOp
         std::uint64_t own = links.row[i] + lower[i];
         for (const PairLink& p : pairs[i]) {
             const std::uint64_t at = cursor[p.other]++;
+            const float distance = static_cast<float>((patches.centroid[i] - patches.centroid[p.other]).norm());
             links.source[at] = static_cast<std::uint32_t>(i);
-            links.ff[at] = p.ff_ji;
-            links.distance[at] = p.distance;
+            links.ff[at] = static_cast<float>(double(p.ff_ij) * patches.area[i] / patches.area[p.other]);
+            links.distance[at] = distance;
             links.source[own] = p.other;
             links.ff[own] = p.ff_ij;
-            links.distance[own] = p.distance;
+            links.distance[own] = distance;
             ++own;
         }
         std::vector<PairLink>().swap(pairs[i]);
