@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 
 #include <array>
+#include <charconv>
 #include <chrono>
 #include <optional>
 #include <cstdio>
@@ -106,11 +107,18 @@ int run_sensor(const tprf::SensorRunOptions& options, bool quiet) {
 
 // "X,Y" -> {X, Y}, for --plot-pixel.
 std::string parse_pixel(const std::string& text, std::optional<std::array<int, 2>>& out) {
-    int x = 0, y = 0;
-    char comma = 0, extra = 0;
-    if (std::sscanf(text.c_str(), "%d %c %d %c", &x, &comma, &y, &extra) != 3 || comma != ',')
-        return "expected X,Y (column, row), got \"" + text + "\"";
-    out = std::array<int, 2>{x, y};
+    const std::string error = "expected X,Y (column, row: non-negative integers), got \"" + text + "\"";
+    const std::size_t comma = text.find(',');
+    if (comma == std::string::npos) return error;
+    int xy[2] = {0, 0};
+    const std::string parts[2] = {text.substr(0, comma), text.substr(comma + 1)};
+    for (int k = 0; k < 2; ++k) {
+        const char* first = parts[k].data();
+        const char* last = first + parts[k].size();
+        const auto [end, ec] = std::from_chars(first, last, xy[k]);
+        if (ec != std::errc() || end != last) return error;
+    }
+    out = std::array<int, 2>{xy[0], xy[1]};
     return "";
 }
 

@@ -110,6 +110,10 @@ TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
     const tprf::NpyArray b = tprf::read_npy(m_dir / "b" / "measurements.npy");
     EXPECT_EQ(a.shape, (std::vector<std::size_t>{8, 8, 5, 3}));
     EXPECT_EQ(a.data, b.data);
+    // A scene file with a sensor block serves as the sensor file too.
+    const Outcome again = run("sensor " + (m_dir / "b").string() + " " + (m_dir / "with_sensor.json").string());
+    ASSERT_EQ(again.status, 0) << again.err;
+    EXPECT_EQ(tprf::read_npy(m_dir / "b" / "measurements.npy").data, a.data);
     // The gates tile [0, 1.5 m), the first 15 of the 16 bins of 0.1 m: together they hold those bins.
     const tprf::NpyArray cube = tprf::read_npy(m_dir / "a" / "transient.npy");
     for (std::size_t p = 0; p < 64; ++p)
@@ -119,6 +123,21 @@ TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
             for (std::size_t k = 0; k < 5; ++k) sum_m += a.data[(p * 5 + k) * 3 + c];
             EXPECT_NEAR(sum_m, sum_cube, 1e-5 * (1.0 + sum_cube));
         }
+}
+
+TEST_F(Cli, SensorRunsReplaceEachOthersOutputs) {
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+    std::ofstream(m_dir / "amcw.json") << R"({"exposure": {"type": "amcw", "frequency_mhz": 20}})";
+    std::ofstream(m_dir / "gates.json") << R"({"exposure": {"type": "gates", "start": 0, "width": 0.5, "step": 0.5, "count": 3}})";
+    ASSERT_EQ(run("sensor " + (m_dir / "out").string() + " " + (m_dir / "amcw.json").string()).status, 0);
+    EXPECT_TRUE(fs::exists(m_dir / "out" / "depth.npy"));
+    ASSERT_EQ(run("sensor " + (m_dir / "out").string() + " " + (m_dir / "gates.json").string()).status, 0);
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "depth.npy")) << "an AMCW depth beside gated measurements";
+    EXPECT_EQ(tprf::read_npy(m_dir / "out" / "measurements.npy").shape, (std::vector<std::size_t>{8, 8, 3, 3}));
+    // A render without a sensor block into the same directory leaves no measurements of the old cube.
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
+    EXPECT_TRUE(fs::exists(m_dir / "out" / "transient.npy"));
 }
 
 TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
@@ -139,6 +158,10 @@ TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
     EXPECT_NE(r.err.find("outside the 8 x 8 image"), std::string::npos) << r.err;
     r = run("sensor " + (m_dir / "out").string() + " " + (m_dir / "sensor.json").string() + " --plot-pixel 3");
     EXPECT_EQ(r.status, 2);
+    r = run("sensor " + (m_dir / "out").string() + " " + (m_dir / "sensor.json").string() +
+            " --plot-pixel 99999999999,1");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("expected X,Y"), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
     EXPECT_FALSE(fs::exists(m_dir / "out" / "depth.npy"));
 }

@@ -198,6 +198,54 @@ TEST(Sensor, TablePulseIsNormalisedAndKeepsItsMean) {
     fs::remove_all(dir);
 }
 
+TEST(Sensor, ExtremeButValidPulsesStayFiniteAndBounded) {
+    const fs::path dir = fs::temp_directory_path() / ("tprf_sensor_extreme_" + std::to_string(std::random_device{}()));
+    fs::create_directories(dir);
+    const TimeAxis time = axis(100, 0.04);
+    // A table a tenth of a nanometre wide, 1 m from t = 0: its grid must not overflow, and its mean stays.
+    std::ofstream(dir / "narrow.csv") << "1.0,1\n1.0000000001,1\n";
+    json block = {{"pulse", {{"shape", "table"}, {"file", "narrow.csv"}}},
+                  {"exposure", {{"type", "gates"}, {"start", 0}, {"width", 0.4}, {"step", 0.4}, {"count", 10}}}};
+    SensorSettings s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
+    check_sensor(s, time);
+    const TimeKernel k = pulse_kernel(s.pulse, time.bin_width);
+    double total = 0.0, mean = 0.0;
+    for (std::size_t q = 0; q < k.mass.size(); ++q) {
+        total += k.mass[q];
+        mean += k.mass[q] * (k.first + double(q)) * k.step;
+    }
+    EXPECT_NEAR(total, 1.0, 1e-12);
+    EXPECT_NEAR(mean, 1.00000000005, 1e-9);
+    // Values near the largest double: only the shape counts.
+    std::ofstream(dir / "huge.csv") << "0,1e308\n0.01,1.7e308\n0.02,0\n";
+    block["pulse"]["file"] = "huge.csv";
+    s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
+    block["clamp"] = false;
+    const std::vector<float> cube = random_cube(2, 2, 100, 9);
+    for (const float v : measure(s, time, cube, 2, 2)) EXPECT_TRUE(std::isfinite(v));
+    // A first row that starts with a number but is malformed is an error, not a header.
+    std::ofstream(dir / "bad.csv") << "0,1,2\n0.01,1\n";
+    block["pulse"]["file"] = "bad.csv";
+    EXPECT_THROW(parse_sensor(JsonNode{block, "sensor", dir / "scene.json"}), Error);
+    fs::remove_all(dir);
+
+    // A SPAD whose pulse is far narrower than its jitter: the convolution's grid stays bounded.
+    const SensorSettings spad = sensor_from({{"pulse", {{"shape", "gaussian"}, {"fwhm", 1e-10}}},
+                                             {"exposure", {{"type", "spad"}, {"photons", 1}, {"jitter_fwhm", 0.04}}}});
+    check_sensor(spad, time);
+    const SensorWeights w = sensor_weights(spad, time);
+    double sum = 0.0;
+    for (const double v : w.weight[50]) sum += v;
+    EXPECT_NEAR(sum, 1.0, 1e-9);  // bin 50 keeps its whole signal: jitter (4 cm) is far from the window's ends
+    // AMCW at a frequency whose phase hardly turns over a bin: the weights are finite, near 1/2 + cos/2.
+    const SensorSettings slow = sensor_from({{"exposure", {{"type", "amcw"}, {"frequency_mhz", 1e-12}}}});
+    const SensorWeights a = sensor_weights(slow, time);
+    for (const auto& row : a.weight)
+        for (const double v : row) EXPECT_TRUE(std::isfinite(v));
+    EXPECT_NEAR(a.weight[0][0], 1.0, 1e-9);  // phase 0: (1 + cos 0) / 2
+    EXPECT_NEAR(a.weight[2][0], 0.0, 1e-9);  // phase 180
+}
+
 TEST(Sensor, NoiseHasTheRequestedSigmaAndIsReproducible) {
     const int H = 32, W = 32, T = 40, K = 10;
     const TimeAxis time = axis(T, 0.01);

@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -37,6 +38,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 class Staging {
 public:
     explicit Staging(const std::filesystem::path& out) : m_out(out) {
+        m_earlier_run = std::filesystem::exists(out / "render.json");
         m_dir = out / (".tprf-staging-" + std::to_string(::getpid()));
         std::filesystem::remove_all(m_dir);
         std::filesystem::create_directories(m_dir);
@@ -53,11 +55,29 @@ public:
         return m_dir / name;
     }
 
-    void publish() {
+    /// Moves every staged output into place, then, when the directory held an earlier render, removes
+    /// that run's outputs that this one did not write (`owned`: names, or prefixes ending in '*'), so
+    /// that the directory never mixes two runs (a depth.npy of an earlier AMCW sensor beside gated
+    /// measurements, say).
+    void publish(const std::vector<std::string>& owned) {
         for (const std::string& name : m_names) {
             const std::filesystem::path to = m_out / name;
             if (std::filesystem::is_directory(to)) std::filesystem::remove_all(to);
             std::filesystem::rename(m_dir / name, to);
+        }
+        // Only in a directory that an earlier run wrote: a folder of the user's own named "frames" in
+        // some other directory is not ours to remove.
+        if (!m_earlier_run) return;
+        for (const auto& entry : std::filesystem::directory_iterator(m_out)) {
+            const std::string name = entry.path().filename().string();
+            if (std::find(m_names.begin(), m_names.end(), name) != m_names.end()) continue;
+            for (const std::string& o : owned) {
+                const bool prefix = !o.empty() && o.back() == '*';
+                if (prefix ? name.rfind(o.substr(0, o.size() - 1), 0) == 0 : name == o) {
+                    std::filesystem::remove_all(entry.path());
+                    break;
+                }
+            }
         }
     }
     const std::vector<std::string>& names() const { return m_names; }
@@ -65,7 +85,18 @@ public:
 private:
     std::filesystem::path m_out, m_dir;
     std::vector<std::string> m_names;
+    bool m_earlier_run = false;
 };
+
+// What a sensor run writes, and what a render writes besides (SPEC.md, "Output directory"; docs/sensor.md).
+const std::vector<std::string> kSensorOutputs = {"measurements.npy", "depth.npy", "sensor.json", "sensor_plot.png"};
+std::vector<std::string> render_outputs() {
+    std::vector<std::string> all = {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json",
+                                    "patches.csv", "patch_transient.npy", "patch_steady.npy", "frames", "streaks",
+                                    "light_in_flight.mp4", "transient_bounce_*"};
+    all.insert(all.end(), kSensorOutputs.begin(), kSensorOutputs.end());
+    return all;
+}
 
 const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
 
@@ -126,7 +157,11 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const T
     j["measurements"] = K;
     j["axis"] = measurement_axis(sensor, time);
     j["clamp"] = sensor.clamp;
-    j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
+    if (sensor.exposure.type == ExposureType::Spad)
+        j["spad"] = {{"photons", sensor.exposure.photons}, {"jitter_fwhm", sensor.exposure.jitter_fwhm},
+                     {"dark_rate", sensor.exposure.dark_rate}, {"seed", sensor.exposure.seed}};
+    else
+        j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
     j["plot_pixel"] = pixel;
     write_text_file(staging.path("sensor.json"), j.dump(2) + "\n");
     measurements.commit();
@@ -286,7 +321,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     j["peak_rss_mb"] = report.peak_rss_mb;
     j["dropped_degenerate_faces"] = report.dropped_degenerate;
     write_text_file(staging.path("render.json"), j.dump(2) + "\n");
-    staging.publish();
+    staging.publish(render_outputs());
     report.written = staging.names();
     if (options.progress) options.progress("write", 1.0);
     return report;
@@ -339,11 +374,12 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     report.height = int(shape[0]);
     report.width = int(shape[1]);
     const std::array<int, 2> pixel = plot_pixel(options.plot_pixel, report.width, report.height);
+    check_output_dir(dir);
     Staging staging(dir);
     if (options.progress) options.progress("sensor", 0.0);
     report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width, pixel,
                                                options.threads);
-    staging.publish();
+    staging.publish(kSensorOutputs);
     report.written = staging.names();
     if (options.progress) options.progress("sensor", 1.0);
     report.seconds = seconds_since(start);

@@ -9,7 +9,9 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
+#include <cstdlib>
 #include <complex>
 #include <fstream>
 #include <limits>
@@ -35,6 +37,11 @@ constexpr double kMaxKernelPoints = 65536.0;
 // and the convolved profile would be sized by the pulse rather than by the render.
 constexpr double kMaxReachInWindows = 64.0;
 constexpr double kMaxPoissonMean = 1e15;
+// Bounds that keep a SPAD's expected counts finite whatever the signal's scale.
+constexpr double kMaxPhotons = 1e20;
+constexpr double kMaxDarkRate = 1e30;
+// Point pairs of a pulse-jitter convolution beyond which its grid is made coarser.
+constexpr double kMaxConvolutionPairs = 1e8;
 // Measurements per pixel beyond which the measurements alone would dwarf any render.
 constexpr int kMaxMeasurements = 1 << 20;
 
@@ -56,25 +63,29 @@ void read_pulse_table(const JsonNode& node, SensorPulse& pulse) {
     if (!in) node.fail("cannot read pulse table " + path.string());
     std::string line;
     int line_no = 0;
-    bool seen_row = false;
+    bool first_row = true;
     while (std::getline(in, line)) {
         ++line_no;
         const std::size_t begin = line.find_first_not_of(" \t\r");
         if (begin == std::string::npos || line[begin] == '#') continue;
         std::replace(line.begin(), line.end(), ',', ' ');
         std::istringstream row(line);
+        std::string first_field;
+        row >> first_field;
+        char* end = nullptr;
+        std::strtod(first_field.c_str(), &end);
+        // Only a first row that does not start with a number is a header: a malformed data row is an error.
+        if (first_row && (end == first_field.c_str() || *end != '\0')) {
+            first_row = false;
+            continue;
+        }
+        first_row = false;
+        row.clear();
+        row.str(line);
         double t = 0.0, v = 0.0;
         std::string rest;
-        const bool numbers = static_cast<bool>(row >> t >> v) && !(row >> rest);
         const std::string where = "pulse table " + path.string() + ", line " + std::to_string(line_no) + ": ";
-        if (!numbers) {
-            if (!seen_row && pulse.table_time.empty()) {  // a header
-                seen_row = true;
-                continue;
-            }
-            node.fail(where + "expected two numbers \"time,value\"");
-        }
-        seen_row = true;
+        if (!(row >> t >> v) || (row >> rest)) node.fail(where + "expected two finite numbers \"time,value\"");
         if (!std::isfinite(t) || !std::isfinite(v)) node.fail(where + "expected finite numbers");
         if (v < 0.0) node.fail(where + "value must be >= 0");
         if (!pulse.table_time.empty() && t <= pulse.table_time.back())
@@ -83,10 +94,16 @@ void read_pulse_table(const JsonNode& node, SensorPulse& pulse) {
         pulse.table_value.push_back(v);
     }
     if (pulse.table_time.size() < 2) node.fail("pulse table " + path.string() + " needs at least two rows");
+    // Only the shape matters (it is normalised to unit area): scaled to a peak of 1, values near the
+    // largest double cannot overflow the area.
+    const double peak = *std::max_element(pulse.table_value.begin(), pulse.table_value.end());
+    if (peak > 0.0)
+        for (double& v : pulse.table_value) v /= peak;
     double area = 0.0;
     for (std::size_t i = 1; i < pulse.table_time.size(); ++i)
         area += 0.5 * (pulse.table_value[i] + pulse.table_value[i - 1]) * (pulse.table_time[i] - pulse.table_time[i - 1]);
-    if (!(area > 0.0)) node.fail("pulse table " + path.string() + " has zero area");
+    if (!(area > 0.0) || !std::isfinite(area))
+        node.fail("pulse table " + path.string() + " has zero area, or times too far apart to integrate");
 }
 
 SensorPulse parse_pulse(const JsonNode& n) {
@@ -137,6 +154,7 @@ Exposure parse_exposure(const JsonNode& n) {
         const JsonNode count_node = n.child("count");
         const int count = count_node.positive_int();
         if (count > kMaxMeasurements) count_node.fail("more than " + std::to_string(kMaxMeasurements) + " gates");
+        if (!std::isfinite(start + (count - 1) * step + width)) n.fail("the last gate ends beyond the largest number");
         for (int k = 0; k < count; ++k) e.windows.push_back({start + k * step, width});
     } else if (name == "windows") {
         n.check_keys({"type", "windows"});
@@ -149,6 +167,7 @@ Exposure parse_exposure(const JsonNode& n) {
             const JsonNode w = list.at(k);
             if (w.array_size() != 2) w.fail("expected [start, width]");
             e.windows.push_back({w.at(0).number(), w.at(1).positive()});
+            if (!std::isfinite(e.windows.back()[0] + e.windows.back()[1])) w.fail("ends beyond the largest number");
         }
     } else if (name == "amcw") {
         n.check_keys({"type", "frequency_mhz", "phases_deg"});
@@ -168,9 +187,14 @@ Exposure parse_exposure(const JsonNode& n) {
     } else if (name == "spad") {
         n.check_keys({"type", "photons", "jitter_fwhm", "dark_rate", "seed"});
         e.type = ExposureType::Spad;
-        e.photons = n.child("photons").positive();
+        const JsonNode photons = n.child("photons");
+        e.photons = photons.positive();
+        if (e.photons > kMaxPhotons) photons.fail("must be at most 1e20 photons per unit of signal");
         if (const auto jitter = n.find("jitter_fwhm")) e.jitter_fwhm = jitter->non_negative();
-        if (const auto dark = n.find("dark_rate")) e.dark_rate = dark->non_negative();
+        if (const auto dark = n.find("dark_rate")) {
+            e.dark_rate = dark->non_negative();
+            if (e.dark_rate > kMaxDarkRate) dark->fail("must be at most 1e30 counts per second");
+        }
         if (const auto seed = n.find("seed")) e.seed = seed_value(*seed);
     } else {
         type.fail("unknown exposure type " + in_quotes(name) +
@@ -202,6 +226,7 @@ TimeKernel kernel_range(double step, double lo, double hi) {
 void normalise(TimeKernel& k) {
     double total = 0.0;
     for (const double m : k.mass) total += m;
+    TPRF_CHECK(std::isfinite(total) && total > 0.0);
     for (double& m : k.mass) m /= total;
 }
 
@@ -225,14 +250,16 @@ TimeKernel gaussian_kernel(double fwhm, double bin_width) {
 TimeKernel table_kernel(const SensorPulse& p, double bin_width) {
     const double t0 = p.table_time.front(), t1 = p.table_time.back();
     const double span = t1 - t0;
-    const double step = std::max(std::min(bin_width, span) / kStepsPerFeature, span / kMaxKernelPoints);
+    // Also no finer than the table's distance from t = 0 allows, so that grid indices fit an int.
+    const double step = std::max({std::min(bin_width, span) / kStepsPerFeature, span / kMaxKernelPoints,
+                                  std::max(std::abs(t0), std::abs(t1)) / kMaxKernelPoints});
     TimeKernel k = kernel_range(step, t0, t1);
     // Each segment in pieces no longer than a step; a piece's mass sits at its centroid, so that the
     // kernel's mean is the table's.
     for (std::size_t s = 1; s < p.table_time.size(); ++s) {
         const double a = p.table_time[s - 1], b = p.table_time[s];
         const double va = p.table_value[s - 1], vb = p.table_value[s];
-        const int pieces = std::max(1, int(std::ceil((b - a) / step)));
+        const int pieces = std::max(1, int(std::ceil((b - a) / k.step)));
         for (int j = 0; j < pieces; ++j) {
             const double x0 = a + (b - a) * j / pieces, x1 = a + (b - a) * (j + 1) / pieces;
             const double y0 = va + (vb - va) * (x0 - a) / (b - a), y1 = va + (vb - va) * (x1 - a) / (b - a);
@@ -245,17 +272,30 @@ TimeKernel table_kernel(const SensorPulse& p, double bin_width) {
     return k;
 }
 
-// The distribution of the sum of two independent offsets: every pair of points, split onto the finer grid.
+// `k` on a grid of `step`: each mass split between its two grid points, so total and mean are kept.
+TimeKernel resample(const TimeKernel& k, double step) {
+    TimeKernel out = kernel_range(step, k.first * k.step, (k.first + double(k.mass.size())) * k.step);
+    for (std::size_t q = 0; q < k.mass.size(); ++q)
+        if (k.mass[q] != 0.0) add_split(out, (k.first + double(q)) * k.step, k.mass[q]);
+    return out;
+}
+
+// The distribution of the sum of two independent offsets (pulse and jitter): both put on one grid,
+// fine enough for the finer of the two unless that would make the grid or the pairwise sum too large.
 TimeKernel convolve(const TimeKernel& a, const TimeKernel& b) {
-    const double step = std::min(a.step, b.step);
-    const double lo = a.first * a.step + b.first * b.step;
-    const double hi = (a.first + double(a.mass.size())) * a.step + (b.first + double(b.mass.size())) * b.step;
-    TimeKernel k = kernel_range(step, lo, hi);
-    for (std::size_t i = 0; i < a.mass.size(); ++i) {
-        if (a.mass[i] == 0.0) continue;
-        for (std::size_t j = 0; j < b.mass.size(); ++j)
-            if (b.mass[j] != 0.0)
-                add_split(k, (a.first + double(i)) * a.step + (b.first + double(j)) * b.step, a.mass[i] * b.mass[j]);
+    const double ra = double(a.mass.size()) * a.step, rb = double(b.mass.size()) * b.step;
+    const double reach = std::max(std::abs(a.first * a.step), std::abs((a.first + double(a.mass.size())) * a.step)) +
+                         std::max(std::abs(b.first * b.step), std::abs((b.first + double(b.mass.size())) * b.step));
+    const double step = std::max({std::min(a.step, b.step), reach / kMaxKernelPoints,
+                                  std::sqrt(ra * rb / kMaxConvolutionPairs)});
+    const TimeKernel ga = resample(a, step), gb = resample(b, step);
+    TimeKernel k;
+    k.step = step;
+    k.first = ga.first + gb.first;
+    k.mass.assign(ga.mass.size() + gb.mass.size() - 1, 0.0);
+    for (std::size_t i = 0; i < ga.mass.size(); ++i) {
+        if (ga.mass[i] == 0.0) continue;
+        for (std::size_t j = 0; j < gb.mass.size(); ++j) k.mass[i + j] += ga.mass[i] * gb.mass[j];
     }
     return k;
 }
@@ -351,7 +391,8 @@ SensorSettings load_sensor(const fs::path& file) {
     const nlohmann::json root = read_json_file(file, "sensor file");
     const JsonNode top{root, "", file};
     top.expect_object();
-    if (root.size() == 1 && root.contains("sensor")) return parse_sensor(top.child("sensor"));
+    // A scene file (or any object with a "sensor" member) gives its block.
+    if (root.contains("sensor")) return parse_sensor(top.child("sensor"));
     return parse_sensor(top);
 }
 
@@ -425,21 +466,23 @@ SensorWeights sensor_weights(const SensorSettings& s, const TimeAxis& time) {
     out.weight.resize(std::size_t(K));
     if (e.type == ExposureType::Amcw) {
         // Exposure (1 + cos(w t - phi)) / 2, non-negative as a real pixel's sensitivity. Shifting by the
-        // kernel multiplies the cosine's phasor by the kernel's characteristic function P(w), so each
-        // bin's weight is 1/2 + Im(P (e^{i(w b - phi)} - e^{i(w a - phi)})) / (2 w dt) exactly.
+        // kernel multiplies the cosine's phasor by the kernel's characteristic function P(w); averaged over
+        // a bin [a, a + dt) the cosine becomes Re(P e^{i(w (a + dt/2) - phi)}) sinc(w dt / 2), exactly,
+        // and without the cancellation of a difference of sines when w dt is small.
         const double w = omega_per_unit(e, time);
         const double dt = time.bin_width;
         std::complex<double> P = 0.0;
         for (std::size_t q = 0; q < k.mass.size(); ++q) P += k.mass[q] * std::polar(1.0, w * (k.first + double(q)) * k.step);
+        const double half = 0.5 * w * dt;
+        const double sinc = half < 1e-4 ? 1.0 - half * half / 6.0 : std::sin(half) / half;
         for (int m = 0; m < K; ++m) {
             const double phi = e.phases_deg[std::size_t(m)] * std::numbers::pi / 180.0;
             std::vector<double>& row = out.weight[std::size_t(m)];
             out.first[std::size_t(m)] = 0;
             row.resize(std::size_t(time.bins));
             for (int i = 0; i < time.bins; ++i) {
-                const double a = time.start + i * dt;
-                const std::complex<double> d = std::polar(1.0, w * (a + dt) - phi) - std::polar(1.0, w * a - phi);
-                row[std::size_t(i)] = 0.5 + (P * d).imag() / (2.0 * w * dt);
+                const double mid = time.start + (i + 0.5) * dt;
+                row[std::size_t(i)] = 0.5 + 0.5 * (P * std::polar(1.0, w * mid - phi)).real() * sinc;
             }
         }
         return out;
@@ -531,7 +574,8 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
                     if (s.noise.sigma > 0.0) v += s.noise.sigma * normal(rng);
                     if (s.clamp) v = std::max(0.0, v);
                 }
-                out[k * 3 + std::size_t(c)] = float(v);
+                // Saturated rather than infinite when a signal's scale exceeds a float's range.
+                out[k * 3 + std::size_t(c)] = float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX)));
             }
         }
         if (depth != nullptr) depth[p] = s.exposure.type == ExposureType::Amcw ? float(amcw_depth(s, out)) : 0.0f;
