@@ -454,7 +454,6 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Em
         stats.seconds_sink += lap(since);
     }
 
-
     stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(fed_layers) * std::uint64_t(blocks) * std::uint64_t(bt);
     stats.max_jacobi_iterations = worst_iterations.load();
     stats.short_links = short_links.size();
