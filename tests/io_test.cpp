@@ -10,7 +10,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
@@ -149,6 +151,28 @@ TEST_F(Io, ReadNpyRejectsWhatItCannotRead) {
     expect_error("v3.npy", npy_bytes(3, "{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }\n", eight),
                  "version 3.0");
     expect_error("text.npy", "hello, world", "not a .npy file");
+}
+
+TEST(IoFullDisk, NpyMapOnAFullDiskIsAnErrorNotASignal) {
+    // A 1 MiB file system and an 8 MiB array: without reserving the blocks up front, the first write
+    // through the mapping beyond 1 MiB would kill the process with SIGBUS.
+    const std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / ("tprf_fulldisk_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    const std::string mount = "mount -t tmpfs -o size=1M tmpfs " + dir.string() + " 2>/dev/null";
+    if (std::system(mount.c_str()) != 0) {
+        std::filesystem::remove(dir);
+        GTEST_SKIP() << "cannot mount a small tmpfs here (needs root)";
+    }
+    try {
+        tprf::NpyMap map(dir / "big.npy", {2, 1024, 1024});
+        ADD_FAILURE() << "an 8 MiB map on a 1 MiB file system was accepted";
+    } catch (const tprf::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("is the disk full?"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / "big.npy"));
+    EXPECT_EQ(std::system(("umount " + dir.string()).c_str()), 0);
+    std::filesystem::remove(dir);
 }
 
 TEST_F(Io, NpyMapWritesThroughTheMappingAndCommits) {

@@ -212,6 +212,14 @@ NpyMap::NpyMap(const fs::path& path, std::vector<std::size_t> shape) : m_file(pa
         ::close(fd);
         fail_errno(temp, "cannot resize to " + std::to_string(m_map_bytes) + " bytes", err);
     }
+    // Reserve the blocks now: writing through the mapping to a sparse file on a full disk would kill
+    // the process with SIGBUS instead of reporting an error. (File systems that cannot preallocate
+    // answer EOPNOTSUPP or EINVAL and stay sparse.)
+    if (const int err = ::posix_fallocate(fd, 0, static_cast<off_t>(m_map_bytes));
+        err != 0 && err != EOPNOTSUPP && err != EINVAL) {
+        ::close(fd);
+        fail_errno(temp, "cannot reserve " + std::to_string(m_map_bytes) + " bytes (is the disk full?)", err);
+    }
     void* map = ::mmap(nullptr, m_map_bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     const int err = errno;
     ::close(fd);  // the mapping keeps the file open

@@ -22,10 +22,10 @@ void write_npy(const std::filesystem::path& path, const std::vector<std::size_t>
 /// larger than RAM (512 x 512 x 4096 x 3 floats = 12 GiB) are written without a copy in memory: the
 /// kernel pages the data out to the file as it sees fit.
 ///
-/// The file is created at a temporary name, sized sparse and zero-filled (ftruncate), and appears
-/// under its final name only on commit(); if the NpyMap is destroyed first, the temporary is removed.
-/// On a full disk, writing a page of a sparse file raises SIGBUS: check free space before mapping
-/// files of this size.
+/// The file is created at a temporary name, sized and zero-filled (ftruncate), its blocks reserved
+/// (posix_fallocate, so that a full disk is an error here rather than a SIGBUS while writing through
+/// the mapping), and appears under its final name only on commit(); if the NpyMap is destroyed first,
+/// the temporary is removed.
 class NpyMap {
 public:
     /// Creates and maps the temporary file for an array of `shape` (product(shape) floats, C order).
