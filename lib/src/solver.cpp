@@ -100,7 +100,12 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
         const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const float* __restrict h = ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * C;
-        for (int e = 0; e < C * BT; ++e) local[e] += t.w0 * h[e + C] + t.w1 * h[e];
+        // Two separate accumulations: written as one sum, the compiler (no -ffast-math) must round
+        // w0 h + w1 h first, which costs a multiply, an FMA and an add instead of two FMAs.
+        for (int e = 0; e < C * BT; ++e) {
+            local[e] += t.w0 * h[e + C];
+            local[e] += t.w1 * h[e];
+        }
     }
     cursor = k;
     for (int e = 0; e < C * BT; ++e) acc[e] += local[e];
@@ -120,7 +125,10 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
         if (t.lag < bt) continue;
         const float* __restrict h =
             ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * std::size_t(C);
-        for (int e = 0; e < len; ++e) acc[e] += t.w0 * h[e + C] + t.w1 * h[e];
+        for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
+            acc[e] += t.w0 * h[e + C];
+            acc[e] += t.w1 * h[e];
+        }
     }
     cursor = k;
 }
