@@ -35,7 +35,7 @@ SensorSettings sensor_from(const json& block) {
     return parse_sensor(JsonNode{block, "sensor", file});
 }
 
-TimeAxis axis(int bins, double width, double start = 0.0) { return test::time_axis(bins, width, start); }
+using test::time_axis;
 
 // A cube (H, W, T, 3) of independent uniform values in [0, 1).
 std::vector<float> random_cube(int h, int w, int t, unsigned seed) {
@@ -58,7 +58,7 @@ std::vector<float> measure(const SensorSettings& s, const TimeAxis& time, const 
 
 TEST(Sensor, DeltaPulseGatesSumTheBinsInsideEachGate) {
     const int H = 2, W = 3, T = 50;
-    const TimeAxis time = axis(T, 0.01, 0.1);
+    const TimeAxis time = time_axis(T, 0.01, 0.1);
     const std::vector<float> cube = random_cube(H, W, T, 1);
     // Gates aligned with bins: gate k covers bins 3 + 5k .. 7 + 5k.
     const SensorSettings s = sensor_from(
@@ -76,7 +76,7 @@ TEST(Sensor, DeltaPulseGatesSumTheBinsInsideEachGate) {
 
 TEST(Sensor, PartialBinsAtWindowEdgesAreWeightedByOverlap) {
     const int T = 20;
-    const TimeAxis time = axis(T, 0.01);
+    const TimeAxis time = time_axis(T, 0.01);
     const std::vector<float> cube = random_cube(1, 1, T, 2);
     // [0.035, 0.0725): half of bin 3, bins 4..6, a quarter of bin 7.
     const SensorSettings s = sensor_from({{"exposure", {{"type", "windows"}, {"windows", {{0.035, 0.0375}}}}}});
@@ -89,7 +89,7 @@ TEST(Sensor, PartialBinsAtWindowEdgesAreWeightedByOverlap) {
 }
 
 TEST(Sensor, WindowsFarOutsideTheAxisMeasureNothing) {
-    const TimeAxis time = axis(20, 0.01);
+    const TimeAxis time = time_axis(20, 0.01);
     const std::vector<float> cube = random_cube(1, 1, 20, 5);
     const SensorSettings s = sensor_from(
         {{"pulse", {{"shape", "box"}, {"width", 0.02}}},
@@ -108,7 +108,7 @@ TEST(Sensor, WindowsFarOutsideTheAxisMeasureNothing) {
 TEST(Sensor, GaussianPulseKeepsEnergyAndMeanArrival) {
     const int T = 400;
     const double dt = 0.005;
-    const TimeAxis time = axis(T, dt, 1.0);
+    const TimeAxis time = time_axis(T, dt, 1.0);
     std::vector<float> profile(T, 0.0f);
     profile[100] = 2.0f;
     profile[101] = 1.0f;
@@ -165,7 +165,7 @@ TEST(Sensor, PulseNarrowerThanABinIsExact) {
     // loses 1/80 of its own first and last bins; the first gate's loss below t = 0 and the last gate's
     // beyond the window are lost for good.
     const int T = 30;
-    const TimeAxis time = axis(T, 0.01);
+    const TimeAxis time = time_axis(T, 0.01);
     const std::vector<float> cube = random_cube(1, 1, T, 3);
     const SensorSettings s = sensor_from({{"pulse", {{"shape", "box"}, {"width", 0.001}}},
                                           {"exposure", {{"type", "gates"}, {"start", 0.0}, {"width", 0.1}, {"step", 0.1}, {"count", 3}}}});
@@ -201,7 +201,7 @@ TEST(Sensor, TablePulseIsNormalisedAndKeepsItsMean) {
 TEST(Sensor, ExtremeButValidPulsesStayFiniteAndBounded) {
     const fs::path dir = fs::temp_directory_path() / ("tprf_sensor_extreme_" + std::to_string(std::random_device{}()));
     fs::create_directories(dir);
-    const TimeAxis time = axis(100, 0.04);
+    const TimeAxis time = time_axis(100, 0.04);
     // A table a tenth of a nanometre wide, 1 m from t = 0: its grid must not overflow, and its mean stays.
     std::ofstream(dir / "narrow.csv") << "1.0,1\n1.0000000001,1\n";
     json block = {{"pulse", {{"shape", "table"}, {"file", "narrow.csv"}}},
@@ -248,7 +248,7 @@ TEST(Sensor, ExtremeButValidPulsesStayFiniteAndBounded) {
 
 TEST(Sensor, NoiseHasTheRequestedSigmaAndIsReproducible) {
     const int H = 32, W = 32, T = 40, K = 10;
-    const TimeAxis time = axis(T, 0.01);
+    const TimeAxis time = time_axis(T, 0.01);
     const std::vector<float> cube(std::size_t(H * W * T * 3), 0.0f);
     const double sigma = 0.25;
     json block = {{"exposure", {{"type", "gates"}, {"start", 0}, {"width", 0.04}, {"step", 0.04}, {"count", K}}},
@@ -278,7 +278,7 @@ TEST(Sensor, NoiseHasTheRequestedSigmaAndIsReproducible) {
 
 TEST(Sensor, SpadCountsArePoisson) {
     const int H = 8, W = 8, T = 64;
-    const TimeAxis time = axis(T, 0.01);
+    const TimeAxis time = time_axis(T, 0.01);
     const std::vector<float> cube(std::size_t(H * W * T * 3), 1.0f);
     const double lambda = 5.0;
     const std::vector<float> m = measure(
@@ -310,7 +310,7 @@ TEST(Sensor, SpadCountsArePoisson) {
 
 TEST(Sensor, SpadJitterSpreadsCountsAroundTheArrival) {
     const int T = 200;
-    const TimeAxis time = axis(T, 0.01);
+    const TimeAxis time = time_axis(T, 0.01);
     std::vector<float> cube(std::size_t(T) * 3, 0.0f);
     for (int c = 0; c < 3; ++c) cube[std::size_t(100 * 3 + c)] = 1.0f;
     const double photons = 1e6, fwhm = 0.05;  // 5 bins

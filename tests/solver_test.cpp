@@ -68,7 +68,7 @@ Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = 
     return out;
 }
 
-TimeAxis axis(int bins, double width, double start = 0.0) { return test::time_axis(bins, width, start); }
+using test::time_axis;
 
 TEST(Solver, FurnaceSteadyStateIsEmissionOverOneMinusAlbedo) {
     const double a = 0.6, le = 1.0;
@@ -92,7 +92,7 @@ TEST(Solver, FurnaceBounceEnergiesFallAsPowersOfTheAlbedo) {
     options.max_bounces = 4;
     options.bounce_terms = 1;
     // Four bounces of at most sqrt(3) m each stay inside 8 m.
-    const Profiles pr = solve(p, axis(400, 0.02), options);
+    const Profiles pr = solve(p, time_axis(400, 0.02), options);
     ASSERT_EQ(pr.term_count, 5);
     double emitted = 0.0;
     for (std::size_t i = 0; i < p.patches.size(); ++i) emitted += p.patches.area[i] * M_PI * le;
@@ -115,7 +115,7 @@ TEST(Solver, NothingArrivesBetweenTheDirectPulseAndTheFirstEcho) {
     const double w = 0.01;
     SolverOptions options;
     options.bounce_terms = 5;  // orders 0..3 and 4+
-    const Profiles pr = solve(p, axis(400, w), options);
+    const Profiles pr = solve(p, time_axis(400, w), options);
     // The bottom plate's patch under the light.
     std::size_t centre = 0;
     for (std::size_t i = 0; i < p.patches.size(); ++i)
@@ -153,7 +153,7 @@ TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
     for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
         SolverOptions options;
         options.delay = mode;
-        const Profiles pr = solve(p, axis(800, 0.05), options);
+        const Profiles pr = solve(p, time_axis(800, 0.05), options);
         EXPECT_EQ(pr.stats.channels, 3);
         for (std::size_t i = 0; i < p.patches.size(); ++i)
             for (int c = 0; c < 3; ++c) {
@@ -176,7 +176,7 @@ TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
     for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
         SolverOptions options;
         options.delay = mode;
-        const Profiles pr = solve(p, axis(4, 10.0), options);
+        const Profiles pr = solve(p, time_axis(4, 10.0), options);
         EXPECT_GT(pr.stats.max_jacobi_iterations, 1);
         for (std::size_t i = 0; i < p.patches.size(); ++i) {
             double sum = 0.0;
@@ -210,7 +210,7 @@ TEST(Solver, LinearDelaysKeepTheMeanArrivalTimeExact) {
         SolverOptions options;
         options.delay = mode;
         options.max_bounces = 1;
-        const Profiles pr = solve(p, axis(40, w), options);
+        const Profiles pr = solve(p, time_axis(40, w), options);
         double mass = 0.0, moment = 0.0;
         for (int t = 0; t < pr.bins; ++t) {
             mass += pr.at(1, t, 0);
@@ -287,7 +287,7 @@ TEST(Solver, LaserEnergyIsCountedOnce) {
     SolverOptions options;
     options.max_bounces = 1;
     options.bounce_terms = 1;
-    const Profiles pr = solve(p, axis(200, 0.05), options);
+    const Profiles pr = solve(p, time_axis(200, 0.05), options);
     const LaserSpot spot = find_laser_spot(laser.origin, laser.direction, p.patches, Visibility(p.patches));
     ASSERT_TRUE(spot.hit);
     double seen = 0.0;
@@ -307,7 +307,7 @@ TEST(Solver, OneAndTwoThreadsGiveIdenticalProfiles) {
     two.threads = 2;
     // Short blocks and fine bins exercise long links, short links and the same-bin iteration.
     one.block_bins = two.block_bins = 8;
-    const Profiles a = solve(p, axis(300, 0.02), one), b = solve(p, axis(300, 0.02), two);
+    const Profiles a = solve(p, time_axis(300, 0.02), one), b = solve(p, time_axis(300, 0.02), two);
     EXPECT_EQ(a.total, b.total);
 }
 
@@ -317,8 +317,8 @@ TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {
     test::add_closed_cube(scene, 1.0, 0.5);
     scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.8), Rgb::Constant(1.0)});
     const Prepared p = prepare(scene);
-    const SolveStats short_run = solve_transient(p.patches, p.links, p.emission, axis(256, 0.02), {}, {});
-    const SolveStats long_run = solve_transient(p.patches, p.links, p.emission, axis(8192, 0.02), {}, {});
+    const SolveStats short_run = solve_transient(p.patches, p.links, p.emission, time_axis(256, 0.02), {}, {});
+    const SolveStats long_run = solve_transient(p.patches, p.links, p.emission, time_axis(8192, 0.02), {}, {});
     EXPECT_EQ(short_run.working_bytes, long_run.working_bytes);
     EXPECT_EQ(short_run.ring_bins, long_run.ring_bins);
 }

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -498,7 +499,7 @@ SensorWeights sensor_weights(const SensorSettings& s, const TimeAxis& time) {
     return out;
 }
 
-ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& time, const float* profile, std::size_t stride) {
+ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& time, const float* profile) {
     // A bin's energy, even over the bin and shifted by tau, falls into the bins floor(tau/dt) and the
     // next in the ratio (1 - f) : f, f = frac(tau/dt): one transfer row for every source bin.
     const TimeKernel k = pulse_kernel(pulse, time.bin_width);
@@ -516,7 +517,7 @@ ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& t
     out.first_bin = o_lo;
     out.energy.assign(std::size_t(time.bins + o_hi - o_lo), 0.0);
     for (int i = 0; i < time.bins; ++i) {
-        const double e = profile[std::size_t(i) * stride];
+        const double e = profile[std::size_t(i)];
         if (e == 0.0) continue;
         for (std::size_t o = 0; o < transfer.size(); ++o) out.energy[std::size_t(i) + o] += e * transfer[o];
     }
@@ -548,11 +549,13 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
     const bool spad = s.exposure.type == ExposureType::Spad;
     const double dark = spad ? s.exposure.dark_rate * time.to_metres(time.bin_width) / kSpeedOfLight : 0.0;
     const std::uint64_t seed = spad ? s.exposure.seed : s.noise.seed;
+    const bool draws = spad || s.noise.sigma > 0.0;  // a generator is seeded only where it is used
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
     for (std::int64_t p = 0; p < pixels; ++p) {
         const float* e = cube + std::size_t(p) * T * 3;
         float* out = measurements + std::size_t(p) * K * 3;
-        std::mt19937_64 rng(mix_seed(seed, std::uint64_t(p)));
+        std::optional<std::mt19937_64> rng;
+        if (draws) rng.emplace(mix_seed(seed, std::uint64_t(p)));
         std::normal_distribution<double> normal(0.0, 1.0);
         for (std::size_t k = 0; k < K; ++k) {
             double acc[3] = {0.0, 0.0, 0.0};
@@ -569,9 +572,9 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
                     if (mean > kMaxPoissonMean)
                         v = mean;
                     else
-                        v = mean > 0.0 ? double(std::poisson_distribution<std::int64_t>(mean)(rng)) : 0.0;
+                        v = mean > 0.0 ? double(std::poisson_distribution<std::int64_t>(mean)(*rng)) : 0.0;
                 } else {
-                    if (s.noise.sigma > 0.0) v += s.noise.sigma * normal(rng);
+                    if (s.noise.sigma > 0.0) v += s.noise.sigma * normal(*rng);
                     if (s.clamp) v = std::max(0.0, v);
                 }
                 // Saturated rather than infinite when a signal's scale exceeds a float's range.

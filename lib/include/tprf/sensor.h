@@ -111,9 +111,8 @@ struct ConvolvedProfile {
     std::vector<double> energy;
 };
 
-/// Convolves one profile (T values, `stride` floats apart) with the pulse.
-ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& time, const float* profile,
-                                     std::size_t stride = 1);
+/// Convolves one profile (T values) with the pulse.
+ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& time, const float* profile);
 
 /// Options of apply_sensor.
 struct SensorOptions {
