@@ -1,7 +1,7 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
-#include "tprf/error.h"
-#include "tprf/render.h"
-#include "tprf/scene.h"
+#include "tprf/core/error.h"
+#include "tprf/pipeline/render.h"
+#include "tprf/scene/parse_json.h"
 
 #include <CLI/CLI.hpp>
 

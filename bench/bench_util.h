@@ -2,7 +2,7 @@
 /// What the link and solver benchmarks share: the Cornell box at a chosen patch count, and the
 /// process's resident memory.
 
-#include "tprf/scene.h"
+#include "tprf/scene/parse_json.h"
 
 #include <sys/resource.h>
 

@@ -3,13 +3,13 @@
 // work of the gather, at 96 x 96 and 256 x 256 pixels with the scene's 4 samples per pixel.
 #include "bench_util.h"
 
-#include "tprf/camera.h"
-#include "tprf/emitters.h"
-#include "tprf/film.h"
-#include "tprf/links.h"
-#include "tprf/patches.h"
-#include "tprf/solver.h"
-#include "tprf/visibility.h"
+#include "tprf/imaging/camera.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/imaging/film.h"
+#include "tprf/transport/links.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/transport/solver.h"
+#include "tprf/geometry/visibility.h"
 
 #include <benchmark/benchmark.h>
 

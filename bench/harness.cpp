@@ -15,10 +15,9 @@
 /// Nothing is asserted: it measures and reports.
 
 #include "machine.h"
-#include "tprf/atomic_file.h"
-#include "tprf/json_node.h"
-#include "tprf/npy.h"
-#include "tprf/plot.h"
+#include "tprf/io/atomic_file.h"
+#include "tprf/io/npy.h"
+#include "tprf/io/plot.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -91,6 +90,13 @@ constexpr int kCoarseBins = 16;
 
 constexpr std::array<const char*, 7> kPhases{"load", "patches", "links", "solve", "gather", "write", "total"};
 enum Phase { kLoad, kPatches, kLinks, kSolve, kGather, kWrite, kTotal };
+
+/// A JSON file the harness wrote or ships (render.json, the Cornell box scene).
+json read_json(const fs::path& file) {
+    std::ifstream in(file);
+    if (!in) throw std::runtime_error(file.string() + ": cannot read");
+    return json::parse(in);
+}
 
 /// One render's render.json, and the sweeps it belongs to.
 struct Run {
@@ -199,7 +205,7 @@ private:
 
 /// A render's render.json.
 Run read_run(const fs::path& dir, const Config& c, const std::string& label) {
-    const json j = tprf::read_json_file(dir / "render.json", "render.json");
+    const json j = read_json(dir / "render.json");
     Run r;
     r.label = label;
     r.config = c;
@@ -223,7 +229,7 @@ public:
     Renderer(const fs::path& scratch, double bin_width, int threads, int total)
         : m_scratch(scratch), m_bin_width(bin_width), m_threads(threads), m_total(total) {
         const fs::path file = fs::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json";
-        m_scene = tprf::read_json_file(file, "scene");
+        m_scene = read_json(file);
         for (json& object : m_scene.at("objects"))  // the copy lives elsewhere: mesh paths made absolute
             if (object.value("type", "") == "mesh" && fs::path(object.at("file").get<std::string>()).is_relative())
                 object["file"] = (file.parent_path() / object.at("file").get<std::string>()).string();

@@ -2,10 +2,10 @@
 // (visibility hierarchy + compute_links) on the Cornell box at about 1k, 4k and 16k patches.
 #include "bench_util.h"
 
-#include "tprf/form_factors.h"
-#include "tprf/links.h"
-#include "tprf/patches.h"
-#include "tprf/visibility.h"
+#include "tprf/geometry/form_factors.h"
+#include "tprf/transport/links.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
 
 #include <benchmark/benchmark.h>
 

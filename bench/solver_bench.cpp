@@ -3,11 +3,11 @@
 #include "bench_util.h"
 #include "machine.h"
 
-#include "tprf/emitters.h"
-#include "tprf/links.h"
-#include "tprf/patches.h"
-#include "tprf/solver.h"
-#include "tprf/visibility.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/links.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/transport/solver.h"
+#include "tprf/geometry/visibility.h"
 
 #include <benchmark/benchmark.h>
 

@@ -1,6 +1,6 @@
 // The command line's contract (SPEC.md, "Command line"): exit status 2 and one message for bad input,
 // and nothing written for it.
-#include "tprf/npy.h"
+#include "tprf/io/npy.h"
 
 #include <gtest/gtest.h>
 

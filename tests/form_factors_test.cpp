@@ -1,4 +1,4 @@
-#include "tprf/form_factors.h"
+#include "tprf/geometry/form_factors.h"
 
 #include "test_scenes.h"
 

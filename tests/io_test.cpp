@@ -1,7 +1,7 @@
-#include "tprf/atomic_file.h"
-#include "tprf/error.h"
-#include "tprf/image_io.h"
-#include "tprf/npy.h"
+#include "tprf/io/atomic_file.h"
+#include "tprf/core/error.h"
+#include "tprf/io/image_io.h"
+#include "tprf/io/npy.h"
 
 #include <gtest/gtest.h>
 // OpenEXR's C RGBA interface: its header needs no Imath include path, which the test target lacks.

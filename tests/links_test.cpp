@@ -1,7 +1,7 @@
-#include "tprf/links.h"
+#include "tprf/transport/links.h"
 
-#include "tprf/patches.h"
-#include "tprf/visibility.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
 
 #include "test_scenes.h"
 

@@ -1,6 +1,6 @@
-#include "tprf/mesh.h"
+#include "tprf/scene/mesh_io.h"
 
-#include "tprf/error.h"
+#include "tprf/core/error.h"
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>

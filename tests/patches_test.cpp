@@ -1,7 +1,7 @@
-#include "tprf/patches.h"
+#include "tprf/geometry/patches.h"
 
-#include "tprf/error.h"
-#include "tprf/scene.h"
+#include "tprf/core/error.h"
+#include "tprf/scene/scene.h"
 
 #include <gtest/gtest.h>
 

@@ -1,5 +1,5 @@
-#include "tprf/error.h"
-#include "tprf/plot.h"
+#include "tprf/core/error.h"
+#include "tprf/io/plot.h"
 
 #include <gtest/gtest.h>
 

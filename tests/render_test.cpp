@@ -1,11 +1,11 @@
-#include "tprf/render.h"
+#include "tprf/pipeline/render.h"
 
-#include "tprf/camera.h"
-#include "tprf/error.h"
-#include "tprf/npy.h"
-#include "tprf/patches.h"
-#include "tprf/scene.h"
-#include "tprf/visibility.h"
+#include "tprf/imaging/camera.h"
+#include "tprf/core/error.h"
+#include "tprf/io/npy.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/geometry/visibility.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,8 @@
-#include "tprf/error.h"
-#include "tprf/scene.h"
+#include "tprf/core/error.h"
+#include "tprf/scene/parse_json.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <filesystem>

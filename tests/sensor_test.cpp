@@ -1,16 +1,19 @@
 // The TPRF sensor model: gates sum what arrives inside them, a pulse keeps energy and mean arrival,
 // noise and photon counts have the statistics they claim, and a CW-ToF camera recovers geometry
 // (and its multipath error) from a render.
-#include "tprf/sensor.h"
+#include "tprf/imaging/sensor_model.h"
 
-#include "tprf/camera.h"
-#include "tprf/error.h"
-#include "tprf/json_node.h"
-#include "tprf/npy.h"
-#include "tprf/patches.h"
-#include "tprf/render.h"
-#include "tprf/scene.h"
-#include "tprf/visibility.h"
+#include "tprf/imaging/camera.h"
+#include "tprf/core/error.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/scene/validate.h"
+
+#include <nlohmann/json.hpp>
+#include "tprf/io/npy.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/pipeline/render.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/geometry/visibility.h"
 
 #include "test_scenes.h"
 
@@ -32,7 +35,7 @@ using nlohmann::json;
 
 SensorSettings sensor_from(const json& block) {
     static const fs::path file = "test.json";
-    return parse_sensor(JsonNode{block, "sensor", file});
+    return parse_sensor_block(block.dump(), file);
 }
 
 using test::time_axis;
@@ -94,7 +97,7 @@ TEST(Sensor, WindowsFarOutsideTheAxisMeasureNothing) {
     const SensorSettings s = sensor_from(
         {{"pulse", {{"shape", "box"}, {"width", 0.02}}},
          {"exposure", {{"type", "windows"}, {"windows", {{-1e300, 1.0}, {0.0, 0.2}, {1e300, 1e300}}}}}});
-    check_sensor(s, time);
+    validate_sensor(s, time);
     const std::vector<float> m = measure(s, time, cube, 1, 1);
     EXPECT_EQ(m[0], 0.0f);
     EXPECT_EQ(m[6], 0.0f);
@@ -186,7 +189,7 @@ TEST(Sensor, TablePulseIsNormalisedAndKeepsItsMean) {
     std::ofstream(dir / "pulse.csv") << "time,value\n0,0\n0.02,4\n0.0200001,0\n";
     const json block = {{"pulse", {{"shape", "table"}, {"file", "pulse.csv"}}},
                         {"exposure", {{"type", "gates"}, {"start", 0}, {"width", 1}, {"step", 1}, {"count", 1}}}};
-    const SensorSettings s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
+    const SensorSettings s = parse_sensor_block(block.dump(), dir / "scene.json");
     const TimeKernel k = pulse_kernel(s.pulse, 0.005);
     double total = 0.0, mean = 0.0;
     for (std::size_t q = 0; q < k.mass.size(); ++q) {
@@ -206,8 +209,8 @@ TEST(Sensor, ExtremeButValidPulsesStayFiniteAndBounded) {
     std::ofstream(dir / "narrow.csv") << "1.0,1\n1.0000000001,1\n";
     json block = {{"pulse", {{"shape", "table"}, {"file", "narrow.csv"}}},
                   {"exposure", {{"type", "gates"}, {"start", 0}, {"width", 0.4}, {"step", 0.4}, {"count", 10}}}};
-    SensorSettings s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
-    check_sensor(s, time);
+    SensorSettings s = parse_sensor_block(block.dump(), dir / "scene.json");
+    validate_sensor(s, time);
     const TimeKernel k = pulse_kernel(s.pulse, time.bin_width);
     double total = 0.0, mean = 0.0;
     for (std::size_t q = 0; q < k.mass.size(); ++q) {
@@ -219,20 +222,20 @@ TEST(Sensor, ExtremeButValidPulsesStayFiniteAndBounded) {
     // Values near the largest double: only the shape counts.
     std::ofstream(dir / "huge.csv") << "0,1e308\n0.01,1.7e308\n0.02,0\n";
     block["pulse"]["file"] = "huge.csv";
-    s = parse_sensor(JsonNode{block, "sensor", dir / "scene.json"});
+    s = parse_sensor_block(block.dump(), dir / "scene.json");
     block["clamp"] = false;
     const std::vector<float> cube = random_cube(2, 2, 100, 9);
     for (const float v : measure(s, time, cube, 2, 2)) EXPECT_TRUE(std::isfinite(v));
     // A first row that starts with a number but is malformed is an error, not a header.
     std::ofstream(dir / "bad.csv") << "0,1,2\n0.01,1\n";
     block["pulse"]["file"] = "bad.csv";
-    EXPECT_THROW(parse_sensor(JsonNode{block, "sensor", dir / "scene.json"}), Error);
+    EXPECT_THROW(parse_sensor_block(block.dump(), dir / "scene.json"), Error);
     fs::remove_all(dir);
 
     // A SPAD whose pulse is far narrower than its jitter: the convolution's grid stays bounded.
     const SensorSettings spad = sensor_from({{"pulse", {{"shape", "gaussian"}, {"fwhm", 1e-10}}},
                                              {"exposure", {{"type", "spad"}, {"photons", 1}, {"jitter_fwhm", 0.04}}}});
-    check_sensor(spad, time);
+    validate_sensor(spad, time);
     const SensorWeights w = sensor_weights(spad, time);
     double sum = 0.0;
     for (const double v : w.weight[50]) sum += v;

@@ -1,10 +1,10 @@
-#include "tprf/solver.h"
+#include "tprf/transport/solver.h"
 
-#include "tprf/emitters.h"
-#include "tprf/links.h"
-#include "tprf/patches.h"
-#include "tprf/steady.h"
-#include "tprf/visibility.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/links.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/transport/steady.h"
+#include "tprf/geometry/visibility.h"
 
 #include "test_scenes.h"
 

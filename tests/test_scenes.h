@@ -1,7 +1,7 @@
 #pragma once
 // Scenes with known answers, built directly as tprf::Scene (no JSON), shared by the stage tests.
 
-#include "tprf/scene.h"
+#include "tprf/scene/scene.h"
 
 #include <cmath>
 

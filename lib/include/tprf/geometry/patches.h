@@ -1,0 +1,62 @@
+#pragma once
+/// Patches: the planar convex cells that carry the time-resolved radiosity.
+
+#include "tprf/core/types.h"
+#include "tprf/core/progress.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace tprf {
+
+struct Scene;
+
+/// The patch set as parallel arrays (struct of arrays). Patch i is the convex planar polygon
+/// vertices[first[i]] .. vertices[first[i+1]-1], counter-clockwise seen from the front (along `normal`).
+struct PatchSet {
+    std::vector<Vec3> vertices;        ///< corner positions, metres
+    std::vector<std::uint32_t> first;  ///< N + 1 offsets into `vertices`
+    std::vector<Vec3> centroid;        ///< N, area centroid, metres
+    std::vector<Vec3> normal;          ///< N, unit front normal
+    std::vector<double> area;          ///< N, m^2
+    std::vector<Rgb> albedo;           ///< N, in [0, 1]
+    std::vector<Rgb> emission;         ///< N, radiance L_e, W/(m^2 sr)
+    std::vector<std::uint32_t> object; ///< N, index into Scene::objects
+
+    /// Number of patches N.
+    std::size_t size() const { return centroid.size(); }
+    /// Number of corners of patch i (3 or 4).
+    std::size_t corners(std::size_t i) const { return first[i + 1] - first[i]; }
+    /// First corner of patch i.
+    const Vec3* polygon(std::size_t i) const { return vertices.data() + first[i]; }
+};
+
+/// What build_patches saw besides the patches.
+struct PatchStats {
+    int dropped_degenerate = 0;        ///< faces of mesh files dropped (zero area, repeated vertices)
+    double max_edge = 0.0;             ///< the patch size used, metres
+};
+
+/// Options of the patch stage.
+struct PatchOptions {
+    ProgressFn progress;               ///< may be empty
+};
+
+/// Subdivides every object of the scene into patches: rectangles into grids of quads, mesh faces into
+/// triangles refined until no patch edge exceeds the scene's max_edge (bounding-box diagonal / 16 when
+/// the scene gives none). A two-sided object yields each patch twice, once per side.
+PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
+
+/// The point of patch i at (u, v) in the unit square: bilinear on a quad (uniform in area for the
+/// parallelograms of rectangle grids), the square-root map on a triangle (uniform in area).
+Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v);
+
+/// Largest distance from patch i's centroid to its corners, metres.
+double circumradius(const PatchSet& patches, std::size_t i);
+
+/// Appends one patch (a convex planar polygon, counter-clockwise about its front) with its attributes;
+/// computes centroid, normal and area. Used by build_patches and by tests that build patch sets by hand.
+void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const Rgb& albedo,
+               const Rgb& emission, std::uint32_t object);
+
+}  // namespace tprf

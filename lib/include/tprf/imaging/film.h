@@ -1,0 +1,50 @@
+#pragma once
+/// The film: turns solved patch profiles and the camera's gather into the (H, W, T, 3) cube and the
+/// steady image.
+
+#include "tprf/core/types.h"
+#include "tprf/scene/scene.h"
+
+#include <vector>
+
+namespace tprf {
+
+struct CameraGather;
+struct Emission;
+struct SolveBlock;
+
+/// Accumulates radiance into a transient cube of shape (H, W, T, 3), pixel-major (each pixel's time
+/// profile contiguous), which the caller owns (typically a memory-mapped .npy). Bin values are
+/// radiance times seconds (W s / (m^2 sr)) arriving in the bin.
+class TransientFilm {
+public:
+    /// `order`: -1 for all orders; k >= 0 to film one per-order term (SolveBlock::per_order[k]), the
+    /// last term holding every order >= k when `last_is_tail`.
+    TransientFilm(const CameraGather& gather, const Emission& emission, const TimeAxis& time, DelayMode delay,
+                  float* cube, int order = -1, bool last_is_tail = false, int threads = 0);
+
+    /// Adds the exact direct-light arrivals (once).
+    void add_direct();
+    /// Adds one solved block's light of later bounces: each tap reads its patch's profile (less the
+    /// pulses the camera evaluates exactly) and shifts it by the camera leg, split between two bins.
+    void add_block(const SolveBlock& block);
+
+private:
+    bool takes_order(int order) const;
+
+    const CameraGather& m_gather;
+    const Emission& m_emission;
+    TimeAxis m_time;
+    DelayMode m_delay;
+    float* m_cube;
+    int m_order;
+    bool m_last_is_tail;
+    int m_threads;
+    std::vector<float> m_indirect;  ///< N x bins x 3 scratch, one block
+};
+
+/// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same
+/// taps and exact direct light, without time.
+std::vector<float> steady_image(const CameraGather& gather, const Emission& emission, const std::vector<Rgb>& steady);
+
+}  // namespace tprf

@@ -1,0 +1,68 @@
+#pragma once
+/// The TPRF sensor model (transient rendering paper, section 6; SPEC.md, "Sensor block"):
+///
+///     M_k = max(0, noise + integral of (TPRF * pulse)(t) exposure_k(t) dt)
+///
+/// The cube's bin i holds the energy e_i that arrives in [t_i, t_i + bin_width), taken as spread
+/// evenly over the bin. Everything before the noise is linear in e, so each measurement is a weighted
+/// sum M_k = sum_i w_k[i] e_i whose weights fold the pulse (and a SPAD's timing jitter) into the
+/// exposure once per render, not once per pixel. All times are in the scene's time unit.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/core/time_kernel.h"
+#include "tprf/scene/sensor_settings.h"
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tprf {
+
+/// Measurements per pixel and channel, K: one per gate, window or phase; T for a SPAD histogram.
+int measurement_count(const SensorSettings& sensor, const TimeAxis& time);
+
+/// The sensor's linear part: measurement k = sum over i in [first[k], first[k] + weight[k].size())
+/// of weight[k][i - first[k]] * e_i. For a SPAD, the weights give the expected signal per histogram
+/// bin (before photons and dark counts).
+struct SensorWeights {
+    std::vector<int> first;
+    std::vector<std::vector<double>> weight;
+};
+
+/// The weights of every measurement over the render's bins.
+SensorWeights sensor_weights(const SensorSettings& sensor, const TimeAxis& time);
+
+/// A time profile convolved with the pulse, per bin of the render's axis extended on both sides
+/// so that nothing is cut: energy[m] arrives in bin first_bin + m (first_bin may be negative).
+struct ConvolvedProfile {
+    int first_bin = 0;
+    std::vector<double> energy;
+};
+
+/// Convolves one profile (T values) with the pulse.
+ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& time, const float* profile);
+
+/// Options of apply_sensor.
+struct SensorOptions {
+    int threads = 0;                   ///< 0: all cores; results are identical for any count
+};
+
+/// Applies the sensor to a cube (H, W, T, 3): writes `measurements` (H, W, K, 3) and, for amcw,
+/// `depth` (H, W), metres (may be null otherwise). Noise and photon counts are drawn per pixel from
+/// the seed, so that the result does not depend on the thread count.
+void apply_sensor(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
+                  float* measurements, float* depth, const SensorOptions& options = {});
+
+/// The depth a CW-ToF camera infers from one pixel's phase measurements (channels summed): the phase
+/// of the fitted M(phi) = a + b cos(phi) + c sin(phi), as distance c * phase / (4 pi f) (emitter
+/// beside the camera), in [0, c / (2 f)); 0 when the measurements carry no modulation.
+double amcw_depth(const SensorSettings& sensor, const float* measurements /* K x 3 */);
+
+/// A PNG for one pixel, like the paper's figures 5 to 7: its TPRF, the TPRF convolved with the
+/// pulse, and its measurements (channel mean).
+void write_sensor_plot(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,
+                       const float* profile /* T x 3 */, const float* measurements /* K x 3 */, int x, int y);
+
+}  // namespace tprf

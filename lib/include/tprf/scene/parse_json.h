@@ -1,0 +1,34 @@
+#pragma once
+/// Scene and sensor files (SPEC.md, "Scene file", "Sensor block") read into plain data. Parsing goes in
+/// stages: JSON text -> JSON document -> Scene, then validate(). Every error names the file, the JSON
+/// path (`objects[2].u`) and what is wrong, and is thrown as tprf::Error. The JSON library stays
+/// inside this stage's sources: nothing here exposes it.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/scene/scene.h"
+#include "tprf/scene/sensor_settings.h"
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+namespace tprf {
+
+/// Reads and validates a scene file. Throws tprf::Error naming the file, the JSON path and the problem.
+Scene load_scene(const std::filesystem::path& file);
+
+/// Validates scene JSON text; `file` is used in messages and to resolve relative mesh paths.
+Scene parse_scene(const std::string& text, const std::filesystem::path& file);
+
+/// Reads a sensor file for `tprf sensor`: either the block itself or an object {"sensor": block}.
+SensorSettings load_sensor(const std::filesystem::path& file);
+
+/// Parses a `sensor` block given as JSON text, as if it stood at `json_path` of `file` (messages name
+/// both; a table pulse's CSV is read relative to `file`).
+SensorSettings parse_sensor_block(const std::string& text, const std::filesystem::path& file,
+                                  std::string_view json_path = "sensor");
+
+/// The time axis recorded in a render directory's render.json (for `tprf sensor`).
+TimeAxis read_render_time(const std::filesystem::path& render_json);
+
+}  // namespace tprf

@@ -1,0 +1,90 @@
+#pragma once
+/// A scene as plain data: what a scene file (SPEC.md, "Scene file") says, in SI units. No JSON here:
+/// scene/parse_json.h builds a Scene from a file, scene/validate.h checks one however it was built.
+
+#include "tprf/core/types.h"
+#include "tprf/scene/sensor_settings.h"
+#include "tprf/core/time_axis.h"
+
+#include <Eigen/Geometry>
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace tprf {
+
+/// Pinhole camera (SPEC: vertical fov in degrees, row 0 at the top).
+struct Camera {
+    Vec3 position = Vec3::Zero();   ///< metres
+    Vec3 look_at = Vec3::UnitX();   ///< metres
+    Vec3 up = Vec3::UnitZ();        ///< not parallel to look_at - position
+    double fov_deg = 40.0;          ///< vertical field of view, (0, 180)
+    int width = 0;                  ///< pixels, > 0
+    int height = 0;                 ///< pixels, > 0
+    int spp = 1;                    ///< samples per pixel, > 0
+    bool unwarp = false;            ///< leave the camera leg out of every sample's time
+};
+
+/// Isotropic point light: irradiance at x is intensity * cos(theta) / r^2.
+struct PointLight {
+    Vec3 position = Vec3::Zero();   ///< metres
+    Rgb intensity = Rgb::Zero();    ///< W/sr per channel, >= 0
+};
+
+/// Laser: deposits `power` at the first surface point it hits.
+struct Laser {
+    Vec3 origin = Vec3::Zero();     ///< metres
+    Vec3 direction = Vec3::UnitX(); ///< unit vector (from `direction`, or normalize(target - origin))
+    Rgb power = Rgb::Zero();        ///< W per channel, >= 0
+};
+
+using Light = std::variant<PointLight, Laser>;
+
+/// A rectangle with corners origin, origin+u, origin+u+v, origin+v; front normal normalize(u x v).
+struct RectangleShape {
+    Vec3 origin = Vec3::Zero();
+    Vec3 u = Vec3::UnitX();
+    Vec3 v = Vec3::UnitY();
+};
+
+/// A mesh file read through OpenMesh, with its transform (scale, then rotate, then translate).
+struct MeshShape {
+    std::filesystem::path file;                          ///< absolute, or relative to the working directory
+    Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< affine, maps file coordinates to metres
+};
+
+/// One entry of `objects`.
+struct Object {
+    std::variant<RectangleShape, MeshShape> shape;
+    Rgb albedo = Rgb::Constant(0.5);   ///< Lambertian reflectance per channel, in [0, 1]
+    Rgb emission = Rgb::Zero();        ///< radiance L_e, W/(m^2 sr), from the front side, >= 0
+    bool two_sided = false;
+    std::string json_path;             ///< e.g. "objects[2]", for later error messages
+};
+
+/// How a delay that falls between two bins is placed.
+enum class DelayMode { Nearest, Linear };
+
+/// The optional `solver` block.
+struct SolverSettings {
+    int max_bounces = -1;               ///< -1: every bounce that arrives inside the window
+    DelayMode delay = DelayMode::Linear;
+    bool bounces = false;               ///< also write the per-bounce terms
+};
+
+/// A validated scene.
+struct Scene {
+    std::filesystem::path file;         ///< the scene file (for messages and relative paths)
+    TimeAxis time;
+    std::optional<Camera> camera;
+    std::vector<Light> lights;
+    std::vector<Object> objects;
+    double max_edge = 0.0;              ///< patches.max_edge, metres; 0 when absent (build_patches picks one)
+    SolverSettings solver;
+    std::optional<SensorSettings> sensor;  ///< the optional `sensor` block
+};
+
+}  // namespace tprf

@@ -1,0 +1,69 @@
+#pragma once
+/// The transient solver: B_i[t] = E_i[t] + albedo_i * sum_j F_ij B_j[t - d_ij], every bounce in one
+/// pass of a time march.
+///
+/// Each patch keeps a ring buffer of its recent radiosity, as long as the largest delay plus one
+/// block; the working memory is O(patches x max delay + links) whatever the number of bins. The time
+/// axis is cut into blocks: a link whose delay is at least the block length reads only history that
+/// is already final, so the block is one contiguous multiply-add over bins per link; shorter links are
+/// applied bin by bin, and zero-delay links (both patches within one bin) by a Jacobi iteration
+/// inside the bin, which neither loses nor invents energy.
+
+#include "tprf/core/progress.h"
+#include "tprf/scene/scene.h"
+
+#include <functional>
+#include <vector>
+
+namespace tprf {
+
+struct PatchSet;
+struct Links;
+struct Emission;
+
+/// Options of the transient solve.
+struct SolverOptions {
+    DelayMode delay = DelayMode::Linear;  ///< how a delay between two bins is placed
+    int max_bounces = -1;                 ///< -1: all; else only orders 0..max_bounces
+    int bounce_terms = 0;                 ///< > 0: also report per-order terms (see SolveBlock)
+    int block_bins = 32;                  ///< time-block length, bins
+    int threads = 0;                      ///< 0: all cores
+    ProgressFn progress;                  ///< phase "solve"
+};
+
+/// A block of final bins, handed to the caller as soon as it is complete.
+struct SolveBlock {
+    int first_bin = 0;              ///< index of the block's first bin on the scene's time axis
+    int bins = 0;                   ///< bins in this block
+    std::size_t patches = 0;        ///< N
+    /// N x bins x 3, patch-major: radiosity B_i (W s / m^2 per bin), all orders that were solved.
+    const float* radiosity = nullptr;
+    /// Number of per-order terms (0 unless asked): term k holds bounce order k; the last term holds
+    /// every order >= its index when max_bounces is unlimited.
+    int terms = 0;
+    /// terms x N x bins x 3, same layout as `radiosity` per term.
+    const float* per_order = nullptr;
+};
+
+/// Called once per block, in time order, from one thread.
+using BlockSink = std::function<void(const SolveBlock&)>;
+
+/// What the solve measured.
+struct SolveStats {
+    int block_bins = 0;                 ///< block length used
+    int ring_bins = 0;                  ///< history kept per patch, bins
+    int channels = 0;                   ///< 1 when the scene is grey, else 3
+    std::uint64_t link_bin_updates = 0; ///< links x bins x fed layers
+    std::size_t working_bytes = 0;      ///< ring buffers, block buffers and short-link lists
+    int max_jacobi_iterations = 0;      ///< worst zero-delay iteration count in one bin
+    std::uint64_t short_links = 0;      ///< links shorter than a block (applied bin by bin)
+    double seconds_long = 0.0;          ///< wall time in the blocked long-link pass
+    double seconds_short = 0.0;         ///< wall time in the bin-by-bin pass (short and same-bin links)
+    double seconds_sink = 0.0;          ///< wall time in output assembly and the sink
+};
+
+/// Marches over the scene's time axis and hands every block of final bins to `sink`.
+SolveStats solve_transient(const PatchSet& patches, const Links& links, const Emission& emission,
+                           const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
+
+}  // namespace tprf

@@ -1,0 +1,22 @@
+#pragma once
+/// The steady state: continuous emission, infinite speed of light.
+
+#include "tprf/core/types.h"
+
+#include <vector>
+
+namespace tprf {
+
+struct PatchSet;
+struct Links;
+struct Emission;
+
+/// Solves (I - diag(albedo) F) B = E for every channel with BiCGSTAB (Eigen) to a relative residual
+/// below 1e-8, where E is each patch's time-integrated propagating emission; pulses that do not
+/// propagate (the laser spot) are added afterwards. With max_bounces >= 0, sums the Neumann series
+/// up to that order instead. Returns N radiosities, W/m^2: by linearity, the sum over time of the
+/// transient radiosity when the window holds all the light.
+std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
+                              int max_bounces = -1);
+
+}  // namespace tprf

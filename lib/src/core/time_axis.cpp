@@ -1,0 +1,16 @@
+#include "tprf/core/time_axis.h"
+
+#include "tprf/core/types.h"
+
+namespace tprf {
+
+double TimeAxis::to_metres(double value_in_unit) const {
+    // Picoseconds are of light travel, so a time converts to the optical path length it covers.
+    return unit == TimeUnit::Picoseconds ? value_in_unit * 1e-12 * kSpeedOfLight : value_in_unit;
+}
+
+double TimeAxis::bin_width_m() const { return to_metres(bin_width); }
+
+double TimeAxis::start_m() const { return to_metres(start); }
+
+}  // namespace tprf

@@ -1,0 +1,186 @@
+#include "tprf/geometry/form_factors.h"
+
+#include "tprf/core/error.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace tprf {
+namespace {
+
+// A convex planar cell of the outer quadrature: a triangle or a quad.
+struct Cell {
+    std::array<Vec3, 4> v;
+    std::size_t count = 0;
+};
+
+// Polygon clipped to a half-space: a convex n-gon cut by a plane has at most n + 1 corners.
+struct Clipped {
+    std::array<Vec3, 9> v;
+    std::size_t count = 0;
+};
+
+// Area and area centroid of a convex polygon, by a fan of triangles.
+void area_centroid(const Vec3* p, std::size_t count, double& area, Vec3& centroid) {
+    Vec3 twice_normal_area = Vec3::Zero();
+    Vec3 weighted = Vec3::Zero();
+    for (std::size_t k = 1; k + 1 < count; ++k) {
+        const Vec3 cross = (p[k] - p[0]).cross(p[k + 1] - p[0]);
+        twice_normal_area += cross;
+        weighted += cross.norm() * (p[0] + p[k] + p[k + 1]) / 3.0;
+    }
+    const double twice = twice_normal_area.norm();
+    area = 0.5 * twice;
+    // Weights are |cross|; their sum equals |sum of cross| for a convex planar polygon.
+    double wsum = 0.0;
+    for (std::size_t k = 1; k + 1 < count; ++k) wsum += (p[k] - p[0]).cross(p[k + 1] - p[0]).norm();
+    centroid = wsum > 0 ? Vec3(weighted / wsum) : p[0];
+}
+
+// Midpoint subdivision into four cells of the same kind.
+std::array<Cell, 4> split(const Cell& c) {
+    std::array<Cell, 4> out;
+    if (c.count == 3) {
+        const Vec3 m01 = 0.5 * (c.v[0] + c.v[1]), m12 = 0.5 * (c.v[1] + c.v[2]), m20 = 0.5 * (c.v[2] + c.v[0]);
+        out[0] = {{c.v[0], m01, m20, Vec3::Zero()}, 3};
+        out[1] = {{m01, c.v[1], m12, Vec3::Zero()}, 3};
+        out[2] = {{m20, m12, c.v[2], Vec3::Zero()}, 3};
+        out[3] = {{m01, m12, m20, Vec3::Zero()}, 3};
+    } else {
+        const Vec3 m01 = 0.5 * (c.v[0] + c.v[1]), m12 = 0.5 * (c.v[1] + c.v[2]);
+        const Vec3 m23 = 0.5 * (c.v[2] + c.v[3]), m30 = 0.5 * (c.v[3] + c.v[0]);
+        const Vec3 mid = 0.25 * (c.v[0] + c.v[1] + c.v[2] + c.v[3]);
+        out[0] = {{c.v[0], m01, mid, m30}, 4};
+        out[1] = {{m01, c.v[1], m12, mid}, 4};
+        out[2] = {{mid, m12, c.v[2], m23}, 4};
+        out[3] = {{m30, mid, m23, c.v[3]}, 4};
+    }
+    return out;
+}
+
+struct Integrand {
+    const Vec3* b;
+    std::size_t b_count;
+    Vec3 b_normal;
+    Vec3 a_normal;
+
+    // Area times the point form factor at the cell's centroid: the cell's share of the integral.
+    double operator()(const Cell& c) const {
+        double area = 0.0;
+        Vec3 centroid;
+        area_centroid(c.v.data(), c.count, area, centroid);
+        return area * point_polygon_form_factor(centroid, a_normal, b, b_count, b_normal);
+    }
+};
+
+double refine(const Integrand& f, const Cell& cell, double estimate, double tolerance_per_area, double cell_area,
+              int depth, int max_depth) {
+    const std::array<Cell, 4> children = split(cell);
+    std::array<double, 4> parts{};
+    double sum = 0.0;
+    for (int k = 0; k < 4; ++k) sum += parts[k] = f(children[k]);
+    if (depth >= max_depth || std::abs(sum - estimate) <= tolerance_per_area * cell_area) return sum;
+    double refined = 0.0;
+    for (int k = 0; k < 4; ++k)
+        refined += refine(f, children[k], parts[k], tolerance_per_area, 0.25 * cell_area, depth + 1, max_depth);
+    return refined;
+}
+
+}  // namespace
+
+double polygon_area(const Vec3* poly, std::size_t count) {
+    double area = 0.0;
+    Vec3 centroid;
+    area_centroid(poly, count, area, centroid);
+    return area;
+}
+
+double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly, std::size_t count,
+                                 const Vec3& poly_normal) {
+    TPRF_DCHECK_LT(count, std::size_t{9});
+    // One-sided: from behind, the polygon's back is all one sees, and it sends nothing.
+    if (poly_normal.dot(x - poly[0]) <= 0.0) return 0.0;
+
+    // Clip to x's upper hemisphere (Sutherland-Hodgman against the plane n . (y - x) = 0). Corners
+    // that lie in that plane (a shared edge of perpendicular patches) are kept: they add nothing.
+    double scale = 0.0;
+    for (std::size_t k = 0; k < count; ++k) scale = std::max(scale, (poly[k] - x).norm());
+    const double tolerance = 1e-12 * scale;
+    Clipped clipped;
+    for (std::size_t k = 0; k < count; ++k) {
+        const Vec3& p = poly[k];
+        const Vec3& q = poly[(k + 1) % count];
+        const double hp = n.dot(p - x), hq = n.dot(q - x);
+        const bool in_p = hp >= -tolerance, in_q = hq >= -tolerance;
+        if (in_p) clipped.v[clipped.count++] = p;
+        if (in_p != in_q) clipped.v[clipped.count++] = p + (hp / (hp - hq)) * (q - p);
+    }
+    if (clipped.count < 3) return 0.0;
+
+    // Lambert's contour integral. With the polygon counter-clockwise about a normal that faces x,
+    // b x a points toward the polygon's side of x, so every term of a front-facing polygon is >= 0.
+    double sum = 0.0;
+    for (std::size_t k = 0; k < clipped.count; ++k) {
+        const Vec3 a = clipped.v[k] - x;
+        const Vec3 b = clipped.v[(k + 1) % clipped.count] - x;
+        const Vec3 cross = b.cross(a);
+        const double s = cross.norm();
+        if (s <= 1e-300) continue;  // x on the edge's line: the edge subtends no angle
+        const double theta = std::atan2(s, a.dot(b));
+        sum += theta * n.dot(cross) / s;
+    }
+    return std::max(0.0, sum / (2.0 * M_PI));
+}
+
+double polygon_form_factor_gauss(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
+                                 std::size_t b_count, const Vec3& b_normal) {
+    double sum = 0.0;
+    if (a_count == 4) {
+        // Bilinear map of the unit square; the Jacobian |x_u x x_v| weights each Gauss point.
+        const double g = 0.5 / std::sqrt(3.0);
+        double weight = 0.0;
+        for (double u : {0.5 - g, 0.5 + g})
+            for (double v : {0.5 - g, 0.5 + g}) {
+                const Vec3 x = (1 - u) * (1 - v) * a[0] + u * (1 - v) * a[1] + u * v * a[2] + (1 - u) * v * a[3];
+                const Vec3 xu = (1 - v) * (a[1] - a[0]) + v * (a[2] - a[3]);
+                const Vec3 xv = (1 - u) * (a[3] - a[0]) + u * (a[2] - a[1]);
+                const double jacobian = xu.cross(xv).norm();
+                weight += jacobian;
+                sum += jacobian * point_polygon_form_factor(x, a_normal, b, b_count, b_normal);
+            }
+        return weight > 0 ? sum / weight : 0.0;
+    }
+    TPRF_CHECK_EQ(a_count, std::size_t{3});
+    for (int k = 0; k < 3; ++k) {
+        const Vec3 x = (2.0 / 3.0) * a[k] + (1.0 / 6.0) * (a[(k + 1) % 3] + a[(k + 2) % 3]);
+        sum += point_polygon_form_factor(x, a_normal, b, b_count, b_normal);
+    }
+    return sum / 3.0;
+}
+
+double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
+                           std::size_t b_count, const Vec3& b_normal, const FormFactorQuadrature& quadrature) {
+    TPRF_CHECK(a_count == 3 || a_count == 4);
+    Cell root;
+    root.count = a_count;
+    std::copy(a, a + a_count, root.v.begin());
+    const Integrand f{b, b_count, b_normal, a_normal};
+    double area = 0.0;
+    Vec3 centroid;
+    area_centroid(a, a_count, area, centroid);
+    if (area <= 0.0) return 0.0;
+    // The tolerance follows the first refinement's average, so that pairs that see each other
+    // weakly are refined as finely, relative to their own value, as strong ones.
+    const std::array<Cell, 4> children = split(root);
+    std::array<double, 4> parts{};
+    double first = 0.0;
+    for (int k = 0; k < 4; ++k) first += parts[k] = f(children[k]);
+    const double tolerance_per_area = quadrature.relative_tolerance * std::max(first / area, 1e-12);
+    double total = 0.0;
+    for (int k = 0; k < 4; ++k)
+        total += refine(f, children[k], parts[k], tolerance_per_area, 0.25 * area, 1, quadrature.max_depth);
+    return total / area;
+}
+
+}  // namespace tprf

@@ -1,0 +1,237 @@
+#include "tprf/geometry/patches.h"
+
+#include "tprf/core/error.h"
+#include "tprf/scene/mesh_io.h"
+#include "tprf/scene/scene.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+
+namespace tprf {
+namespace {
+
+// Number of equal pieces that bring `length` down to at most `max_edge`. The slack keeps 1.0 / 0.1 from
+// becoming 11 pieces through rounding; a piece then exceeds max_edge by at most a relative 1e-9.
+std::size_t pieces(double length, double max_edge) {
+    const double n = std::ceil(length / max_edge - 1e-9);
+    return n < 1.0 ? 1 : static_cast<std::size_t>(n);
+}
+
+struct Grid {
+    std::size_t nu = 1;
+    std::size_t nv = 1;
+};
+
+Grid rectangle_grid(const RectangleShape& r, double max_edge) {
+    return {pieces(r.u.norm(), max_edge), pieces(r.v.norm(), max_edge)};
+}
+
+using Triangle = std::array<Vec3, 3>;
+
+// Fan triangulation, exact for the convex polygons that mesh files hold in practice. Fan pieces without
+// area (a corner lying on an edge of the polygon) are left out: they carry no energy and have no normal.
+// "Without area" is relative to the polygon, which load_mesh guarantees is not degenerate itself.
+void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
+    for (const auto& face : mesh.faces) {
+        const Vec3& a = mesh.vertices[face[0]];
+        double polygon = 0.0;
+        for (std::size_t i = 1; i + 1 < face.size(); ++i)
+            polygon += (mesh.vertices[face[i]] - a).cross(mesh.vertices[face[i + 1]] - a).norm();
+        for (std::size_t i = 1; i + 1 < face.size(); ++i) {
+            const Vec3& b = mesh.vertices[face[i]];
+            const Vec3& c = mesh.vertices[face[i + 1]];
+            if ((b - a).cross(c - a).norm() > 1e-12 * polygon) out.push_back({a, b, c});
+        }
+    }
+}
+
+double longest_edge(const Triangle& t) {
+    return std::max({(t[1] - t[0]).norm(), (t[2] - t[1]).norm(), (t[0] - t[2]).norm()});
+}
+
+// One object's geometry before subdivision: a rectangle, or a mesh already triangulated.
+struct Source {
+    const Object* object = nullptr;
+    std::vector<Triangle> triangles;  // empty for a rectangle
+    std::size_t patch_count = 0;      // per side
+};
+
+void emit(PatchSet& patches, const Vec3* corners, std::size_t count, const Object& object,
+          std::uint32_t id) {
+    add_patch(patches, corners, count, object.albedo, object.emission, id);
+    if (!object.two_sided) return;
+    // SPEC has emission leave from the front side; a two-sided object has two fronts, so the back copy
+    // emits too. This makes a two-sided emitter a light seen from both sides, which is what a user who
+    // asks for two sides on an emitter means.
+    std::array<Vec3, 4> reversed;
+    for (std::size_t i = 0; i < count; ++i) reversed[i] = corners[count - 1 - i];
+    add_patch(patches, reversed.data(), count, object.albedo, object.emission, id);
+}
+
+void emit_rectangle(PatchSet& patches, const RectangleShape& r, const Grid& grid, const Object& object,
+                    std::uint32_t id) {
+    const double nu = static_cast<double>(grid.nu);
+    const double nv = static_cast<double>(grid.nv);
+    auto point = [&](std::size_t i, std::size_t j) {
+        return Vec3(r.origin + (static_cast<double>(i) / nu) * r.u + (static_cast<double>(j) / nv) * r.v);
+    };
+    for (std::size_t j = 0; j < grid.nv; ++j)
+        for (std::size_t i = 0; i < grid.nu; ++i) {
+            const std::array<Vec3, 4> quad{point(i, j), point(i + 1, j), point(i + 1, j + 1),
+                                           point(i, j + 1)};
+            emit(patches, quad.data(), quad.size(), object, id);
+        }
+}
+
+// Uniform subdivision into n^2 similar triangles: every sub-edge is parallel to an edge of `t` and 1/n of
+// its length, and every sub-triangle keeps the winding of `t`.
+void emit_triangle(PatchSet& patches, const Triangle& t, std::size_t n, const Object& object,
+                   std::uint32_t id) {
+    const double inv = 1.0 / static_cast<double>(n);
+    const Vec3 du = (t[1] - t[0]) * inv;
+    const Vec3 dv = (t[2] - t[0]) * inv;
+    auto point = [&](std::size_t i, std::size_t j) {
+        return Vec3(t[0] + static_cast<double>(i) * du + static_cast<double>(j) * dv);
+    };
+    for (std::size_t j = 0; j < n; ++j)
+        for (std::size_t i = 0; i + j < n; ++i) {
+            const std::array<Vec3, 3> up{point(i, j), point(i + 1, j), point(i, j + 1)};
+            emit(patches, up.data(), up.size(), object, id);
+            if (i + j + 1 < n) {
+                const std::array<Vec3, 3> down{point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)};
+                emit(patches, down.data(), down.size(), object, id);
+            }
+        }
+}
+
+}  // namespace
+
+Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v) {
+    const Vec3* p = patches.polygon(i);
+    if (patches.corners(i) == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
+    const double su = std::sqrt(u);
+    return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
+}
+
+double circumradius(const PatchSet& patches, std::size_t i) {
+    double r = 0.0;
+    for (std::size_t k = 0; k < patches.corners(i); ++k) r = std::max(r, (patches.polygon(i)[k] - patches.centroid[i]).norm());
+    return r;
+}
+
+void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const Rgb& albedo,
+               const Rgb& emission, std::uint32_t object) {
+    TPRF_CHECK_LE(std::size_t{3}, count);
+    TPRF_CHECK_LE(patches.vertices.size() + count,
+                  static_cast<std::size_t>(std::numeric_limits<std::uint32_t>::max()));
+    // Newell's normal is exact for planar polygons and does not depend on which corner comes first.
+    Vec3 n = Vec3::Zero();
+    for (std::size_t i = 0; i < count; ++i) n += corners[i].cross(corners[(i + 1) % count]);
+    const double twice_area = n.norm();
+    TPRF_CHECK_LT(0.0, twice_area);
+    const Vec3 normal = n / twice_area;
+
+    // Area centroid: the fan's triangle centroids weighted by their (signed) areas.
+    Vec3 centroid = Vec3::Zero();
+    double weight = 0.0;
+    for (std::size_t i = 1; i + 1 < count; ++i) {
+        const double w = (corners[i] - corners[0]).cross(corners[i + 1] - corners[0]).dot(normal);
+        centroid += w * (corners[0] + corners[i] + corners[i + 1]) / 3.0;
+        weight += w;
+    }
+
+    if (patches.first.empty()) patches.first.push_back(0);
+    patches.vertices.insert(patches.vertices.end(), corners, corners + count);
+    patches.first.push_back(static_cast<std::uint32_t>(patches.vertices.size()));
+    patches.centroid.push_back(centroid / weight);
+    patches.normal.push_back(normal);
+    patches.area.push_back(0.5 * twice_area);
+    patches.albedo.push_back(albedo);
+    patches.emission.push_back(emission);
+    patches.object.push_back(object);
+}
+
+PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchStats* stats) {
+    PatchStats local;
+    PatchStats& st = stats ? *stats : local;
+    st = PatchStats{};
+
+    // Meshes are loaded first: the default patch size depends on the bounding box of every object.
+    std::vector<PolygonMesh> meshes(scene.objects.size());
+    Eigen::AlignedBox3d box;
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const Object& object = scene.objects[k];
+        const std::string path = "objects[" + std::to_string(k) + "]";
+        if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+            if (!(r->u.cross(r->v).norm() > 0.0)) fail_input(scene.file, path, "rectangle has no area");
+            for (const Vec3& p : {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->u + r->v),
+                                  Vec3(r->origin + r->v)})
+                box.extend(p);
+        } else {
+            const auto& m = std::get<MeshShape>(object.shape);
+            meshes[k] = load_mesh(m.file, m.transform, scene.file, path + ".file");
+            st.dropped_degenerate += meshes[k].dropped_degenerate;
+            for (const Vec3& p : meshes[k].vertices) box.extend(p);
+        }
+    }
+
+    PatchSet patches;
+    patches.first.push_back(0);
+    if (scene.objects.empty()) return patches;
+    st.max_edge = scene.max_edge > 0.0 ? scene.max_edge : box.diagonal().norm() / 16.0;
+    TPRF_CHECK_LT(0.0, st.max_edge);
+
+    // Counting before emitting lets every array be allocated once.
+    std::vector<Source> sources(scene.objects.size());
+    std::size_t total = 0;
+    std::size_t corner_total = 0;
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        Source& s = sources[k];
+        s.object = &scene.objects[k];
+        if (const auto* r = std::get_if<RectangleShape>(&s.object->shape)) {
+            const Grid g = rectangle_grid(*r, st.max_edge);
+            s.patch_count = g.nu * g.nv;
+            corner_total += 4 * s.patch_count * (s.object->two_sided ? 2 : 1);
+        } else {
+            triangulate(meshes[k], s.triangles);
+            meshes[k] = PolygonMesh{};
+            for (const Triangle& t : s.triangles) {
+                const std::size_t n = pieces(longest_edge(t), st.max_edge);
+                s.patch_count += n * n;
+            }
+            corner_total += 3 * s.patch_count * (s.object->two_sided ? 2 : 1);
+        }
+        total += s.patch_count * (s.object->two_sided ? 2 : 1);
+    }
+    patches.vertices.reserve(corner_total);
+    patches.first.reserve(total + 1);
+    patches.centroid.reserve(total);
+    patches.normal.reserve(total);
+    patches.area.reserve(total);
+    patches.albedo.reserve(total);
+    patches.emission.reserve(total);
+    patches.object.reserve(total);
+
+    for (std::size_t k = 0; k < sources.size(); ++k) {
+        const Source& s = sources[k];
+        const auto id = static_cast<std::uint32_t>(k);
+        if (const auto* r = std::get_if<RectangleShape>(&s.object->shape)) {
+            emit_rectangle(patches, *r, rectangle_grid(*r, st.max_edge), *s.object, id);
+        } else {
+            for (const Triangle& t : s.triangles)
+                emit_triangle(patches, t, pieces(longest_edge(t), st.max_edge), *s.object, id);
+        }
+        if (options.progress)
+            options.progress("patches", static_cast<double>(k + 1) / static_cast<double>(sources.size()));
+    }
+    TPRF_CHECK_EQ(patches.size(), total);
+    return patches;
+}
+
+}  // namespace tprf

@@ -1,0 +1,266 @@
+#include "tprf/scene/parse_json.h"
+
+#include "tprf/scene/validate.h"
+
+#include "tprf/core/error.h"
+#include "json_node.h"
+#include "tprf/imaging/sensor_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <fstream>
+#include <initializer_list>
+#include <iterator>
+#include <limits>
+#include <numbers>
+#include <string_view>
+#include <system_error>
+
+namespace tprf {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// Relative tolerance below which two directions count as parallel: nearer than this, a rectangle or a
+// camera frame is numerically meaningless although not exactly degenerate.
+constexpr double kParallelTol = 1e-9;
+
+bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
+
+using Node = JsonNode;
+
+Camera parse_camera(const Node& n) {
+    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
+    Camera c;
+    c.position = n.child("position").vec3();
+    const Node look_at = n.child("look_at");
+    c.look_at = look_at.vec3();
+    if (c.look_at == c.position) look_at.fail("equals camera.position, so there is no view direction");
+    const Node up = n.child("up");
+    c.up = up.vec3();
+    if (c.up.norm() == 0.0) up.fail("has zero length");
+    if (parallel(c.up, c.look_at - c.position)) up.fail("is parallel to the view direction (look_at - position)");
+    const Node fov = n.child("fov");
+    c.fov_deg = fov.number();
+    if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
+    c.width = n.child("width").positive_int();
+    c.height = n.child("height").positive_int();
+    if (const auto spp = n.find("spp")) c.spp = spp->positive_int();
+    if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
+    return c;
+}
+
+Light parse_laser(const Node& n) {
+    n.check_keys({"type", "origin", "direction", "target", "power"});
+    Laser l;
+    l.origin = n.child("origin").vec3();
+    const auto direction = n.find("direction");
+    const auto target = n.find("target");
+    if (direction && target) n.fail("give either \"direction\" or \"target\", not both");
+    if (direction) {
+        const Vec3 d = direction->vec3();
+        if (d.norm() == 0.0) direction->fail("has zero length");
+        l.direction = d.normalized();
+    } else if (target) {
+        const Vec3 d = target->vec3() - l.origin;
+        if (d.norm() == 0.0) target->fail("equals origin, so there is no direction");
+        l.direction = d.normalized();
+    } else {
+        n.fail("missing key \"direction\" or \"target\"");
+    }
+    l.power = n.child("power").non_negative_rgb();
+    return l;
+}
+
+Light parse_light(const Node& n) {
+    const Node type = n.child("type");
+    const std::string name = type.string();
+    if (name == "laser") return parse_laser(n);
+    if (name != "point") type.fail("unknown light type " + in_quotes(name) + " (expected \"point\" or \"laser\")");
+    n.check_keys({"type", "position", "intensity"});
+    PointLight p;
+    p.position = n.child("position").vec3();
+    p.intensity = n.child("intensity").non_negative_rgb();
+    return p;
+}
+
+RectangleShape parse_rectangle(const Node& n) {
+    RectangleShape r;
+    r.origin = n.child("origin").vec3();
+    const Node u = n.child("u");
+    const Node v = n.child("v");
+    r.u = u.vec3();
+    r.v = v.vec3();
+    if (r.u.norm() == 0.0) u.fail("has zero length");
+    if (r.v.norm() == 0.0) v.fail("has zero length");
+    if (parallel(r.u, r.v)) v.fail("is parallel to u, so the rectangle has no area");
+    return r;
+}
+
+Eigen::Matrix4d parse_matrix(const Node& n) {
+    if (!n.j.is_array() || n.j.size() != 16) n.fail("expected an array of 16 numbers (row-major 4x4)");
+    Eigen::Matrix4d m;
+    for (Eigen::Index r = 0; r < 4; ++r)
+        for (Eigen::Index c = 0; c < 4; ++c) m(r, c) = n.at(static_cast<std::size_t>(4 * r + c)).number();
+    if (m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) n.fail("last row must be 0 0 0 1 (an affine transform)");
+    // Scale-relative, so that a tiny but uniform scale is not taken for a singular matrix.
+    const Eigen::Matrix3d a = m.topLeftCorner<3, 3>();
+    const double size = a.norm() / std::sqrt(3.0);
+    if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) n.fail("is singular");
+    return m;
+}
+
+Eigen::Matrix4d parse_transform(const Node& n) {
+    n.check_keys({"matrix", "translate", "scale", "rotate"});
+    if (const auto matrix = n.find("matrix")) {
+        if (n.has("translate") || n.has("scale") || n.has("rotate"))
+            n.fail("\"matrix\" cannot be combined with translate, scale or rotate");
+        return parse_matrix(*matrix);
+    }
+    Eigen::Affine3d t = Eigen::Affine3d::Identity();
+    if (const auto translate = n.find("translate")) t.translate(translate->vec3());
+    if (const auto rotate = n.find("rotate")) {
+        rotate->check_keys({"axis", "angle"});
+        const Node axis_node = rotate->child("axis");
+        const Vec3 axis = axis_node.vec3();
+        if (axis.norm() == 0.0) axis_node.fail("has zero length");
+        const double angle = rotate->child("angle").number() * std::numbers::pi / 180.0;
+        t.rotate(Eigen::AngleAxisd(angle, axis.normalized()));
+    }
+    if (const auto scale = n.find("scale")) {
+        const Vec3 s = scale->j.is_number() ? Vec3::Constant(scale->number()) : scale->vec3();
+        if ((s.array() == 0.0).any()) scale->fail("must not be 0 (the mesh would have no area)");
+        t.scale(s);
+    }
+    // Eigen's translate/rotate/scale multiply on the right, so building T, then R, then S gives T*R*S:
+    // scale applied first, then rotate, then translate.
+    return t.matrix();
+}
+
+fs::path parse_mesh_file(const Node& n) {
+    const std::string name = n.string();
+    if (name.empty()) n.fail("is empty");
+    fs::path p(name);
+    if (p.is_relative()) p = n.file.parent_path() / p;
+    // The mesh is read by a later stage; checking here reports a bad path with the scene's other errors.
+    std::error_code ec;
+    const fs::file_status st = fs::status(p, ec);
+    if (!fs::exists(st)) n.fail("mesh file " + p.string() + " does not exist");
+    if (!fs::is_regular_file(st)) n.fail("mesh file " + p.string() + " is not a regular file");
+    if (!std::ifstream(p, std::ios::binary)) n.fail("cannot read mesh file " + p.string());
+    return p;
+}
+
+Object parse_object(const Node& n) {
+    const Node type = n.child("type");
+    const std::string name = type.string();
+    Object o;
+    o.json_path = n.path;
+    if (name == "rectangle") {
+        n.check_keys({"type", "origin", "u", "v", "albedo", "emission", "two_sided"});
+        o.shape = parse_rectangle(n);
+    } else if (name == "mesh") {
+        n.check_keys({"type", "file", "transform", "albedo", "emission", "two_sided"});
+        MeshShape m;
+        m.file = parse_mesh_file(n.child("file"));
+        if (const auto transform = n.find("transform")) m.transform = parse_transform(*transform);
+        o.shape = std::move(m);
+    } else {
+        type.fail("unknown object type " + in_quotes(name) + " (expected \"rectangle\" or \"mesh\")");
+    }
+    if (const auto albedo = n.find("albedo")) {
+        o.albedo = albedo->rgb();
+        if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo->fail("must be in [0, 1]");
+    }
+    if (const auto emission = n.find("emission")) o.emission = emission->non_negative_rgb();
+    if (const auto two_sided = n.find("two_sided")) o.two_sided = two_sided->boolean();
+    return o;
+}
+
+SolverSettings parse_solver(const Node& n) {
+    n.check_keys({"max_bounces", "delay", "bounces"});
+    SolverSettings s;
+    if (const auto max_bounces = n.find("max_bounces")) {
+        s.max_bounces = max_bounces->integer();
+        if (s.max_bounces < 0) max_bounces->fail("must be >= 0");
+    }
+    if (const auto delay = n.find("delay")) {
+        const std::string d = delay->string();
+        if (d == "nearest")
+            s.delay = DelayMode::Nearest;
+        else if (d == "linear")
+            s.delay = DelayMode::Linear;
+        else
+            delay->fail("unknown delay mode " + in_quotes(d) + " (expected \"nearest\" or \"linear\")");
+    }
+    if (const auto bounces = n.find("bounces")) s.bounces = bounces->boolean();
+    return s;
+}
+
+TimeAxis parse_time(const JsonNode& n) {
+    n.check_keys({"bins", "bin_width", "start", "unit"});
+    TimeAxis t;
+    t.bins = n.child("bins").positive_int();
+    t.bin_width = n.child("bin_width").positive();
+    if (const auto start = n.find("start")) t.start = start->number();
+    if (const auto unit = n.find("unit")) {
+        const std::string u = unit->string();
+        if (u == "m")
+            t.unit = TimeUnit::Metres;
+        else if (u == "ps")
+            t.unit = TimeUnit::Picoseconds;
+        else
+            unit->fail("unknown time unit " + in_quotes(u) + " (expected \"m\" or \"ps\")");
+    }
+    return t;
+}
+
+
+Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file) {
+    if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
+    const Node n{root, "", file};
+    n.check_keys({"time", "camera", "lights", "objects", "patches", "solver", "sensor"});
+
+    Scene scene;
+    scene.file = file;
+    scene.time = parse_time(n.child("time"));
+    if (const auto camera = n.find("camera")) scene.camera = parse_camera(*camera);
+    if (const auto lights = n.find("lights")) {
+        const std::size_t count = lights->array_size();
+        for (std::size_t i = 0; i < count; ++i) scene.lights.push_back(parse_light(lights->at(i)));
+    }
+    const Node objects = n.child("objects");
+    const std::size_t count = objects.array_size();
+    if (count == 0) objects.fail("must hold at least one object");
+    for (std::size_t i = 0; i < count; ++i) scene.objects.push_back(parse_object(objects.at(i)));
+    if (const auto patches = n.find("patches")) {
+        patches->check_keys({"max_edge"});
+        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = max_edge->positive();
+    }
+    if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
+    if (const auto sensor = n.find("sensor")) {
+        scene.sensor = parse_sensor(*sensor);
+        validate_sensor(*scene.sensor, scene.time);
+    }
+    return scene;
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
+    return build_scene(parse_json_text(text, file), file);
+}
+
+Scene load_scene(const std::filesystem::path& file) { return build_scene(read_json_file(file, "scene file"), file); }
+
+TimeAxis read_render_time(const std::filesystem::path& render_json) {
+    const nlohmann::json info = read_json_file(render_json, "render.json");
+    const JsonNode root{info, "", render_json};
+    root.expect_object();
+    return parse_time(root.child("time"));
+}
+
+}  // namespace tprf

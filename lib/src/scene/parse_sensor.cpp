@@ -1,0 +1,219 @@
+#include "tprf/scene/parse_json.h"
+
+#include "tprf/core/error.h"
+#include "json_node.h"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+#include <string>
+
+namespace tprf {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Measurements per pixel beyond which the measurements alone would dwarf any render.
+constexpr int kMaxMeasurements = 1 << 20;
+// Bounds that keep a SPAD's expected counts finite whatever the signal's scale.
+constexpr double kMaxPhotons = 1e20;
+constexpr double kMaxDarkRate = 1e30;
+
+std::uint64_t seed_value(const JsonNode& n) {
+    const double v = n.number();
+    if (v < 0.0 || v != std::floor(v) || v > 9007199254740992.0) n.fail("must be an integer in [0, 2^53]");
+    return static_cast<std::uint64_t>(v);
+}
+
+// A table pulse: "time,value" rows (a header row, blank lines and '#' comments are skipped).
+void read_pulse_table(const JsonNode& node, SensorPulse& pulse) {
+    const std::string name = node.string();
+    if (name.empty()) node.fail("is empty");
+    fs::path path(name);
+    if (path.is_relative()) path = node.file.parent_path() / path;
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) node.fail("pulse table " + path.string() + " is a directory");
+    std::ifstream in(path);
+    if (!in) node.fail("cannot read pulse table " + path.string());
+    std::string line;
+    int line_no = 0;
+    bool first_row = true;
+    while (std::getline(in, line)) {
+        ++line_no;
+        const std::size_t begin = line.find_first_not_of(" \t\r");
+        if (begin == std::string::npos || line[begin] == '#') continue;
+        std::replace(line.begin(), line.end(), ',', ' ');
+        std::istringstream row(line);
+        std::string first_field;
+        row >> first_field;
+        char* end = nullptr;
+        std::strtod(first_field.c_str(), &end);
+        // Only a first row that does not start with a number is a header: a malformed data row is an error.
+        if (first_row && (end == first_field.c_str() || *end != '\0')) {
+            first_row = false;
+            continue;
+        }
+        first_row = false;
+        row.clear();
+        row.str(line);
+        double t = 0.0, v = 0.0;
+        std::string rest;
+        const std::string where = "pulse table " + path.string() + ", line " + std::to_string(line_no) + ": ";
+        if (!(row >> t >> v) || (row >> rest)) node.fail(where + "expected two finite numbers \"time,value\"");
+        if (!std::isfinite(t) || !std::isfinite(v)) node.fail(where + "expected finite numbers");
+        if (v < 0.0) node.fail(where + "value must be >= 0");
+        if (!pulse.table_time.empty() && t <= pulse.table_time.back())
+            node.fail(where + "times must increase strictly");
+        pulse.table_time.push_back(t);
+        pulse.table_value.push_back(v);
+    }
+    if (pulse.table_time.size() < 2) node.fail("pulse table " + path.string() + " needs at least two rows");
+    // Only the shape matters (it is normalised to unit area): scaled to a peak of 1, values near the
+    // largest double cannot overflow the area.
+    const double peak = *std::max_element(pulse.table_value.begin(), pulse.table_value.end());
+    if (peak > 0.0)
+        for (double& v : pulse.table_value) v /= peak;
+    double area = 0.0;
+    for (std::size_t i = 1; i < pulse.table_time.size(); ++i)
+        area += 0.5 * (pulse.table_value[i] + pulse.table_value[i - 1]) * (pulse.table_time[i] - pulse.table_time[i - 1]);
+    if (!(area > 0.0) || !std::isfinite(area))
+        node.fail("pulse table " + path.string() + " has zero area, or times too far apart to integrate");
+}
+
+SensorPulse parse_pulse(const JsonNode& n) {
+    SensorPulse p;
+    const std::string shape = n.find("shape") ? n.child("shape").string() : "delta";
+    if (shape == "delta") {
+        n.check_keys({"shape"});
+    } else if (shape == "gaussian") {
+        n.check_keys({"shape", "fwhm"});
+        p.shape = PulseShape::Gaussian;
+        p.fwhm = n.child("fwhm").positive();
+    } else if (shape == "box") {
+        n.check_keys({"shape", "width"});
+        p.shape = PulseShape::Box;
+        p.width = n.child("width").positive();
+    } else if (shape == "table") {
+        n.check_keys({"shape", "file"});
+        p.shape = PulseShape::Table;
+        read_pulse_table(n.child("file"), p);
+    } else {
+        n.child("shape").fail("unknown pulse shape " + in_quotes(shape) +
+                              " (expected \"delta\", \"gaussian\", \"box\" or \"table\")");
+    }
+    return p;
+}
+
+// The 3 x 3 normal matrix of the fit M(phi) = a + b cos(phi) + c sin(phi) over the phases.
+Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {
+    Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+    for (const double deg : phases_deg) {
+        const double phi = deg * std::numbers::pi / 180.0;
+        const Eigen::Vector3d row(1.0, std::cos(phi), std::sin(phi));
+        m += row * row.transpose();
+    }
+    return m;
+}
+
+Exposure parse_exposure(const JsonNode& n) {
+    Exposure e;
+    const JsonNode type = n.child("type");
+    const std::string name = type.string();
+    if (name == "gates") {
+        n.check_keys({"type", "start", "width", "step", "count"});
+        e.type = ExposureType::Gates;
+        const double start = n.child("start").number();
+        const double width = n.child("width").positive();
+        const double step = n.child("step").positive();
+        const JsonNode count_node = n.child("count");
+        const int count = count_node.positive_int();
+        if (count > kMaxMeasurements) count_node.fail("more than " + std::to_string(kMaxMeasurements) + " gates");
+        if (!std::isfinite(start + (count - 1) * step + width)) n.fail("the last gate ends beyond the largest number");
+        for (int k = 0; k < count; ++k) e.windows.push_back({start + k * step, width});
+    } else if (name == "windows") {
+        n.check_keys({"type", "windows"});
+        e.type = ExposureType::Windows;
+        const JsonNode list = n.child("windows");
+        const std::size_t count = list.array_size();
+        if (count == 0) list.fail("must hold at least one [start, width]");
+        if (count > std::size_t(kMaxMeasurements)) list.fail("more than " + std::to_string(kMaxMeasurements) + " windows");
+        for (std::size_t k = 0; k < count; ++k) {
+            const JsonNode w = list.at(k);
+            if (w.array_size() != 2) w.fail("expected [start, width]");
+            e.windows.push_back({w.at(0).number(), w.at(1).positive()});
+            if (!std::isfinite(e.windows.back()[0] + e.windows.back()[1])) w.fail("ends beyond the largest number");
+        }
+    } else if (name == "amcw") {
+        n.check_keys({"type", "frequency_mhz", "phases_deg"});
+        e.type = ExposureType::Amcw;
+        e.frequency_mhz = n.child("frequency_mhz").positive();
+        if (const auto phases = n.find("phases_deg")) {
+            const std::size_t count = phases->array_size();
+            for (std::size_t k = 0; k < count; ++k) e.phases_deg.push_back(phases->at(k).number());
+            if (count > std::size_t(kMaxMeasurements)) phases->fail("too many phases");
+            // The phase of the fit is determined only when cos and sin are both sampled.
+            const Eigen::Matrix3d m = phase_normal_matrix(e.phases_deg);
+            if (count < 3 || std::abs(m.determinant()) < 1e-9 * std::pow(double(count), 3))
+                phases->fail("needs at least 3 phases that determine a cosine's phase (e.g. [0, 90, 180, 270])");
+        } else {
+            e.phases_deg = {0.0, 90.0, 180.0, 270.0};
+        }
+    } else if (name == "spad") {
+        n.check_keys({"type", "photons", "jitter_fwhm", "dark_rate", "seed"});
+        e.type = ExposureType::Spad;
+        const JsonNode photons = n.child("photons");
+        e.photons = photons.positive();
+        if (e.photons > kMaxPhotons) photons.fail("must be at most 1e20 photons per unit of signal");
+        if (const auto jitter = n.find("jitter_fwhm")) e.jitter_fwhm = jitter->non_negative();
+        if (const auto dark = n.find("dark_rate")) {
+            e.dark_rate = dark->non_negative();
+            if (e.dark_rate > kMaxDarkRate) dark->fail("must be at most 1e30 counts per second");
+        }
+        if (const auto seed = n.find("seed")) e.seed = seed_value(*seed);
+    } else {
+        type.fail("unknown exposure type " + in_quotes(name) +
+                  " (expected \"gates\", \"windows\", \"amcw\" or \"spad\")");
+    }
+    return e;
+}
+
+}  // namespace
+
+SensorSettings parse_sensor(const JsonNode& n) {
+    n.check_keys({"pulse", "exposure", "noise", "clamp"});
+    SensorSettings s;
+    s.file = n.file;
+    s.json_path = n.path;
+    if (const auto pulse = n.find("pulse")) s.pulse = parse_pulse(*pulse);
+    s.exposure = parse_exposure(n.child("exposure"));
+    if (const auto noise = n.find("noise")) {
+        noise->check_keys({"sigma", "seed"});
+        if (s.exposure.type == ExposureType::Spad)
+            noise->fail("a SPAD counts photons, whose noise is Poisson: leave out \"noise\"");
+        s.noise.sigma = noise->child("sigma").non_negative();
+        if (const auto seed = noise->find("seed")) s.noise.seed = seed_value(*seed);
+    }
+    if (const auto clamp = n.find("clamp")) s.clamp = clamp->boolean();
+    return s;
+}
+
+SensorSettings load_sensor(const fs::path& file) {
+    const nlohmann::json root = read_json_file(file, "sensor file");
+    const JsonNode top{root, "", file};
+    top.expect_object();
+    // A scene file (or any object with a "sensor" member) gives its block.
+    if (root.contains("sensor")) return parse_sensor(top.child("sensor"));
+    return parse_sensor(top);
+}
+
+SensorSettings parse_sensor_block(const std::string& text, const fs::path& file, std::string_view json_path) {
+    const nlohmann::json root = parse_json_text(text, file);
+    return parse_sensor(JsonNode{root, std::string(json_path), file});
+}
+
+}  // namespace tprf

@@ -1,0 +1,65 @@
+#include "tprf/scene/sensor_settings.h"
+
+#include "tprf/core/error.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tprf {
+namespace {
+
+TimeKernel table_kernel(const SensorPulse& p, double bin_width) {
+    const double t0 = p.table_time.front(), t1 = p.table_time.back();
+    const double span = t1 - t0;
+    // Also no finer than the table's distance from t = 0 allows, so that grid indices fit an int.
+    const double step = std::max({std::min(bin_width, span) / kStepsPerFeature, span / kMaxKernelPoints,
+                                  std::max(std::abs(t0), std::abs(t1)) / kMaxKernelPoints});
+    TimeKernel k = kernel_range(step, t0, t1);
+    // Each segment in pieces no longer than a step; a piece's mass sits at its centroid, so that the
+    // kernel's mean is the table's.
+    for (std::size_t s = 1; s < p.table_time.size(); ++s) {
+        const double a = p.table_time[s - 1], b = p.table_time[s];
+        const double va = p.table_value[s - 1], vb = p.table_value[s];
+        const int pieces = std::max(1, int(std::ceil((b - a) / k.step)));
+        for (int j = 0; j < pieces; ++j) {
+            const double x0 = a + (b - a) * j / pieces, x1 = a + (b - a) * (j + 1) / pieces;
+            const double y0 = va + (vb - va) * (x0 - a) / (b - a), y1 = va + (vb - va) * (x1 - a) / (b - a);
+            const double mass = 0.5 * (y0 + y1) * (x1 - x0);
+            if (mass <= 0.0) continue;
+            add_split(k, x0 + (x1 - x0) * (y0 + 2.0 * y1) / (3.0 * (y0 + y1)), mass);
+        }
+    }
+    normalise(k);
+    return k;
+}
+
+}  // namespace
+
+const char* exposure_name(ExposureType type) {
+    switch (type) {
+        case ExposureType::Gates: return "gates";
+        case ExposureType::Windows: return "windows";
+        case ExposureType::Amcw: return "amcw";
+        case ExposureType::Spad: return "spad";
+    }
+    return "?";
+}
+
+TimeKernel pulse_kernel(const SensorPulse& p, double bin_width) {
+    switch (p.shape) {
+        case PulseShape::Delta: return TimeKernel{bin_width, 0, {1.0}};
+        case PulseShape::Gaussian: return gaussian_kernel(p.fwhm, bin_width);
+        case PulseShape::Box: {
+            // Equal masses at the centres of n equal cells of [-w/2, w/2]: symmetric, so the mean is 0.
+            const double step = std::max(std::min(bin_width, p.width) / kStepsPerFeature, p.width / kMaxKernelPoints);
+            TimeKernel k = kernel_range(step, -0.5 * p.width, 0.5 * p.width);
+            const int n = std::max(1, int(std::ceil(p.width / step)));
+            for (int j = 0; j < n; ++j) add_split(k, -0.5 * p.width + (j + 0.5) * p.width / n, 1.0 / n);
+            return k;
+        }
+        case PulseShape::Table: return table_kernel(p, bin_width);
+    }
+    throw InternalError("unknown pulse shape");
+}
+
+}  // namespace tprf

@@ -1,0 +1,230 @@
+#include "tprf/transport/links.h"
+
+#include "tprf/core/error.h"
+#include "tprf/geometry/form_factors.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+
+#include <flann/flann.hpp>
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+
+namespace tprf {
+namespace {
+
+// One unordered pair's result, kept by its lower-numbered patch until the CSR is assembled.
+// One unordered pair while the links are collected: 8 bytes, so that the collection costs less than
+// the CSR arrays it becomes (12 bytes a link, 24 a pair). F_ji follows by reciprocity and the
+// distance from the centroids.
+struct PairLink {
+    std::uint32_t other;  // j > i
+    float ff_ij;          // i -> j
+};
+
+// Deterministic per-pair jitter (threads must not change the answer): a 64-bit mix of the inputs.
+double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+    std::uint64_t h = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^ c;
+    h ^= h >> 33;
+    h *= 0xff51afd7ed558ccdull;
+    h ^= h >> 33;
+    h *= 0xc4ceb9fe1a85ec53ull;
+    h ^= h >> 33;
+    return double(h >> 11) * 0x1.0p-53;
+}
+
+// Strata of a 4 x 4 grid, ordered so that the first four cover the four quadrants: when those
+// agree the pair is decided early.
+constexpr std::array<int, 16> kStrataA = {0, 10, 8, 2, 5, 15, 13, 7, 1, 11, 9, 3, 4, 14, 12, 6};
+constexpr std::array<int, 16> kStrataB = {10, 0, 2, 8, 15, 5, 7, 13, 11, 1, 3, 9, 14, 4, 6, 12};
+
+Vec3 stratified_point(const PatchSet& patches, std::size_t i, int stratum, double ju, double jv, double lift) {
+    const double u = ((stratum % 4) + ju) / 4.0, v = ((stratum / 4) + jv) / 4.0;
+    return patch_point(patches, i, u, v) + lift * patches.normal[i];
+}
+
+// True when some corner of b lies strictly in front of a's plane.
+bool any_in_front(const PatchSet& patches, std::size_t a, std::size_t b, double tolerance) {
+    const Vec3& n = patches.normal[a];
+    const Vec3& c = patches.centroid[a];
+    const Vec3* poly = patches.polygon(b);
+    for (std::size_t k = 0; k < patches.corners(b); ++k)
+        if (n.dot(poly[k] - c) > tolerance) return true;
+    return false;
+}
+
+std::vector<double> circumradii(const PatchSet& patches) {
+    std::vector<double> r(patches.size());
+    for (std::size_t i = 0; i < patches.size(); ++i) r[i] = circumradius(patches, i);
+    return r;
+}
+
+// For each patch i, the patches j > i closer than near_factor * (r_i + r_j), sorted: a FLANN radius
+// search over the centroids with the largest radius that can matter, then the exact criterion.
+std::vector<std::vector<std::uint32_t>> near_pairs(const PatchSet& patches, const std::vector<double>& radius,
+                                                   double near_factor, int threads) {
+    const std::size_t n = patches.size();
+    std::vector<std::vector<std::uint32_t>> out(n);
+    if (n < 2) return out;
+    std::vector<double> xyz(3 * n);
+    for (std::size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) xyz[3 * i + std::size_t(c)] = patches.centroid[i][c];
+    flann::Matrix<double> points(xyz.data(), n, 3);
+    flann::Index<flann::L2_Simple<double>> index(points, flann::KDTreeSingleIndexParams(12));
+    index.buildIndex();
+    const double r_max = *std::max_element(radius.begin(), radius.end());
+    const double search = near_factor * 2.0 * r_max;
+    flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
+    params.cores = threads;
+    std::vector<std::vector<std::size_t>> indices;
+    std::vector<std::vector<double>> dist2;
+    index.radiusSearch(points, indices, dist2, static_cast<float>(search * search), params);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t k = 0; k < indices[i].size(); ++k) {
+            const std::size_t j = indices[i][k];
+            if (j <= i) continue;
+            const double limit = near_factor * (radius[i] + radius[j]);
+            if (dist2[i][k] < limit * limit) out[i].push_back(static_cast<std::uint32_t>(j));
+        }
+        std::sort(out[i].begin(), out[i].end());
+    }
+    return out;
+}
+
+// Fraction of stratified rays between i and j that nothing blocks; the first rays decide when they agree.
+double visible_fraction(const PatchSet& patches, const Visibility& vis, std::size_t i, std::size_t j,
+                        const LinkOptions& options, std::uint64_t& rays) {
+    const int total = std::clamp(options.visibility_rays, 1, 16);
+    const int first = std::clamp(options.first_rays, 1, total);
+    const double lift = vis.epsilon();
+    int visible = 0, cast = 0;
+    for (int k = 0; k < total; ++k) {
+        if (k == first && (visible == 0 || visible == cast)) break;
+        const Vec3 a = stratified_point(patches, i, kStrataA[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k)),
+                                        hash01(i, j, 4 * std::uint64_t(k) + 1), lift);
+        const Vec3 b = stratified_point(patches, j, kStrataB[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k) + 2),
+                                        hash01(i, j, 4 * std::uint64_t(k) + 3), lift);
+        ++cast;
+        if (!vis.occluded(a, b)) ++visible;
+    }
+    rays += std::uint64_t(cast);
+    return double(visible) / double(cast);
+}
+
+}  // namespace
+
+std::size_t Links::bytes() const {
+    return row.size() * sizeof(std::uint64_t) + source.size() * sizeof(std::uint32_t) +
+           ff.size() * sizeof(float) + distance.size() * sizeof(float);
+}
+
+Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, LinkStats* stats) {
+    const std::size_t n = patches.size();
+    TPRF_CHECK_LT(n, std::size_t{0xFFFFFFFFu});
+    const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+    const std::vector<double> radius = circumradii(patches);
+    const std::vector<std::vector<std::uint32_t>> near = near_pairs(patches, radius, options.near_factor, threads);
+
+    const double far2 = options.far_factor * options.far_factor;
+    std::vector<std::vector<PairLink>> pairs(n);
+    std::atomic<std::uint64_t> tested{0}, near_count{0}, ray_count{0}, done_work{0};
+    const double total_work = 0.5 * double(n) * double(n) + 1.0;
+    std::mutex progress_mutex;
+    double reported = 0.0;
+
+#pragma omp parallel num_threads(threads)
+    {
+        std::uint64_t my_tested = 0, my_near = 0, my_rays = 0;
+#pragma omp for schedule(dynamic, 8)
+        for (std::size_t i = 0; i < n; ++i) {
+            const double tol_i = 1e-9 * radius[i];
+            const std::vector<std::uint32_t>& near_i = near[i];
+            std::size_t near_cursor = 0;
+            std::vector<PairLink>& row = pairs[i];
+            for (std::size_t j = i + 1; j < n; ++j) {
+                const bool is_near = near_cursor < near_i.size() && near_i[near_cursor] == j;
+                if (is_near) ++near_cursor;
+                if (!any_in_front(patches, i, j, tol_i) || !any_in_front(patches, j, i, 1e-9 * radius[j])) continue;
+                ++my_tested;
+                // Integrate over the smaller patch, with the exact inner integral over the larger one.
+                const bool i_outer = patches.area[i] <= patches.area[j];
+                const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
+                double f_st;
+                if (is_near) {
+                    ++my_near;
+                    f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s],
+                                               patches.polygon(t), patches.corners(t), patches.normal[t],
+                                               options.quadrature);
+                } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() <
+                           far2 * (radius[i] + radius[j]) * (radius[i] + radius[j])) {
+                    f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
+                                                     patches.polygon(t), patches.corners(t), patches.normal[t]);
+                } else {
+                    f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
+                                                     patches.corners(t), patches.normal[t]);
+                }
+                if (!(f_st > 0.0)) continue;
+                const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
+                const double v = visible_fraction(patches, vis, i, j, options, my_rays);
+                if (v <= 0.0) continue;
+                const double f_ij = (i_outer ? f_st : f_ts) * v;
+                row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij)});
+            }
+            row.shrink_to_fit();
+            const std::uint64_t work = done_work.fetch_add(n - i) + (n - i);
+            if (options.progress) {
+                const double fraction = double(work) / total_work;
+                std::lock_guard<std::mutex> lock(progress_mutex);
+                if (fraction - reported >= 0.01) {
+                    reported = fraction;
+                    options.progress("links", std::min(fraction, 1.0));
+                }
+            }
+        }
+        tested += my_tested;
+        near_count += my_near;
+        ray_count += my_rays;
+    }
+
+    // Assemble the CSR by receiver. Row i takes its sources k < i (scattered from pairs[k], in
+    // increasing k) and then its own j > i, so that sources increase along every row.
+    Links links;
+    links.row.assign(n + 1, 0);
+    std::vector<std::uint64_t> lower(n, 0);
+    for (std::size_t i = 0; i < n; ++i)
+        for (const PairLink& p : pairs[i]) ++lower[p.other];
+    for (std::size_t i = 0; i < n; ++i) links.row[i + 1] = links.row[i] + lower[i] + pairs[i].size();
+    const std::size_t total = links.row[n];
+    links.source.resize(total);
+    links.ff.resize(total);
+    links.distance.resize(total);
+    std::vector<std::uint64_t> cursor(links.row.begin(), links.row.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) {
+        std::uint64_t own = links.row[i] + lower[i];
+        for (const PairLink& p : pairs[i]) {
+            const std::uint64_t at = cursor[p.other]++;
+            const float distance = static_cast<float>((patches.centroid[i] - patches.centroid[p.other]).norm());
+            links.source[at] = static_cast<std::uint32_t>(i);
+            links.ff[at] = static_cast<float>(double(p.ff_ij) * patches.area[i] / patches.area[p.other]);
+            links.distance[at] = distance;
+            links.source[own] = p.other;
+            links.ff[own] = p.ff_ij;
+            links.distance[own] = distance;
+            ++own;
+        }
+        std::vector<PairLink>().swap(pairs[i]);
+    }
+    if (options.progress) options.progress("links", 1.0);
+    if (stats) {
+        stats->pairs_tested = tested;
+        stats->near_pairs = near_count;
+        stats->rays = ray_count;
+    }
+    return links;
+}
+
+}  // namespace tprf

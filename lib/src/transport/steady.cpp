@@ -1,0 +1,143 @@
+#include "tprf/transport/steady.h"
+
+#include "tprf/transport/illumination.h"
+#include "tprf/core/error.h"
+#include "tprf/transport/links.h"
+#include "tprf/geometry/patches.h"
+
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCore>
+
+#include <string>
+
+namespace tprf {
+namespace {
+
+// y = diag(albedo_c) F x for one channel.
+Eigen::VectorXd gather(const PatchSet& patches, const Links& links, const Eigen::VectorXd& x, int c) {
+    const Eigen::Index n = Eigen::Index(patches.size());
+    Eigen::VectorXd y(n);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (Eigen::Index i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (std::uint64_t k = links.row[std::size_t(i)]; k < links.row[std::size_t(i) + 1]; ++k)
+            s += double(links.ff[k]) * x[links.source[k]];
+        y[i] = patches.albedo[std::size_t(i)][c] * s;
+    }
+    return y;
+}
+
+}  // namespace
+
+class SteadyOperator;
+
+}  // namespace tprf
+
+template <>
+struct Eigen::internal::traits<tprf::SteadyOperator> : public Eigen::internal::traits<Eigen::SparseMatrix<double>> {};
+
+namespace tprf {
+
+/// The system matrix I - diag(albedo_c) F of one channel, applied straight from the links (Eigen's
+/// matrix-free solver interface): a sparse copy of F would cost 12 more bytes per link, as much again
+/// as the links themselves.
+class SteadyOperator : public Eigen::EigenBase<SteadyOperator> {
+public:
+    using Scalar = double;
+    using RealScalar = double;
+    using StorageIndex = int;
+    enum { ColsAtCompileTime = Eigen::Dynamic, MaxColsAtCompileTime = Eigen::Dynamic, IsRowMajor = false };
+
+    SteadyOperator(const PatchSet& patches, const Links& links, int channel)
+        : m_patches(patches), m_links(links), m_channel(channel) {}
+
+    Eigen::Index rows() const { return Eigen::Index(m_patches.size()); }
+    Eigen::Index cols() const { return Eigen::Index(m_patches.size()); }
+
+    template <typename Rhs>
+    Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct> operator*(const Eigen::MatrixBase<Rhs>& x) const {
+        return Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct>(*this, x.derived());
+    }
+
+    /// (I - diag(albedo) F) x.
+    Eigen::VectorXd apply(const Eigen::VectorXd& x) const { return x - gather(m_patches, m_links, x, m_channel); }
+
+private:
+    const PatchSet& m_patches;
+    const Links& m_links;
+    int m_channel;
+};
+
+}  // namespace tprf
+
+namespace Eigen::internal {
+
+template <typename Rhs>
+struct generic_product_impl<tprf::SteadyOperator, Rhs, SparseShape, DenseShape, GemvProduct>
+    : generic_product_impl_base<tprf::SteadyOperator, Rhs, generic_product_impl<tprf::SteadyOperator, Rhs>> {
+    using Scalar = typename Product<tprf::SteadyOperator, Rhs>::Scalar;
+    template <typename Dest>
+    static void scaleAndAddTo(Dest& dst, const tprf::SteadyOperator& lhs, const Rhs& rhs, const Scalar& alpha) {
+        dst.noalias() += alpha * lhs.apply(rhs);
+    }
+};
+
+}  // namespace Eigen::internal
+
+namespace tprf {
+
+std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
+                              int max_bounces) {
+    const std::size_t n = patches.size();
+    TPRF_CHECK_EQ(links.receivers(), n);
+    int max_order = 0;
+    for (const Pulse& p : emission.pulses) max_order = std::max(max_order, int(p.order));
+    // Time-integrated emission per order (a pulse's energy is its whole contribution).
+    std::vector<std::vector<Rgb>> by_order(std::size_t(max_order) + 1, std::vector<Rgb>(n, Rgb::Zero()));
+    std::vector<Rgb> seen_only(n, Rgb::Zero());
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
+            const Pulse& p = emission.pulses[k];
+            if (max_bounces >= 0 && p.order > max_bounces) continue;
+            (p.propagates ? by_order[p.order][i] : seen_only[i]) += p.energy;
+        }
+
+    std::vector<Rgb> b(n, Rgb::Zero());
+    for (int c = 0; c < 3; ++c) {
+        Eigen::VectorXd result;
+        if (max_bounces >= 0) {
+            // Neumann series up to max_bounces: R_k = E_k + diag(a) F R_{k-1}.
+            Eigen::VectorXd r = Eigen::VectorXd::Zero(Eigen::Index(n));
+            result = Eigen::VectorXd::Zero(Eigen::Index(n));
+            for (int k = 0; k <= max_bounces; ++k) {
+                Eigen::VectorXd next = k > 0 ? gather(patches, links, r, c) : Eigen::VectorXd::Zero(Eigen::Index(n));
+                if (k <= max_order)
+                    for (std::size_t i = 0; i < n; ++i) next[Eigen::Index(i)] += by_order[std::size_t(k)][i][c];
+                r = std::move(next);
+                result += r;
+            }
+        } else {
+            Eigen::VectorXd e = Eigen::VectorXd::Zero(Eigen::Index(n));
+            for (const auto& order : by_order)
+                for (std::size_t i = 0; i < n; ++i) e[Eigen::Index(i)] += order[i][c];
+            if (e.squaredNorm() == 0.0) {
+                result = e;
+            } else {
+                // A patch never links to itself, so the diagonal is 1 and needs no preconditioner.
+                const SteadyOperator m(patches, links, c);
+                Eigen::BiCGSTAB<SteadyOperator, Eigen::IdentityPreconditioner> solver;
+                solver.setTolerance(1e-8);
+                solver.setMaxIterations(10000);
+                solver.compute(m);
+                result = solver.solve(e);
+                if (solver.info() != Eigen::Success)
+                    throw InternalError("steady state: BiCGSTAB did not converge (relative residual " +
+                                        std::to_string(solver.error()) + ")");
+            }
+        }
+        for (std::size_t i = 0; i < n; ++i) b[i][c] = result[Eigen::Index(i)] + seen_only[i][c];
+    }
+    return b;
+}
+
+}  // namespace tprf
