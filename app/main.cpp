@@ -1,6 +1,8 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
 #include "tprf/core/error.h"
+#include "tprf/pipeline/info.h"
 #include "tprf/pipeline/render.h"
+#include "tprf/pipeline/sensor_run.h"
 #include "tprf/scene/parse_json.h"
 
 #include <CLI/CLI.hpp>
@@ -13,6 +15,7 @@
 #include <exception>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <unistd.h>
 
@@ -79,6 +82,11 @@ int run_info(const std::string& scene_file, int threads, bool quiet) {
     return 0;
 }
 
+// Warnings are printed even with --quiet: they say that something asked for was not made.
+void print_warnings(const std::vector<std::string>& warnings) {
+    for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
+}
+
 int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet) {
     ProgressBar bar(quiet);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
@@ -87,6 +95,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     if (r.dropped_degenerate > 0)
         std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
                      r.dropped_degenerate);
+    print_warnings(r.warnings);
     if (!quiet)
         std::fprintf(stderr,
                      "tprf: %zu patches, %zu links, %dx%d pixels x %d bins in %.2f s (patches %.2f, links %.2f, "
@@ -99,6 +108,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
 
 int run_sensor(const tprf::SensorRunOptions& options, bool quiet) {
     const tprf::SensorReport r = tprf::apply_sensor_file(options);
+    print_warnings(r.warnings);
     if (!quiet)
         std::fprintf(stderr, "tprf: %dx%d pixels x %d measurements in %.2f s -> %s\n", r.width, r.height,
                      r.measurements, r.seconds, options.render_dir.string().c_str());

@@ -27,7 +27,8 @@ struct Stage {
     tprf::PatchSet patches;
     std::unique_ptr<tprf::Visibility> visibility;
     tprf::Links links;
-    tprf::Emission emission;
+    tprf::LightSources sources;
+    tprf::Illumination emission;
 };
 
 const Stage& stage() {
@@ -40,9 +41,10 @@ const Stage& stage() {
         tprf::LinkOptions link_options;
         link_options.threads = kThreads;
         out->links = tprf::compute_links(out->patches, *out->visibility, link_options);
-        tprf::EmitterOptions emitter_options;
+        tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
-        out->emission = tprf::compute_emission(out->scene, out->patches, out->links, *out->visibility, emitter_options);
+        out->sources = tprf::light_sources(out->scene, out->patches, *out->visibility);
+        out->emission = tprf::illuminate(out->sources, out->patches, out->links, *out->visibility, emitter_options);
         return out;
     }();
     return *s;
@@ -58,11 +60,11 @@ tprf::Camera camera_of_size(int pixels) {
 void BM_PrepareCamera(benchmark::State& state) {
     const Stage& s = stage();
     const tprf::Camera camera = camera_of_size(int(state.range(0)));
-    tprf::CameraOptions options;
+    tprf::GatherOptions options;
     options.threads = kThreads;
     std::size_t taps = 0;
     for (auto _ : state) {
-        const tprf::CameraGather gather = tprf::prepare_camera(camera, s.scene, s.patches, *s.visibility, options);
+        const tprf::Gather gather = tprf::prepare_camera(camera, s.patches, s.sources, *s.visibility, options);
         taps = gather.taps.size();
         benchmark::DoNotOptimize(gather.taps.data());
     }
@@ -77,9 +79,9 @@ BENCHMARK(BM_PrepareCamera)->Arg(96)->Arg(256)->Unit(benchmark::kMillisecond)->U
 void BM_FilmBlock(benchmark::State& state) {
     const Stage& s = stage();
     const tprf::Camera camera = camera_of_size(int(state.range(0)));
-    tprf::CameraOptions options;
+    tprf::GatherOptions options;
     options.threads = kThreads;
-    const tprf::CameraGather gather = tprf::prepare_camera(camera, s.scene, s.patches, *s.visibility, options);
+    const tprf::Gather gather = tprf::prepare_camera(camera, s.patches, s.sources, *s.visibility, options);
     std::vector<float> cube(std::size_t(camera.width) * camera.height * kBins * 3, 0.0f);
     tprf::TransientFilm film(gather, s.emission, s.scene.time, s.scene.solver.delay, cube.data(), -1, false, kThreads);
     std::vector<float> radiosity(s.patches.size() * kBlockBins * 3, 1e-3f);

@@ -10,14 +10,15 @@
 ///     against the FMA peak, peak memory against what links + solver state + cube need;
 ///  3. the relative L2 error of the transient cube, of its 16-bin sums and of the steady image at
 ///     max_edge h against a render at h/2, set against the render's seconds;
-///  4. harness.csv, accuracy.csv, scaling.png (log-log, least-squares exponents in the legends) and
-///     a section of bench/RESULTS.md between `<!-- harness:begin -->` and `<!-- harness:end -->`.
+///  4. harness.csv, accuracy.csv, scaling.png (drawn by python/tprf_plots.py: log-log, least-squares
+///     exponents in the legends) and a section of bench/RESULTS.md between `<!-- harness:begin -->`
+///     and `<!-- harness:end -->`.
 /// Nothing is asserted: it measures and reports.
 
 #include "machine.h"
 #include "tprf/io/atomic_file.h"
 #include "tprf/io/npy.h"
-#include "tprf/io/plot.h"
+#include "tprf/io/plots.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -375,105 +376,55 @@ struct Fit {
     double total, links, solve;
 };
 
-/// Colours per phase (all-zero means "palette" to render_plot, hence the near-black); the second
-/// group of a panel (another patch count) is drawn lighter and left out of the legend.
-constexpr std::array<std::array<std::uint8_t, 3>, 4> kPhaseColors{
-    {{20, 20, 20}, {31, 119, 180}, {214, 39, 40}, {44, 160, 44}}};
-constexpr std::array<Phase, 4> kPlotted{kTotal, kLinks, kSolve, kGather};
-
-std::array<std::uint8_t, 3> lighter(std::array<std::uint8_t, 3> c) {
-    for (auto& v : c) v = static_cast<std::uint8_t>(v + (255 - v) / 2);
-    return c;
-}
-
-/// A labelled line and its unlabelled markers, so that single points stay visible.
-void add_curve(tprf::PlotPanel& panel, const std::string& label, const std::vector<double>& x,
-               const std::vector<double>& y, std::array<std::uint8_t, 3> color) {
-    panel.series.push_back({label, x, y, color, tprf::SeriesStyle::Line});
-    panel.series.push_back({"", x, y, color, tprf::SeriesStyle::Markers});
-}
-
-/// Runs whose seconds are plotted against x (patches or bins), and what they have in common.
+/// Runs whose seconds are fitted against x (patches or bins), and what they have in common.
 struct Group {
     std::string what;
     std::vector<const Run*> runs;
     std::vector<double> x;
 };
 
-/// Adds the phase curves of `groups` to `panel`, one legend entry per phase with every group's
-/// slope ("solve (slope 1.02 | 0.97)"), and returns the fitted exponents.
-std::vector<Fit> add_phases(tprf::PlotPanel& panel, const std::vector<Group>& groups) {
-    std::vector<Fit> fits;
-    for (const Group& g : groups) fits.push_back({g.what, 0, 0, 0});
-    for (std::size_t k = 0; k < kPlotted.size(); ++k) {
-        std::vector<std::vector<double>> ys;
-        std::string slopes;
-        for (std::size_t gi = 0; gi < groups.size(); ++gi) {
-            std::vector<double>& y = ys.emplace_back();
-            for (const Run* r : groups[gi].runs) y.push_back(r->seconds[kPlotted[k]]);
-            const double s = log_slope(groups[gi].x, y);
-            if (kPlotted[k] == kTotal) fits[gi].total = s;
-            if (kPlotted[k] == kLinks) fits[gi].links = s;
-            if (kPlotted[k] == kSolve) fits[gi].solve = s;
-            slopes += (gi ? " | " : "") + slope_text(s);
-        }
-        const std::string label = kPhases[kPlotted[k]] + (kPlotted[k] == kGather ? "" : " (slope " + slopes + ")");
-        for (std::size_t gi = 0; gi < groups.size(); ++gi)
-            add_curve(panel, gi ? "" : label, groups[gi].x, ys[gi],
-                      gi ? lighter(kPhaseColors[k]) : kPhaseColors[k]);
-    }
-    return fits;
+/// The exponents of total, links and solve seconds against x, per group.
+Fit fit_group(const Group& g) {
+    auto slope = [&](Phase phase) {
+        std::vector<double> y;
+        for (const Run* r : g.runs) y.push_back(r->seconds[phase]);
+        return log_slope(g.x, y);
+    };
+    return {g.what, slope(kTotal), slope(kLinks), slope(kSolve)};
 }
 
-tprf::PlotPanel log_log_panel(std::string title, std::string x_label, std::string y_label) {
-    tprf::PlotPanel panel;
-    panel.title = std::move(title), panel.x_label = std::move(x_label), panel.y_label = std::move(y_label);
-    panel.x_scale = panel.y_scale = tprf::AxisScale::Log;
-    return panel;
-}
-
-/// Draws scaling.png and returns the fitted exponents.
-std::vector<Fit> plot_scaling(const fs::path& png, const Plan& p, const std::vector<Run>& runs,
-                              const std::vector<Accuracy>& accuracy) {
-    const std::string pixels = std::to_string(p.small) + "x" + std::to_string(p.small);
+/// The fitted exponents for RESULTS.md: against patches, and against bins at each bins-sweep max_edge.
+/// (scaling.png, drawn by python/tprf_plots.py from harness.csv, fits the same least squares.)
+std::vector<Fit> scaling_fits(const Plan& p, const std::vector<Run>& runs) {
     Group by_patch{"patches (" + std::to_string(p.patch_bins) + " bins)", {}, {}};
     for (double e : p.patch_edges) {
         by_patch.runs.push_back(&find_run(runs, {e, p.patch_bins, p.small, p.small}));
         by_patch.x.push_back(by_patch.runs.back()->patches);
     }
-    tprf::PlotPanel patches_panel = log_log_panel(
-        "Seconds against patches (" + std::to_string(p.patch_bins) + " bins, " + pixels + ")", "patches", "seconds");
-    std::vector<Fit> fits = add_phases(patches_panel, {by_patch});
-
-    std::vector<Group> by_bins;
-    std::string shades;
+    std::vector<Fit> fits = {fit_group(by_patch)};
     for (double e : p.bin_edges) {
         Group g;
         for (int b : p.bin_counts) {
             g.runs.push_back(&find_run(runs, {e, b, p.small, p.small}));
             g.x.push_back(b);
         }
-        const std::string count = num(g.runs.front()->patches, 0);
-        g.what = "bins (max_edge " + general(e) + ", " + count + " patches)";
-        shades += (by_bins.empty() ? "; dark " + count + " patches" : ", light " + count);
-        by_bins.push_back(std::move(g));
+        g.what = "bins (max_edge " + general(e) + ", " + num(g.runs.front()->patches, 0) + " patches)";
+        fits.push_back(fit_group(g));
     }
-    tprf::PlotPanel bins_panel = log_log_panel(
-        "Seconds against bins (" + general(p.bin_width) + " m each, " + pixels + shades + ")", "bins", "seconds");
-    for (const Fit& f : add_phases(bins_panel, by_bins)) fits.push_back(f);
-
-    tprf::PlotPanel error_panel = log_log_panel("Relative L2 error against the render at max_edge / 2 (" +
-                                                    std::to_string(p.accuracy_bins) + " bins, " + pixels + ")",
-                                                "render seconds", "relative L2 error");
-    std::vector<double> secs, transient, coarse, steady;
-    for (const Accuracy& a : accuracy)
-        secs.push_back(a.seconds), transient.push_back(a.transient), coarse.push_back(a.coarse),
-            steady.push_back(a.steady);
-    add_curve(error_panel, "transient cube", secs, transient, kPhaseColors[0]);
-    add_curve(error_panel, std::to_string(kCoarseBins) + "-bin sums", secs, coarse, kPhaseColors[1]);
-    add_curve(error_panel, "steady image", secs, steady, kPhaseColors[2]);
-    tprf::write_plot_png(png, {patches_panel, bins_panel, error_panel}, 1000, 440);
     return fits;
+}
+
+/// Draws scaling.png from the two CSVs with python/tprf_plots.py. Without a Python that has
+/// matplotlib, says how to draw it later and removes an older scaling.png, which would not match the
+/// CSVs. Returns whether it was drawn.
+bool draw_scaling(const fs::path& harness, const fs::path& accuracy, const fs::path& png, const Plan& p) {
+    const std::vector<std::string> args = {"scaling", harness.string(), accuracy.string(), png.string(),
+                                           "--bin-width", general(p.bin_width), "--accuracy-bins",
+                                           std::to_string(p.accuracy_bins)};
+    if (tprf::run_plot_script(args)) return true;
+    fs::remove(png);
+    std::fprintf(stderr, "tprf_harness: %s\n", tprf::plot_not_drawn_message(png, args).c_str());
+    return false;
 }
 
 /// The first "KEY : value" line of a /proc file, value trimmed; empty when absent.
@@ -501,7 +452,7 @@ std::string utc_date() {
 /// The Markdown section that goes between the markers of RESULTS.md.
 std::string results_section(const std::string& command, const Plan& plan, int threads, double peak_gfma,
                             double bandwidth, const std::vector<Run>& runs, const std::vector<Fit>& fits,
-                            const std::vector<Accuracy>& accuracy, const std::string& png) {
+                            const std::vector<Accuracy>& accuracy, const std::string& png /* empty: not drawn */) {
     std::ostringstream os;
     const double mem_gib = std::atof(proc_field("/proc/meminfo", "MemTotal").c_str()) / (1024.0 * 1024.0);
     std::string cpu = proc_field("/proc/cpuinfo", "model name");
@@ -532,7 +483,10 @@ std::string results_section(const std::string& command, const Plan& plan, int th
     for (const Accuracy& a : accuracy)
         os << "| " << general(a.max_edge) << " | " << num(a.patches, 0) << " | " << num(a.seconds, 2) << " | "
            << num(a.transient, 4) << " | " << num(a.coarse, 4) << " | " << num(a.steady, 4) << " |\n";
-    os << "\nPlots: [" << png << "](" << png << ")\n";
+    if (png.empty())
+        os << "\nPlots: not drawn (no Python with matplotlib; see bench/README.md).\n";
+    else
+        os << "\nPlots: [" << png << "](" << png << ")\n";
     return os.str();
 }
 
@@ -617,12 +571,13 @@ int main(int argc, char** argv) {
         tprf::write_text_file(out / "harness.csv", harness_csv(runs, peak_gfma));
         tprf::write_text_file(out / "accuracy.csv", accuracy_csv(accuracy));
         const fs::path png = out / "scaling.png";
-        const std::vector<Fit> fits = plot_scaling(png, plan, runs, accuracy);
-        std::fprintf(stderr, "wrote %s, %s, %s\n", (out / "harness.csv").c_str(), (out / "accuracy.csv").c_str(),
-                     png.c_str());
+        const bool drawn = draw_scaling(out / "harness.csv", out / "accuracy.csv", png, plan);
+        const std::vector<Fit> fits = scaling_fits(plan, runs);
+        std::fprintf(stderr, "wrote %s, %s%s%s\n", (out / "harness.csv").c_str(), (out / "accuracy.csv").c_str(),
+                     drawn ? ", " : "", drawn ? png.c_str() : "");
         if (!no_results) {
             const fs::path file = fs::absolute(results);
-            const std::string link = fs::relative(png, file.parent_path()).generic_string();
+            const std::string link = drawn ? fs::relative(png, file.parent_path()).generic_string() : "";
             update_results(file,
                            results_section(command, plan, threads, peak_gfma, bandwidth, runs, fits, accuracy, link));
             std::fprintf(stderr, "updated %s\n", file.c_str());

@@ -28,7 +28,7 @@ struct Problem {
     tprf::Scene scene;
     tprf::PatchSet patches;
     tprf::Links links;
-    tprf::Emission emission;
+    tprf::Illumination emission;
 };
 
 const Problem& problem() {
@@ -44,9 +44,9 @@ const Problem& problem() {
         tprf::LinkOptions link_options;
         link_options.threads = kThreads;
         out->links = tprf::compute_links(out->patches, visibility, link_options);
-        tprf::EmitterOptions emitter_options;
+        tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
-        out->emission = tprf::compute_emission(out->scene, out->patches, out->links, visibility, emitter_options);
+        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, out->links, visibility, emitter_options);
         return out;
     }();
     return *p;

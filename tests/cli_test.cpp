@@ -3,6 +3,7 @@
 #include "tprf/io/npy.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cstdio>
@@ -10,8 +11,12 @@
 #include <sys/wait.h>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <optional>
 #include <random>
+#include <sstream>
 #include <string>
+#include <utility>
 
 namespace {
 
@@ -32,6 +37,26 @@ Outcome run(const std::string& args) {
     r.err.assign(std::istreambuf_iterator<char>(in), {});
     fs::remove(err);
     return r;
+}
+
+// Runs the command and returns its standard output (stderr is dropped).
+std::string run_stdout(const std::string& args, int& status) {
+    const fs::path out = fs::temp_directory_path() / ("tprf_cli_out_" + std::to_string(std::random_device{}()));
+    const std::string command = std::string(TPRF_BINARY) + " " + args + " -q >" + out.string() + " 2>/dev/null";
+    const int raw = std::system(command.c_str());
+    status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    std::ifstream in(out);
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    fs::remove(out);
+    return text;
+}
+
+// The line of `text` that starts with `key`, without the key.
+std::string line_after(const std::string& text, const std::string& key) {
+    std::istringstream lines(text);
+    for (std::string line; std::getline(lines, line);)
+        if (line.rfind(key, 0) == 0) return line.substr(key.size());
+    return {};
 }
 
 class Cli : public ::testing::Test {
@@ -88,6 +113,44 @@ TEST_F(Cli, GoodSceneRendersAndInfoPrints) {
         EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / f)) << f;
 }
 
+TEST_F(Cli, InfoPrintsPatchesLinksAndTheTimeWindow) {
+    // Two facing 1 m squares cut at 0.25 m: 16 + 16 patches; every patch of one sees every patch of the
+    // other and none of its own, so 2 x 16 x 16 links. 100 bins of 10 ps: bins of
+    // 10e-12 s x 299792458 m/s = 2.99792458 mm of path, a window of 0.299792458 m, 0 to 1 ns.
+    std::ofstream(m_dir / "plates.json") << R"({
+      "time": {"bins": 100, "bin_width": 10, "unit": "ps"},
+      "camera": {"position": [0.5, 0.5, 0.5], "look_at": [0.5, 0.5, 0], "up": [0, 1, 0], "fov": 40,
+                 "width": 8, "height": 8},
+      "lights": [{"type": "point", "position": [0.5, 0.5, 0.5], "intensity": 1.0}],
+      "objects": [{"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0]},
+                  {"type": "rectangle", "origin": [0, 0, 1], "u": [0, 1, 0], "v": [1, 0, 0]}],
+      "patches": {"max_edge": 0.25}})";
+    const auto entries = [&] {
+        return std::distance(fs::recursive_directory_iterator(m_dir), fs::recursive_directory_iterator());
+    };
+    const auto before = entries();
+    int status = -1;
+    const std::string out = run_stdout("info " + (m_dir / "plates.json").string(), status);
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_EQ(std::stoul(line_after(out, "patches")), 32u) << out;
+    EXPECT_EQ(std::stoul(line_after(out, "links")), 512u) << out;
+    const std::string time = line_after(out, "time");
+    int bins = 0;
+    double width = 0, from = 0, to = 0, from_ns = 0, to_ns = 0;
+    ASSERT_EQ(std::sscanf(time.c_str(), " %d bins of %lf m from %lf m to %lf m of optical path (%lf ns to %lf ns)",
+                          &bins, &width, &from, &to, &from_ns, &to_ns),
+              6)
+        << out;
+    EXPECT_EQ(bins, 100);
+    // Printed to 6 significant digits: half a unit of the 6th digit is at most 5e-6 relative.
+    EXPECT_NEAR(width, 2.99792458e-3, 5e-6 * 2.99792458e-3);
+    EXPECT_EQ(from, 0.0);
+    EXPECT_NEAR(to, 0.299792458, 5e-6 * 0.299792458);
+    EXPECT_EQ(from_ns, 0.0);
+    EXPECT_NEAR(to_ns, 1.0, 5e-6);
+    EXPECT_EQ(entries(), before) << "info wrote something";
+}
+
 TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
     // The same gates through `tprf sensor` on a plain render and through the scene's own sensor block.
     const std::string gates = R"({"type": "gates", "start": 0.0, "width": 0.3, "step": 0.3, "count": 5})";
@@ -102,9 +165,14 @@ TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
     ASSERT_EQ(r.status, 0) << r.err;
     const Outcome s = run("render " + (m_dir / "with_sensor.json").string() + " -o " + (m_dir / "b").string());
     ASSERT_EQ(s.status, 0) << s.err;
-    for (const char* f : {"measurements.npy", "sensor_plot.png", "sensor.json"}) {
+    for (const char* f : {"measurements.npy", "sensor_plot.json", "sensor.json"}) {
         EXPECT_TRUE(fs::is_regular_file(m_dir / "a" / f)) << f;
         EXPECT_TRUE(fs::is_regular_file(m_dir / "b" / f)) << f;
+    }
+    // The PNG is drawn by Python with matplotlib; without one, the run says so instead (and succeeds).
+    for (const auto& [dir, out] : {std::pair{"a", r}, std::pair{"b", s}}) {
+        const bool warned = out.err.find("sensor_plot.png not drawn") != std::string::npos;
+        EXPECT_NE(fs::is_regular_file(m_dir / dir / "sensor_plot.png"), warned) << dir << ": " << out.err;
     }
     const tprf::NpyArray a = tprf::read_npy(m_dir / "a" / "measurements.npy");
     const tprf::NpyArray b = tprf::read_npy(m_dir / "b" / "measurements.npy");
@@ -123,6 +191,78 @@ TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
             for (std::size_t k = 0; k < 5; ++k) sum_m += a.data[(p * 5 + k) * 3 + c];
             EXPECT_NEAR(sum_m, sum_cube, 1e-5 * (1.0 + sum_cube));
         }
+}
+
+// Sets an environment variable for one test; the shell that run() starts inherits it.
+class ScopedEnv {
+public:
+    ScopedEnv(const char* name, const std::string& value) : m_name(name) {
+        if (const char* old = std::getenv(name)) m_old = old;
+        ::setenv(name, value.c_str(), 1);
+    }
+    ~ScopedEnv() {
+        if (m_old)
+            ::setenv(m_name, m_old->c_str(), 1);
+        else
+            ::unsetenv(m_name);
+    }
+    ScopedEnv(const ScopedEnv&) = delete;
+    ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+private:
+    const char* m_name;
+    std::optional<std::string> m_old;
+};
+
+TEST_F(Cli, SensorPlotWithoutMatplotlibKeepsItsDataAndSaysHowToDrawIt) {
+    // good.json with 64 bins of 0.1 m: long enough for the light to reach the camera (16 bins are not).
+    std::ifstream in_scene(m_dir / "good.json");
+    std::string scene((std::istreambuf_iterator<char>(in_scene)), {});
+    scene.replace(scene.find(R"("bins": 16)"), 10, R"("bins": 64)");
+    std::ofstream(m_dir / "lit.json") << scene;
+    ASSERT_EQ(run("render " + (m_dir / "lit.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+    std::ofstream(m_dir / "gates.json") << R"({"exposure": {"type": "gates", "start": 0, "width": 0.3, "step": 0.3, "count": 5}})";
+    const std::string sensor = "sensor " + (m_dir / "out").string() + " " + (m_dir / "gates.json").string() + " --plot-pixel 4,6";  // a pixel that sees the floor
+    ASSERT_EQ(run(sensor).status, 0);  // with matplotlib where there is one: a sensor_plot.png to replace
+    Outcome r;
+    {
+        const ScopedEnv no_python("TPRF_PYTHON", (m_dir / "no-such-python").string());
+        r = run(sensor);
+    }
+    EXPECT_EQ(r.status, 0) << r.err;
+    // One line: what was not drawn, how to install matplotlib, and the command that draws it later.
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    for (const char* part : {"sensor_plot.png not drawn", "apt-get install python3-matplotlib", "tprf_plots.py sensor "})
+        EXPECT_NE(r.err.find(part), std::string::npos) << part << " in " << r.err;
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "sensor_plot.png")) << "a plot of the earlier run beside this run's data";
+
+    // The data is the pixel's: its TPRF's bins sum to the pixel's energy in transient.npy (channel mean),
+    // and its measurements are the pixel's in measurements.npy.
+    std::ifstream in(m_dir / "out" / "sensor_plot.json");
+    const nlohmann::json j = nlohmann::json::parse(in);
+    EXPECT_EQ(j.at("pixel"), nlohmann::json({4, 6}));
+    EXPECT_EQ(j.at("exposure"), "gates");
+    EXPECT_EQ(j.at("units").at("time"), "m");
+    const std::vector<double> edges = j.at("tprf").at("bin_edges"), density = j.at("tprf").at("density");
+    ASSERT_EQ(edges.size(), 65u);  // 64 bins of 0.1 m
+    ASSERT_EQ(density.size(), 64u);
+    const tprf::NpyArray cube = tprf::read_npy(m_dir / "out" / "transient.npy");
+    const std::size_t pixel = 6 * 8 + 4;
+    double energy = 0.0, plotted = 0.0;
+    for (std::size_t t = 0; t < 64; ++t) {
+        for (std::size_t c = 0; c < 3; ++c) energy += cube.data[(pixel * 64 + t) * 3 + c] / 3.0;
+        plotted += density[t] * (edges[t + 1] - edges[t]);
+    }
+    EXPECT_GT(energy, 0.0);
+    EXPECT_NEAR(plotted, energy, 1e-9 * energy);  // 12 significant digits in the JSON
+    const std::vector<double> values = j.at("measurements").at("value");
+    const tprf::NpyArray m = tprf::read_npy(m_dir / "out" / "measurements.npy");
+    ASSERT_EQ(values.size(), 5u);
+    for (std::size_t k = 0; k < 5; ++k) {
+        const double mean = (double(m.data[(pixel * 5 + k) * 3]) + m.data[(pixel * 5 + k) * 3 + 1] +
+                             m.data[(pixel * 5 + k) * 3 + 2]) / 3.0;
+        EXPECT_NEAR(values[k], mean, 1e-9 * (1.0 + std::abs(mean))) << "gate " << k;
+    }
 }
 
 TEST_F(Cli, SensorRunsReplaceEachOthersOutputs) {

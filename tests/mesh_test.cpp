@@ -244,6 +244,24 @@ TEST_F(Mesh, MissingFileNamesTheJsonPath) {
     expect_input_error(m_dir / "nowhere.obj", "does not exist");
 }
 
+TEST_F(Mesh, DirectoryInPlaceOfTheFileNamesTheJsonPath) {
+    const fs::path dir = m_dir / "folder.obj";
+    fs::create_directory(dir);
+    expect_input_error(dir, "mesh file '" + dir.string() + "' is not a regular file");
+}
+
+TEST_F(Mesh, UnreadableFileNamesTheJsonPath) {
+    // File permissions do not stop root (CI runs as root), but Linux sysctl files are checked by their
+    // own mode bits for root too: /proc/sys/vm/drop_caches (mode 0200) is a regular file that no one
+    // may read. A link to it stands for a mesh file that exists and cannot be opened.
+    const fs::path sysctl = "/proc/sys/vm/drop_caches";
+    if (!fs::is_regular_file(sysctl) || std::ifstream(sysctl))
+        GTEST_SKIP() << sysctl << " is absent or readable here: no unreadable regular file to point at";
+    const fs::path link = m_dir / "locked.obj";
+    fs::create_symlink(sysctl, link);
+    expect_input_error(link, "mesh file '" + link.string() + "' cannot be opened");
+}
+
 TEST_F(Mesh, GarbageNamesTheJsonPath) {
     expect_input_error(write("garbage.ply", "this is not a mesh\n"), "not a valid ply file");
     // OpenMesh's OBJ reader skips unknown lines and reports success: nothing is left.

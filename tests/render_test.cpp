@@ -11,8 +11,16 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <fstream>
+#include <iterator>
 #include <random>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace tprf {
 namespace {
@@ -165,31 +173,195 @@ TEST(Render, UnwarpRemovesEachPixelsOwnCameraLeg) {
     fs::remove_all(dir);
 }
 
+// The header of a .npy file, read here byte by byte rather than through the library's reader.
+struct NpyHeader {
+    std::string descr;
+    bool fortran_order = true;
+    std::vector<std::size_t> shape;
+    std::size_t data_offset = 0;  // bytes before the payload
+};
+
+NpyHeader read_npy_header(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), {});
+    NpyHeader h;
+    if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0) return h;
+    const auto byte = [&](std::size_t i) { return std::size_t(static_cast<unsigned char>(bytes[i])); };
+    std::size_t length = 0, start = 0;
+    if (bytes[6] == 1) {
+        length = byte(8) | byte(9) << 8;
+        start = 10;
+    } else {
+        length = byte(8) | byte(9) << 8 | byte(10) << 16 | byte(11) << 24;
+        start = 12;
+    }
+    const std::string dict = bytes.substr(start, length);
+    h.data_offset = start + length;
+    const auto value = [&](const std::string& key) {
+        const std::size_t k = dict.find("'" + key + "':");
+        return k == std::string::npos ? std::string() : dict.substr(k + key.size() + 3);
+    };
+    const std::string descr = value("descr");
+    const std::size_t q = descr.find('\'');
+    h.descr = descr.substr(q + 1, descr.find('\'', q + 1) - q - 1);
+    const std::string order = value("fortran_order");
+    h.fortran_order = order.compare(order.find_first_not_of(' '), 5, "False") != 0;
+    std::string shape = value("shape");
+    shape = shape.substr(shape.find('(') + 1, shape.find(')') - shape.find('(') - 1);
+    std::istringstream dims(shape);
+    for (std::string dim; std::getline(dims, dim, ',');)
+        if (dim.find_first_not_of(' ') != std::string::npos) h.shape.push_back(std::stoul(dim));
+    return h;
+}
+
+// A .npy is float32, C order, of `shape`, and holds exactly that many floats.
+void expect_npy(const fs::path& file, const std::vector<std::size_t>& shape) {
+    const NpyHeader h = read_npy_header(file);
+    EXPECT_EQ(h.descr, "<f4") << file;
+    EXPECT_FALSE(h.fortran_order) << file;
+    EXPECT_EQ(h.shape, shape) << file;
+    std::size_t count = 1;
+    for (std::size_t d : shape) count *= d;
+    EXPECT_EQ(fs::file_size(file), h.data_offset + 4 * count) << file;
+}
+
+// An OpenEXR file's data window and channels, parsed from its header (OpenEXR file layout: magic,
+// version, then attributes name\0 type\0 size value, ended by an empty name).
+struct ExrHeader {
+    int width = 0;
+    int height = 0;
+    std::vector<std::pair<std::string, int>> channels;  // name, pixel type (2 = FLOAT)
+};
+
+ExrHeader read_exr_header(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), {});
+    ExrHeader h;
+    const auto int32 = [&](std::size_t i) {
+        std::int32_t v = 0;
+        std::memcpy(&v, bytes.data() + i, 4);  // little-endian, as the format and this host are
+        return v;
+    };
+    if (bytes.size() < 8 || int32(0) != 20000630) return h;
+    std::size_t at = 8;
+    while (at < bytes.size() && bytes[at] != '\0') {
+        const std::string name = bytes.c_str() + at;
+        at += name.size() + 1;
+        const std::string type = bytes.c_str() + at;
+        at += type.size() + 1;
+        const std::size_t size = std::size_t(int32(at));
+        at += 4;
+        if (name == "dataWindow" && type == "box2i") {
+            h.width = int32(at + 8) - int32(at) + 1;
+            h.height = int32(at + 12) - int32(at + 4) + 1;
+        }
+        if (name == "channels" && type == "chlist") {
+            // name\0, pixel type (int), pLinear and 3 reserved bytes, xSampling, ySampling; ends with \0.
+            for (std::size_t c = at; bytes[c] != '\0';) {
+                const std::string channel = bytes.c_str() + c;
+                c += channel.size() + 1;
+                h.channels.emplace_back(channel, int32(c));
+                c += 16;
+            }
+        }
+        at += size;
+    }
+    return h;
+}
+
+void expect_exr(const fs::path& file, int width, int height) {
+    const ExrHeader h = read_exr_header(file);
+    EXPECT_EQ(h.width, width) << file;
+    EXPECT_EQ(h.height, height) << file;
+    const std::vector<std::pair<std::string, int>> rgb_float = {{"B", 2}, {"G", 2}, {"R", 2}};  // sorted by name
+    EXPECT_EQ(h.channels, rgb_float) << file;
+}
+
+// A PNG's IHDR: width, height, 8-bit depth, colour type 2 (RGB).
+void expect_png(const fs::path& file, int width, int height) {
+    std::ifstream in(file, std::ios::binary);
+    unsigned char b[26] = {};
+    in.read(reinterpret_cast<char*>(b), sizeof b);
+    ASSERT_TRUE(in) << file;
+    EXPECT_EQ(std::string(reinterpret_cast<char*>(b), 8), std::string("\x89PNG\r\n\x1a\n", 8)) << file;
+    EXPECT_EQ(std::string(reinterpret_cast<char*>(b + 12), 4), "IHDR") << file;
+    const auto be32 = [&](int i) { return int(b[i]) << 24 | int(b[i + 1]) << 16 | int(b[i + 2]) << 8 | int(b[i + 3]); };
+    EXPECT_EQ(be32(16), width) << file;
+    EXPECT_EQ(be32(20), height) << file;
+    EXPECT_EQ(int(b[24]), 8) << file;
+    EXPECT_EQ(int(b[25]), 2) << file;
+}
+
 TEST(Render, EveryOutputHasTheSpecShape) {
     const fs::path dir = fresh_dir("outputs");
-    const fs::path file = write_scene(dir, corner_scene(64, 0.05));
+    // W x H = 24 x 20 pixels, T = 64 bins. Two 1 m squares cut at 0.1 m: N = 200 patches, and since
+    // every patch of the floor faces every patch of the wall with nothing between, 2 x 100 x 100 links.
+    const std::size_t W = 24, H = 20, T = 64, N = 200, L = 20000;
+    const fs::path file = write_scene(dir, corner_scene(int(T), 0.05));
     RenderOptions o = quiet_options(dir / "out");
     o.patch_profiles = o.frames = o.streaks = true;
     const RenderReport report = render_file(file, o);
+    EXPECT_EQ(report.patches, N);
+    EXPECT_EQ(report.links, L);
     const fs::path out = dir / "out";
-    EXPECT_EQ(read_npy(out / "transient.npy").shape, (std::vector<std::size_t>{20, 24, 64, 3}));
-    EXPECT_EQ(read_npy(out / "steady.npy").shape, (std::vector<std::size_t>{20, 24, 3}));
-    EXPECT_EQ(read_npy(out / "patch_transient.npy").shape, (std::vector<std::size_t>{report.patches, 64, 3}));
-    EXPECT_EQ(read_npy(out / "patch_steady.npy").shape, (std::vector<std::size_t>{report.patches, 3}));
-    EXPECT_TRUE(fs::is_regular_file(out / "steady.exr"));
-    EXPECT_TRUE(fs::is_regular_file(out / "preview.png"));
-    EXPECT_TRUE(fs::is_regular_file(out / "frames" / "frame_00063.exr"));
-    EXPECT_TRUE(fs::is_regular_file(out / "streaks" / "row_0019.exr"));
+    expect_npy(out / "transient.npy", {H, W, T, 3});
+    expect_npy(out / "steady.npy", {H, W, 3});
+    expect_npy(out / "patch_transient.npy", {N, T, 3});
+    expect_npy(out / "patch_steady.npy", {N, 3});
+    expect_exr(out / "steady.exr", int(W), int(H));
+    expect_png(out / "preview.png", int(W), int(H));
+    // One frame per bin (W x H), one streak per image row (W x T, time downward), and no others.
+    const auto entries = [](const fs::path& folder) {
+        return std::size_t(std::distance(fs::directory_iterator(folder), fs::directory_iterator()));
+    };
+    EXPECT_EQ(entries(out / "frames"), T);
+    EXPECT_EQ(entries(out / "streaks"), H);
+    for (std::size_t t = 0; t < T; ++t) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%05zu.exr", t);
+        expect_exr(out / "frames" / name, int(W), int(H));
+    }
+    for (std::size_t r = 0; r < H; ++r) {
+        char name[32];
+        std::snprintf(name, sizeof name, "row_%04zu.exr", r);
+        expect_exr(out / "streaks" / name, int(W), int(T));
+    }
+    // patches.csv: the header, then one row of 9 fields per patch, ids in order; each object's
+    // patches tile its 1 m^2.
     std::ifstream csv(out / "patches.csv");
-    std::string header;
-    std::getline(csv, header);
-    EXPECT_EQ(header, "id,object,cx,cy,cz,nx,ny,nz,area");
+    std::string line;
+    std::getline(csv, line);
+    EXPECT_EQ(line, "id,object,cx,cy,cz,nx,ny,nz,area");
+    std::size_t rows = 0;
+    double area[2] = {0.0, 0.0};
+    while (std::getline(csv, line)) {
+        std::vector<double> fields;
+        std::istringstream row(line);
+        for (std::string field; std::getline(row, field, ',');) fields.push_back(std::stod(field));
+        ASSERT_EQ(fields.size(), 9u) << line;
+        EXPECT_EQ(fields[0], double(rows)) << line;
+        ASSERT_TRUE(fields[1] == 0.0 || fields[1] == 1.0) << line;
+        area[int(fields[1])] += fields[8];
+        ++rows;
+    }
+    EXPECT_EQ(rows, N);
+    EXPECT_NEAR(area[0], 1.0, 1e-6);  // 100 areas of 0.01 printed to at least 6 digits
+    EXPECT_NEAR(area[1], 1.0, 1e-6);
+    // render.json (SPEC "Output directory"): counts, the scene's time axis, one entry per phase.
     const nlohmann::json j = nlohmann::json::parse(std::ifstream(out / "render.json"));
-    EXPECT_EQ(j["patches"].get<std::size_t>(), report.patches);
-    EXPECT_EQ(j["bins"].get<int>(), 64);
-    for (const char* phase : {"load", "patches", "links", "solve", "gather", "write", "total"})
-        EXPECT_TRUE(j["seconds"].contains(phase)) << phase;
+    EXPECT_EQ(j["patches"].get<std::size_t>(), N);
+    EXPECT_EQ(j["links"].get<std::size_t>(), L);
+    EXPECT_EQ(j["bins"].get<std::size_t>(), T);
+    EXPECT_EQ(j["time"]["bins"].get<std::size_t>(), T);
+    EXPECT_EQ(j["time"]["bin_width"].get<double>(), 0.05);
+    EXPECT_EQ(j["time"]["start"].get<double>(), 0.0);
+    EXPECT_EQ(j["time"]["unit"].get<std::string>(), "m");
+    for (const char* phase : {"load", "patches", "links", "solve", "gather", "write", "total"}) {
+        ASSERT_TRUE(j["seconds"].contains(phase)) << phase;
+        EXPECT_GE(j["seconds"][phase].get<double>(), 0.0) << phase;
+    }
     EXPECT_GT(j["peak_rss_mb"].get<double>(), 0.0);
+    EXPECT_TRUE(j["version"].is_string());
     // Nothing is left behind but the outputs.
     for (const auto& entry : fs::directory_iterator(out))
         EXPECT_NE(entry.path().filename().string().front(), '.') << entry.path();

@@ -5,6 +5,7 @@
 
 #include "tprf/imaging/camera.h"
 #include "tprf/core/error.h"
+#include "tprf/core/random.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
 
@@ -21,7 +22,9 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <numeric>
 #include <random>
@@ -392,6 +395,133 @@ TEST(Sensor, AmcwDepthInACornerIsTooLong) {
         mean += err / double(e.size());
     }
     EXPECT_GT(mean, 0.01) << "the corner's interreflections should lengthen the depth beyond the 1 cm tolerance";
+}
+
+
+// ---- The random numbers behind noise and photon counts (core/random.h, docs/sensor.md) ----
+
+TEST(SensorRandom, SplitMix64MatchesTheReferenceOutputs) {
+    // The first outputs of Vigna's splitmix64.c for this seed, as published with rand_xoshiro's test
+    // of its translation (github.com/rust-random/rngs, rand_xoshiro/src/splitmix64.rs).
+    const std::uint64_t seed = 1477776061723855037ull;
+    const std::array<std::uint64_t, 6> expected = {1985237415132408290ull,  2979275885539914483ull,
+                                                   13511426838097143398ull, 8488337342461049707ull,
+                                                   15141737807933549159ull, 17093170987380407015ull};
+    SplitMix64 sm(seed);
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+        EXPECT_EQ(sm.next(), expected[i]) << "output " << i;
+        EXPECT_EQ(SplitMix64::output(seed, i), expected[i]) << "output " << i << " by index (a pixel's seed)";
+    }
+}
+
+TEST(SensorRandom, Xoshiro256StarStarMatchesTheReferenceOutputs) {
+    // xoshiro256starstar.c from the state {1, 2, 3, 4}, as published with rand_xoshiro's test
+    // (rand_xoshiro/src/xoshiro256starstar.rs: "produced with the reference implementation").
+    Xoshiro256StarStar g(std::array<std::uint64_t, 4>{1, 2, 3, 4});
+    const std::array<std::uint64_t, 10> expected = {
+        11520ull, 0ull, 1509978240ull, 1215971899390074240ull, 1216172134540287360ull, 607988272756665600ull,
+        16172922978634559625ull, 8476171486693032832ull, 10595114339597558777ull, 2904607092377533576ull};
+    for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(g.next(), expected[i]) << "output " << i;
+}
+
+TEST(SensorRandom, AStreamGivesTheSameNumbersEverywhere) {
+    // Computed once by tools/random_reference.py, a Python reimplementation of random.h written from
+    // docs/sensor.md (Python ints masked to 64 bits, the C library's log, sqrt, cos, sin, exp, log1p),
+    // and pasted here. Doubles as hexadecimal literals: the comparison is exact.
+    Random r(42);
+    EXPECT_EQ(r.next_u64(), 1546998764402558742ull);
+    EXPECT_EQ(r.next_u64(), 6990951692964543102ull);
+    EXPECT_EQ(r.next_u64(), 12544586762248559009ull);
+    EXPECT_EQ(r.uniform(), 0x1.d9715a8e0766cp-1);
+    EXPECT_EQ(r.uniform(), 0x1.fbcdb8ffc5d8bp-1);
+    EXPECT_EQ(r.normal(), -0x1.50ddefa736061p-2);  // the cosine of a pair
+    EXPECT_EQ(r.normal(), -0x1.ae92833edca00p+0);  // its sine, drawn with it
+    EXPECT_EQ(r.normal(), 0x1.1cdd0889a848fp-3);
+    for (const double k : {4.0, 6.0, 3.0, 4.0}) EXPECT_EQ(r.poisson(3.5), k);  // multiplication method
+    for (const double k : {1226.0, 1270.0, 1266.0, 1231.0}) EXPECT_EQ(r.poisson(1234.5), k);  // PTRS
+    for (const double k : {1000000103100.0, 1000000962220.0, 1000001500209.0}) EXPECT_EQ(r.poisson(1e12), k);
+    for (const double k : {1000000005792487.0, 1000000038522556.0, 1000000001739257.0}) EXPECT_EQ(r.poisson(1e15), k);
+}
+
+TEST(SensorRandom, NormalsHaveTheMomentsOfAStandardNormal) {
+    Random r(11);
+    const int n = 1000000;
+    double sum = 0.0, sum2 = 0.0, sum4 = 0.0, pair = 0.0;
+    for (int i = 0; i < n; i += 2) {
+        const double a = r.normal(), b = r.normal();  // the two values of one Box-Muller pair
+        for (const double z : {a, b}) sum += z, sum2 += z * z, sum4 += z * z * z * z;
+        pair += a * b;
+    }
+    // Four standard errors of each sample moment: Var(z) = 1, Var(z^2) = E z^4 - 1 = 2, Var(z^4) = E z^8 - 9
+    // = 96, and the product of a pair's two values (independent, so E[ab] = 0) has variance 1.
+    EXPECT_NEAR(sum / n, 0.0, 4.0 / std::sqrt(n));
+    EXPECT_NEAR(sum2 / n, 1.0, 4.0 * std::sqrt(2.0 / n));
+    EXPECT_NEAR(sum4 / n, 3.0, 4.0 * std::sqrt(96.0 / n));
+    EXPECT_NEAR(pair / (n / 2), 0.0, 4.0 / std::sqrt(n / 2));
+}
+
+TEST(SensorRandom, PoissonCountsHaveTheirMeanAsMeanAndVariance) {
+    // Below 10 the multiplication method, from 10 on PTRS: both sides of the switch, and PTRS up to the
+    // largest mean a SPAD bin draws (1e15; beyond, the count is its mean).
+    const int n = 200000;
+    for (const double lambda : {0.05, 0.5, 3.0, 9.99, 10.0, 47.5, 1e4, 1e12, 1e15}) {
+        Random r(std::uint64_t(lambda * 1000) + 1);
+        double sum = 0.0, sum2 = 0.0;
+        for (int i = 0; i < n; ++i) {
+            const double k = r.poisson(lambda);
+            ASSERT_EQ(k, std::floor(k)) << "lambda " << lambda;
+            ASSERT_GE(k, 0.0);
+            const double d = k - lambda;  // deviations: exact, where sums of counts near 1e15 would not be
+            sum += d, sum2 += d * d;
+        }
+        const double mean_dev = sum / n, var = (sum2 - sum * mean_dev) / (n - 1);
+        // Four standard errors: sqrt(lambda / n) for the mean; sqrt((mu4 - sigma^4) / n) for the variance,
+        // with a Poisson's mu4 = lambda (1 + 3 lambda).
+        EXPECT_NEAR(mean_dev, 0.0, 4 * std::sqrt(lambda / n)) << "lambda " << lambda;
+        EXPECT_NEAR(var, lambda, 4 * std::sqrt((lambda + 2 * lambda * lambda) / n)) << "lambda " << lambda;
+    }
+}
+
+TEST(SensorRandom, PoissonFrequenciesFollowThePoissonLaw) {
+    // Pearson's chi-square of the counts against the Poisson probabilities (from lgamma here, not from
+    // the generator's own formulas), over the cells expected to hold at least 5 counts (the tails pooled
+    // into the end cells). With df degrees of freedom chi-square has mean df and variance 2 df: four
+    // standard deviations above the mean is the bound.
+    const int n = 1000000;
+    for (const double lambda : {3.0, 20.0, 1000.0}) {  // multiplication; PTRS near its table; PTRS (Stirling)
+        Random r(std::uint64_t(lambda) + 77);
+        std::vector<double> observed(std::size_t(4 * lambda + 100), 0.0);
+        for (int i = 0; i < n; ++i) {
+            const std::size_t k = std::size_t(r.poisson(lambda));
+            observed[std::min(k, observed.size() - 1)] += 1.0;
+        }
+        auto p = [&](std::size_t k) { return std::exp(-lambda + double(k) * std::log(lambda) - std::lgamma(double(k) + 1)); };
+        std::size_t lo = 0, hi = observed.size() - 1;
+        while (n * p(lo) < 5) ++lo;
+        while (n * p(hi) < 5) --hi;
+        double p_low = 0.0, p_mid = 0.0, o_low = 0.0, o_high = 0.0;
+        for (std::size_t k = 0; k < lo; ++k) p_low += p(k), o_low += observed[k];
+        for (std::size_t k = lo; k <= hi; ++k) p_mid += p(k);
+        for (std::size_t k = hi + 1; k < observed.size(); ++k) o_high += observed[k];
+        const double p_high = 1.0 - p_low - p_mid;
+        double chi2 = 0.0;
+        for (std::size_t k = lo; k <= hi; ++k) {
+            double e = n * p(k), o = observed[k];
+            if (k == lo) e += n * p_low, o += o_low;
+            if (k == hi) e += n * p_high, o += o_high;
+            chi2 += (o - e) * (o - e) / e;
+        }
+        const double df = double(hi - lo);
+        EXPECT_LT(chi2, df + 4 * std::sqrt(2 * df)) << "lambda " << lambda << ", " << hi - lo + 1 << " cells";
+    }
+}
+
+TEST(Sensor, SpadCountsBeyondTheBoundAreTheirMean) {
+    // 1e20 expected photons per bin (beyond 1e15): the count is the mean itself, in float.
+    const TimeAxis time = time_axis(4, 0.01);
+    const std::vector<float> cube(4 * 3, 1.0f);
+    const std::vector<float> m = measure(sensor_from({{"exposure", {{"type", "spad"}, {"photons", 1e20}}}}), time, cube, 1, 1);
+    for (const float v : m) EXPECT_EQ(v, 1e20f);
 }
 
 }  // namespace

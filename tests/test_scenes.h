@@ -55,15 +55,21 @@ inline double ff_point_parallel_rectangle_corner(double a, double b, double c) {
     return 1.0 / (2 * M_PI) * (A / a1 * std::atan(B / a1) + B / b1 * std::atan(A / b1));
 }
 
+/// A closed box [0,sx] x [0,sy] x [0,sz] of six rectangles facing inward.
+inline void add_closed_box(Scene& scene, const Vec3& size, double albedo = 0.5, double emission = 0.0) {
+    const Vec3 X = size.x() * Vec3::UnitX(), Y = size.y() * Vec3::UnitY(), Z = size.z() * Vec3::UnitZ();
+    const Vec3 O = Vec3::Zero();
+    scene.objects.push_back(rectangle(O, X, Y, albedo, emission));  // floor z=0, normal +z
+    scene.objects.push_back(rectangle(Z, Y, X, albedo, emission));  // ceiling z=sz, normal -z
+    scene.objects.push_back(rectangle(O, Z, X, albedo, emission));  // wall y=0, normal +y
+    scene.objects.push_back(rectangle(Y, X, Z, albedo, emission));  // wall y=sy, normal -y
+    scene.objects.push_back(rectangle(O, Y, Z, albedo, emission));  // wall x=0, normal +x
+    scene.objects.push_back(rectangle(X, Z, Y, albedo, emission));  // wall x=sx, normal -x
+}
+
 /// A closed box [0,s]^3 of six rectangles facing inward.
 inline void add_closed_cube(Scene& scene, double s, double albedo = 0.5, double emission = 0.0) {
-    const Vec3 X = s * Vec3::UnitX(), Y = s * Vec3::UnitY(), Z = s * Vec3::UnitZ(), O = Vec3::Zero();
-    scene.objects.push_back(rectangle(O, X, Y, albedo, emission));  // floor z=0, normal +z
-    scene.objects.push_back(rectangle(Z, Y, X, albedo, emission));  // ceiling z=s, normal -z
-    scene.objects.push_back(rectangle(O, Z, X, albedo, emission));  // wall y=0, normal +y
-    scene.objects.push_back(rectangle(Y, X, Z, albedo, emission));  // wall y=s, normal -y
-    scene.objects.push_back(rectangle(O, Y, Z, albedo, emission));  // wall x=0, normal +x
-    scene.objects.push_back(rectangle(X, Z, Y, albedo, emission));  // wall x=s, normal -x
+    add_closed_box(scene, Vec3::Constant(s), albedo, emission);
 }
 
 }  // namespace tprf::test

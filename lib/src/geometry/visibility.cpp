@@ -10,15 +10,26 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <string>
 #include <vector>
 
 namespace tprf {
 namespace {
 
-void embree_error(void* /*user*/, RTCError code, const char* message) {
+// Embree calls this from inside its own code, possibly on its worker threads: an exception thrown
+// here would cross C frames and end in std::terminate. It records the first error instead, and the
+// builder rethrows it on the calling thread.
+struct EmbreeErrors {
+    std::mutex mutex;
+    std::string first;
+};
+
+void embree_error(void* user, RTCError code, const char* message) {
     if (code == RTC_ERROR_NONE) return;
-    throw InternalError(std::string("Embree: ") + (message ? message : "unknown error"));
+    auto* errors = static_cast<EmbreeErrors*>(user);
+    std::lock_guard<std::mutex> lock(errors->mutex);
+    if (errors->first.empty()) errors->first = std::string("Embree: ") + (message ? message : "unknown error");
 }
 
 // Two-sided objects give each polygon twice with opposite normals; Embree returns either copy, so a
@@ -47,6 +58,7 @@ std::vector<std::int64_t> find_twins(const PatchSet& patches) {
 }  // namespace
 
 struct Visibility::Impl {
+    EmbreeErrors errors;
     RTCDevice device = nullptr;
     RTCScene scene = nullptr;
     const PatchSet* patches = nullptr;
@@ -63,7 +75,7 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
     im.patches = &patches;
     im.device = rtcNewDevice(nullptr);
     if (!im.device) throw InternalError("Embree: cannot create a device");
-    rtcSetDeviceErrorFunction(im.device, embree_error, nullptr);
+    rtcSetDeviceErrorFunction(im.device, embree_error, &im.errors);
     im.scene = rtcNewScene(im.device);
     rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_HIGH);
     // Watertight: a ray through the shared edge of two triangles (a quad's diagonal, a patch border)
@@ -84,10 +96,14 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
         auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
                                                                RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                                                patches.vertices.size()));
-        for (std::size_t k = 0; k < patches.vertices.size(); ++k)
-            for (int c = 0; c < 3; ++c) vb[3 * k + c] = static_cast<float>(patches.vertices[k][c]);
         auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
                                                                   RTC_FORMAT_UINT4, 4 * sizeof(unsigned), n));
+        if (!vb || !ib) {  // out of memory: Embree has said why
+            rtcReleaseGeometry(geometry);
+            throw InternalError(im.errors.first.empty() ? "Embree: cannot allocate the geometry" : im.errors.first);
+        }
+        for (std::size_t k = 0; k < patches.vertices.size(); ++k)
+            for (int c = 0; c < 3; ++c) vb[3 * k + c] = static_cast<float>(patches.vertices[k][c]);
         for (std::size_t i = 0; i < n; ++i) {
             const std::size_t corners = patches.corners(i);
             TPRF_CHECK(corners == 3 || corners == 4);
@@ -102,6 +118,7 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
         rtcReleaseGeometry(geometry);
     }
     rtcCommitScene(im.scene);
+    if (!im.errors.first.empty()) throw InternalError(im.errors.first);
     im.twin = find_twins(patches);
 }
 

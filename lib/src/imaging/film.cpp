@@ -1,21 +1,20 @@
 #include "tprf/imaging/film.h"
 
-#include "tprf/imaging/camera.h"
+#include "tprf/core/parallel.h"
+#include "tprf/imaging/gather.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
 #include "tprf/transport/solver.h"
-
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
 
 namespace tprf {
 
-TransientFilm::TransientFilm(const CameraGather& gather, const Emission& emission, const TimeAxis& time,
+TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time,
                              DelayMode delay, float* cube, int order, bool last_is_tail, int threads)
-    : m_gather(gather), m_emission(emission), m_time(time), m_delay(delay), m_cube(cube), m_order(order),
-      m_last_is_tail(last_is_tail), m_threads(threads > 0 ? threads : omp_get_max_threads()) {}
+    : m_gather(gather), m_illumination(illumination), m_time(time), m_delay(delay), m_cube(cube), m_order(order),
+      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)) {}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -34,20 +33,21 @@ void TransientFilm::add_direct() {
     }
 }
 
-void TransientFilm::add_block(const SolveBlock& block) {
+// The block's profiles less the pulses of point sources, which the gather evaluates exactly at each
+// sensing point.
+void TransientFilm::copy_indirect(const SolveBlock& block) {
     const std::size_t n = block.patches, bins = std::size_t(block.bins);
     const float* source = block.radiosity;
     if (m_order >= 0) {
         TPRF_CHECK_LT(m_order, block.terms);
         source = block.per_order + std::size_t(m_order) * n * bins * 3;
     }
-    // The profiles less the pulses that the camera evaluates exactly at each visible point.
     m_indirect.assign(source, source + n * bins * 3);
     const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
     for (std::size_t i = 0; i < n; ++i)
-        for (std::uint64_t k = m_emission.row[i]; k < m_emission.row[i + 1]; ++k) {
-            const Pulse& p = m_emission.pulses[k];
-            if (!p.exact_at_camera || !takes_order(p.order)) continue;
+        for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
+            const Pulse& p = m_illumination.pulses[k];
+            if (p.point_source < 0 || !takes_order(p.order)) continue;
             const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
             float* v = m_indirect.data() + (i * bins + std::size_t(b)) * 3;
@@ -55,63 +55,70 @@ void TransientFilm::add_block(const SolveBlock& block) {
             // turn an exact zero into a small negative radiance.
             for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(p.energy[c]));
         }
+}
 
+// One pixel's taps over the block: each reads its patch's profile and shifts it by the last leg,
+// split between two bins.
+void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
+    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
     const std::int64_t T = m_time.bins;
-    const std::size_t pixels = m_gather.row.size() - 1;
-#pragma omp parallel for schedule(dynamic, 64) num_threads(m_threads)
-    for (std::size_t px = 0; px < pixels; ++px) {
-        float* out = m_cube + px * std::size_t(T) * 3;
-        for (std::uint64_t k = m_gather.row[px]; k < m_gather.row[px + 1]; ++k) {
-            const PixelTap& tap = m_gather.taps[k];
-            const double lag = double(tap.leg) * inv_bin;
-            std::int64_t whole;
-            float w0 = tap.weight, w1 = 0.0f;
-            if (m_delay == DelayMode::Nearest) {
-                whole = std::int64_t(std::floor(lag + 0.5));
-            } else {
-                whole = std::int64_t(std::floor(lag));
-                const double f = lag - double(whole);
-                w0 = float(tap.weight * (1.0 - f));
-                w1 = float(tap.weight * f);
-            }
-            // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
-            const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
-            const std::int64_t base = block.first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
-            const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
-            // Bins t whose w0 target base + t lies before `first` (and their w1 targets up to it).
-            const std::int64_t early = std::clamp<std::int64_t>(first - base, 0, std::int64_t(bins));
-            if (early > 0 && first >= 0 && first < T) {
-                float carried[3] = {0, 0, 0};
-                for (std::int64_t t = 0; t < early; ++t) {
-                    const float w = w0 + (base + t + 1 <= first ? w1 : 0.0f);
-                    for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
-                }
-                for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += carried[c];
-            }
-            // The rest: two contiguous multiply-adds over bins, each clipped to the window [0, T).
-            auto add = [&](float w, std::int64_t shift, std::int64_t from) {
-                if (w == 0.0f) return;
-                const std::int64_t lo = std::max<std::int64_t>(from, -(base + shift));
-                const std::int64_t hi = std::min<std::int64_t>(std::int64_t(bins), T - (base + shift));
-                if (lo >= hi) return;
-                float* __restrict o = out + std::size_t(base + shift + lo) * 3;
-                const float* __restrict in = b + std::size_t(lo) * 3;
-                const std::size_t len = std::size_t(hi - lo) * 3;
-                for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
-            };
-            add(w0, 0, early);
-            // A w1 tap at base + t + 1 was carried above when it fell at or before `first`.
-            add(w1, 1, std::max<std::int64_t>(0, first - base));
+    float* out = m_cube + px * std::size_t(T) * 3;
+    for (std::uint64_t k = m_gather.row[px]; k < m_gather.row[px + 1]; ++k) {
+        const PixelTap& tap = m_gather.taps[k];
+        const double lag = double(tap.leg) * inv_bin;
+        std::int64_t whole;
+        float w0 = tap.weight, w1 = 0.0f;
+        if (m_delay == DelayMode::Nearest) {
+            whole = std::int64_t(std::floor(lag + 0.5));
+        } else {
+            whole = std::int64_t(std::floor(lag));
+            const double f = lag - double(whole);
+            w0 = float(tap.weight * (1.0 - f));
+            w1 = float(tap.weight * f);
         }
+        // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
+        const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
+        const std::int64_t base = first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
+        const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
+        // Bins t whose w0 target base + t lies before `first` (and their w1 targets up to it).
+        const std::int64_t early = std::clamp<std::int64_t>(first - base, 0, std::int64_t(bins));
+        if (early > 0 && first >= 0 && first < T) {
+            float carried[3] = {0, 0, 0};
+            for (std::int64_t t = 0; t < early; ++t) {
+                const float w = w0 + (base + t + 1 <= first ? w1 : 0.0f);
+                for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
+            }
+            for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += carried[c];
+        }
+        // The rest: two contiguous multiply-adds over bins, each clipped to the window [0, T).
+        auto add = [&](float w, std::int64_t shift, std::int64_t from) {
+            if (w == 0.0f) return;
+            const std::int64_t lo = std::max<std::int64_t>(from, -(base + shift));
+            const std::int64_t hi = std::min<std::int64_t>(std::int64_t(bins), T - (base + shift));
+            if (lo >= hi) return;
+            float* __restrict o = out + std::size_t(base + shift + lo) * 3;
+            const float* __restrict in = b + std::size_t(lo) * 3;
+            const std::size_t len = std::size_t(hi - lo) * 3;
+            for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
+        };
+        add(w0, 0, early);
+        // A w1 tap at base + t + 1 was carried above when it fell at or before `first`.
+        add(w1, 1, std::max<std::int64_t>(0, first - base));
     }
 }
 
-std::vector<float> steady_image(const CameraGather& gather, const Emission& emission, const std::vector<Rgb>& steady) {
+void TransientFilm::add_block(const SolveBlock& block) {
+    copy_indirect(block);
+    const std::size_t pixels = m_gather.row.size() - 1, bins = std::size_t(block.bins);
+    parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) { add_taps(px, block.first_bin, bins); });
+}
+
+std::vector<float> steady_image(const Gather& gather, const Illumination& illumination, const std::vector<Rgb>& steady) {
     const std::size_t pixels = std::size_t(gather.width) * std::size_t(gather.height);
     std::vector<Rgb> indirect(steady);
     for (std::size_t i = 0; i < indirect.size(); ++i)
-        for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k)
-            if (emission.pulses[k].exact_at_camera) indirect[i] -= emission.pulses[k].energy;
+        for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k)
+            if (illumination.pulses[k].point_source >= 0) indirect[i] -= illumination.pulses[k].energy;
     std::vector<float> image(pixels * 3, 0.0f);
     for (std::size_t px = 0; px < pixels; ++px) {
         Rgb v = Rgb::Zero();

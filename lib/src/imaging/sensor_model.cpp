@@ -1,8 +1,8 @@
 #include "tprf/imaging/sensor_model.h"
 
 #include "tprf/core/error.h"
+#include "tprf/core/random.h"
 #include "tprf/core/types.h"
-#include "tprf/io/plot.h"
 
 #include <Eigen/Dense>
 #include <omp.h>
@@ -16,13 +16,10 @@
 #include <limits>
 #include <numbers>
 #include <optional>
-#include <random>
 #include <sstream>
 #include <string>
 
 namespace tprf {
-
-namespace fs = std::filesystem;
 
 namespace {
 
@@ -87,15 +84,6 @@ void box_window_weights(const TimeKernel& k, const TimeAxis& time, double a, dou
 // Angular frequency of the modulation per unit of the scene's time axis.
 double omega_per_unit(const Exposure& e, const TimeAxis& time) {
     return 2.0 * std::numbers::pi * e.frequency_mhz * 1e6 * time.to_metres(1.0) / kSpeedOfLight;
-}
-
-// SplitMix64: decorrelated per-pixel seeds from one user seed, so that a pixel's noise does not
-// depend on which thread draws it.
-std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t pixel) {
-    std::uint64_t z = seed + 0x9E3779B97F4A7C15ull * (pixel + 1);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
 }
 
 }  // namespace
@@ -206,9 +194,10 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
     for (std::int64_t p = 0; p < pixels; ++p) {
         const float* e = cube + std::size_t(p) * T * 3;
         float* out = measurements + std::size_t(p) * K * 3;
-        std::optional<std::mt19937_64> rng;
-        if (draws) rng.emplace(mix_seed(seed, std::uint64_t(p)));
-        std::normal_distribution<double> normal(0.0, 1.0);
+        // Pixel p's stream is seeded with output p of SplitMix64(seed), so that a pixel's noise does not
+        // depend on which thread draws it.
+        std::optional<Random> rng;
+        if (draws) rng.emplace(SplitMix64::output(seed, std::uint64_t(p)));
         for (std::size_t k = 0; k < K; ++k) {
             double acc[3] = {0.0, 0.0, 0.0};
             const std::vector<double>& w = weights.weight[k];
@@ -220,13 +209,10 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
                 if (spad) {
                     const double mean = s.exposure.photons * std::max(0.0, v) + dark;
                     // Beyond 1e15 expected counts the Poisson spread (1/sqrt(mean)) is below float
-                    // precision, and a draw could overflow the integer: the count is its mean.
-                    if (mean > kMaxPoissonMean)
-                        v = mean;
-                    else
-                        v = mean > 0.0 ? double(std::poisson_distribution<std::int64_t>(mean)(*rng)) : 0.0;
+                    // precision (and Random::poisson takes means up to 2^52 only): the count is its mean.
+                    v = mean > kMaxPoissonMean ? mean : rng->poisson(mean);
                 } else {
-                    if (s.noise.sigma > 0.0) v += s.noise.sigma * normal(*rng);
+                    if (s.noise.sigma > 0.0) v += s.noise.sigma * rng->normal();
                     if (s.clamp) v = std::max(0.0, v);
                 }
                 // Saturated rather than infinite when a signal's scale exceeds a float's range.
@@ -237,38 +223,31 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
     }
 }
 
-void write_sensor_plot(const fs::path& path, const SensorSettings& s, const TimeAxis& time, const float* profile,
-                       const float* measurements, int x, int y) {
-    const char* unit = time.unit == TimeUnit::Picoseconds ? "ps" : "m";
+SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const float* profile, const float* measurements,
+                       int x, int y) {
     const double dt = time.bin_width;
     auto mean3 = [](const float* v) { return (double(v[0]) + v[1] + v[2]) / 3.0; };
+    SensorPlot plot;
+    plot.x = x, plot.y = y;
+    plot.exposure = exposure_name(s.exposure.type);
+    plot.time_unit = time.unit == TimeUnit::Picoseconds ? "ps" : "m";
+    plot.start = time.start, plot.end = time.start + time.bins * dt;
 
     // The TPRF and its convolution with the pulse as densities (energy per unit time), so that the two
     // curves are comparable whatever the bin width.
-    PlotPanel tprf_panel;
-    tprf_panel.title = "pixel (" + std::to_string(x) + ", " + std::to_string(y) + "): TPRF and TPRF * pulse";
-    tprf_panel.x_label = std::string("time (") + unit + ")";
-    tprf_panel.y_label = std::string("radiance s per ") + unit;
-    PlotSeries ideal{"TPRF", {}, {}, {40, 40, 40}, SeriesStyle::Steps};
-    for (int i = 0; i <= time.bins; ++i) {
-        ideal.x.push_back(time.start + i * dt);
-        ideal.y.push_back(mean3(profile + std::size_t(std::min(i, time.bins - 1)) * 3) / dt);
-    }
     std::vector<float> grey(std::size_t(time.bins));
-    for (int i = 0; i < time.bins; ++i) grey[std::size_t(i)] = float(mean3(profile + std::size_t(i) * 3));
-    const ConvolvedProfile conv = convolve_with_pulse(s.pulse, time, grey.data());
-    PlotSeries convolved{"TPRF * pulse", {}, {}, {220, 60, 30}, SeriesStyle::Line};
-    for (std::size_t m = 0; m < conv.energy.size(); ++m) {
-        convolved.x.push_back(time.start + (conv.first_bin + double(m) + 0.5) * dt);
-        convolved.y.push_back(conv.energy[m] / dt);
+    for (int i = 0; i <= time.bins; ++i) plot.tprf_edges.push_back(time.start + i * dt);
+    for (int i = 0; i < time.bins; ++i) {
+        grey[std::size_t(i)] = float(mean3(profile + std::size_t(i) * 3));
+        plot.tprf.push_back(mean3(profile + std::size_t(i) * 3) / dt);
     }
-    tprf_panel.series = {ideal, convolved};
-    tprf_panel.x_range = std::make_pair(time.start, time.start + time.bins * dt);
+    const ConvolvedProfile conv = convolve_with_pulse(s.pulse, time, grey.data());
+    for (std::size_t m = 0; m < conv.energy.size(); ++m) {
+        plot.convolved_time.push_back(time.start + (conv.first_bin + double(m) + 0.5) * dt);
+        plot.convolved.push_back(conv.energy[m] / dt);
+    }
 
-    PlotPanel m_panel;
-    m_panel.title = std::string("measurements (") + exposure_name(s.exposure.type) + ")";
     const int K = measurement_count(s, time);
-    PlotSeries meas{"M_k", {}, {}, {30, 90, 200}, SeriesStyle::Markers};
     for (int k = 0; k < K; ++k) {
         double at = 0.0;
         switch (s.exposure.type) {
@@ -279,22 +258,10 @@ void write_sensor_plot(const fs::path& path, const SensorSettings& s, const Time
             case ExposureType::Amcw: at = s.exposure.phases_deg[std::size_t(k)]; break;
             case ExposureType::Spad: at = time.start + k * dt; break;
         }
-        meas.x.push_back(at);
-        meas.y.push_back(mean3(measurements + std::size_t(k) * 3));
+        plot.measurement_at.push_back(at);
+        plot.measurements.push_back(mean3(measurements + std::size_t(k) * 3));
     }
-    if (s.exposure.type == ExposureType::Spad) {
-        meas.style = SeriesStyle::Steps;
-        meas.label = "photon counts";
-        meas.x.push_back(time.start + K * dt);
-        meas.y.push_back(meas.y.empty() ? 0.0 : meas.y.back());
-        m_panel.y_label = "counts per bin";
-    } else {
-        m_panel.y_label = "measurement";
-    }
-    m_panel.x_label = s.exposure.type == ExposureType::Amcw ? "phase (degrees)" : std::string("time (") + unit + ")";
-    if (s.exposure.type == ExposureType::Spad) m_panel.x_range = tprf_panel.x_range;
-    m_panel.series = {meas};
-    write_plot_png(path, {tprf_panel, m_panel});
+    return plot;
 }
 
 }  // namespace tprf

@@ -74,23 +74,11 @@ double JsonNode::positive() const {
     return v;
 }
 
-double JsonNode::non_negative() const {
-    const double v = number();
-    if (v < 0.0) fail("must be >= 0");
-    return v;
-}
-
 int JsonNode::integer() const {
     const double v = number();
     if (v != std::floor(v)) fail("expected an integer");
     if (v < std::numeric_limits<int>::min() || v > std::numeric_limits<int>::max()) fail("integer out of range");
     return static_cast<int>(v);
-}
-
-int JsonNode::positive_int() const {
-    const int v = integer();
-    if (v <= 0) fail("must be > 0");
-    return v;
 }
 
 bool JsonNode::boolean() const {
@@ -112,12 +100,6 @@ Rgb JsonNode::rgb() const {
     if (j.is_number()) return Rgb::Constant(number());
     if (!j.is_array() || j.size() != 3) fail("expected a number or an array of 3 numbers");
     return Rgb(at(0).number(), at(1).number(), at(2).number());
-}
-
-Rgb JsonNode::non_negative_rgb() const {
-    const Rgb c = rgb();
-    if ((c < 0.0).any()) fail("must be >= 0");
-    return c;
 }
 
 JsonNode JsonNode::member(std::string_view key, const json& value) const {

@@ -1,6 +1,7 @@
 #pragma once
-/// Private to the scene stage (not installed). Validated reading of JSON input (scene files, sensor blocks): one value with its JSON path, so
-/// that every check can say where it failed ("FILE: objects[2].u: has zero length").
+/// Private to the scene stage (not installed). Typed reading of JSON input (scene files, sensor blocks):
+/// one value with its JSON path, so that every error can say where it is ("FILE: objects[2].u[1]:
+/// expected a number"). Value ranges are checked later, on the built data (scene/validate.h).
 
 #include "tprf/core/types.h"
 #include "tprf/scene/sensor_settings.h"
@@ -40,17 +41,15 @@ struct JsonNode {
     void check_keys(std::initializer_list<std::string_view> allowed) const;
 
     double number() const;          ///< finite
-    double positive() const;        ///< finite, > 0
-    double non_negative() const;    ///< finite, >= 0
+    /// A finite number > 0, for inputs that validate() never sees (a gate step).
+    double positive() const;
+    /// A whole number that fits an int; its range is validate()'s.
     int integer() const;
-    int positive_int() const;       ///< > 0
     bool boolean() const;
     std::string string() const;
     Vec3 vec3() const;
     /// A colour: a grey number or an RGB triple (SPEC, "Scene file").
     Rgb rgb() const;
-    /// A colour with every channel >= 0.
-    Rgb non_negative_rgb() const;
     /// A member named `key` of this object.
     JsonNode member(std::string_view key, const nlohmann::json& value) const;
 };
@@ -64,8 +63,8 @@ nlohmann::json parse_json_text(const std::string& text, const std::filesystem::p
 /// Reads and parses a JSON file (errors as parse_json_text, or "cannot read").
 nlohmann::json read_json_file(const std::filesystem::path& file, std::string_view what = "file");
 
-/// Validates a `sensor` block; errors name the node's file and JSON path. A table pulse's CSV is
-/// read here, relative to the node's file.
+/// Reads a `sensor` block; errors name the node's file and JSON path. A table pulse's CSV is read (and
+/// checked) here, relative to the node's file; the ranges of the result are validate_sensor()'s.
 SensorSettings parse_sensor(const JsonNode& block);
 
 }  // namespace tprf

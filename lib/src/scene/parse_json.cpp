@@ -1,21 +1,15 @@
 #include "tprf/scene/parse_json.h"
 
-#include "tprf/scene/validate.h"
-
 #include "tprf/core/error.h"
+#include "tprf/scene/validate.h"
 #include "json_node.h"
-#include "tprf/imaging/sensor_model.h"
 
-#include <algorithm>
 #include <cmath>
 #include <cstddef>
-#include <fstream>
-#include <initializer_list>
-#include <iterator>
 #include <limits>
 #include <numbers>
-#include <string_view>
-#include <system_error>
+#include <string>
+#include <utility>
 
 namespace tprf {
 
@@ -24,11 +18,9 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// Relative tolerance below which two directions count as parallel: nearer than this, a rectangle or a
-// camera frame is numerically meaningless although not exactly degenerate.
-constexpr double kParallelTol = 1e-9;
-
-bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
+// Only what the JSON text decides is checked here: keys, types, array lengths, enum names, and inputs
+// that the Scene does not keep (a laser's target, a transform's scale and axis, a gate step). Ranges and
+// geometry are checked by validate() on the built Scene, whatever built it.
 
 using Node = JsonNode;
 
@@ -36,21 +28,23 @@ Camera parse_camera(const Node& n) {
     n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
     Camera c;
     c.position = n.child("position").vec3();
-    const Node look_at = n.child("look_at");
-    c.look_at = look_at.vec3();
-    if (c.look_at == c.position) look_at.fail("equals camera.position, so there is no view direction");
-    const Node up = n.child("up");
-    c.up = up.vec3();
-    if (c.up.norm() == 0.0) up.fail("has zero length");
-    if (parallel(c.up, c.look_at - c.position)) up.fail("is parallel to the view direction (look_at - position)");
-    const Node fov = n.child("fov");
-    c.fov_deg = fov.number();
-    if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
-    c.width = n.child("width").positive_int();
-    c.height = n.child("height").positive_int();
-    if (const auto spp = n.find("spp")) c.spp = spp->positive_int();
+    c.look_at = n.child("look_at").vec3();
+    c.up = n.child("up").vec3();
+    c.fov_deg = n.child("fov").number();
+    c.width = n.child("width").integer();
+    c.height = n.child("height").integer();
+    if (const auto spp = n.find("spp")) c.spp = spp->integer();
     if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
     return c;
+}
+
+// A zero direction is kept as it is, for validate() to name. Where the squared norm underflows or
+// overflows, rescaling first keeps a tiny or huge but valid direction exact.
+Vec3 unit_or_zero(const Vec3& d) {
+    if (d.norm() == 0.0) return d;
+    const double squared = d.squaredNorm();
+    const bool in_range = std::isfinite(squared) && squared >= std::numeric_limits<double>::min();
+    return in_range ? d.normalized() : d.stableNormalized();
 }
 
 Light parse_laser(const Node& n) {
@@ -61,17 +55,15 @@ Light parse_laser(const Node& n) {
     const auto target = n.find("target");
     if (direction && target) n.fail("give either \"direction\" or \"target\", not both");
     if (direction) {
-        const Vec3 d = direction->vec3();
-        if (d.norm() == 0.0) direction->fail("has zero length");
-        l.direction = d.normalized();
+        l.direction = unit_or_zero(direction->vec3());
     } else if (target) {
         const Vec3 d = target->vec3() - l.origin;
         if (d.norm() == 0.0) target->fail("equals origin, so there is no direction");
-        l.direction = d.normalized();
+        l.direction = unit_or_zero(d);
     } else {
         n.fail("missing key \"direction\" or \"target\"");
     }
-    l.power = n.child("power").non_negative_rgb();
+    l.power = n.child("power").rgb();
     return l;
 }
 
@@ -83,33 +75,24 @@ Light parse_light(const Node& n) {
     n.check_keys({"type", "position", "intensity"});
     PointLight p;
     p.position = n.child("position").vec3();
-    p.intensity = n.child("intensity").non_negative_rgb();
+    p.intensity = n.child("intensity").rgb();
     return p;
 }
 
 RectangleShape parse_rectangle(const Node& n) {
     RectangleShape r;
     r.origin = n.child("origin").vec3();
-    const Node u = n.child("u");
-    const Node v = n.child("v");
-    r.u = u.vec3();
-    r.v = v.vec3();
-    if (r.u.norm() == 0.0) u.fail("has zero length");
-    if (r.v.norm() == 0.0) v.fail("has zero length");
-    if (parallel(r.u, r.v)) v.fail("is parallel to u, so the rectangle has no area");
+    r.u = n.child("u").vec3();
+    r.v = n.child("v").vec3();
     return r;
 }
 
+// The 16 numbers, row-major; validate() checks that they are affine and not singular.
 Eigen::Matrix4d parse_matrix(const Node& n) {
     if (!n.j.is_array() || n.j.size() != 16) n.fail("expected an array of 16 numbers (row-major 4x4)");
     Eigen::Matrix4d m;
     for (Eigen::Index r = 0; r < 4; ++r)
         for (Eigen::Index c = 0; c < 4; ++c) m(r, c) = n.at(static_cast<std::size_t>(4 * r + c)).number();
-    if (m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) n.fail("last row must be 0 0 0 1 (an affine transform)");
-    // Scale-relative, so that a tiny but uniform scale is not taken for a singular matrix.
-    const Eigen::Matrix3d a = m.topLeftCorner<3, 3>();
-    const double size = a.norm() / std::sqrt(3.0);
-    if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) n.fail("is singular");
     return m;
 }
 
@@ -140,17 +123,13 @@ Eigen::Matrix4d parse_transform(const Node& n) {
     return t.matrix();
 }
 
+// Relative to the scene file; validate() checks that it can be read. An empty name is refused here,
+// since resolved it would name the scene's directory.
 fs::path parse_mesh_file(const Node& n) {
     const std::string name = n.string();
     if (name.empty()) n.fail("is empty");
     fs::path p(name);
     if (p.is_relative()) p = n.file.parent_path() / p;
-    // The mesh is read by a later stage; checking here reports a bad path with the scene's other errors.
-    std::error_code ec;
-    const fs::file_status st = fs::status(p, ec);
-    if (!fs::exists(st)) n.fail("mesh file " + p.string() + " does not exist");
-    if (!fs::is_regular_file(st)) n.fail("mesh file " + p.string() + " is not a regular file");
-    if (!std::ifstream(p, std::ios::binary)) n.fail("cannot read mesh file " + p.string());
     return p;
 }
 
@@ -171,11 +150,8 @@ Object parse_object(const Node& n) {
     } else {
         type.fail("unknown object type " + in_quotes(name) + " (expected \"rectangle\" or \"mesh\")");
     }
-    if (const auto albedo = n.find("albedo")) {
-        o.albedo = albedo->rgb();
-        if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo->fail("must be in [0, 1]");
-    }
-    if (const auto emission = n.find("emission")) o.emission = emission->non_negative_rgb();
+    if (const auto albedo = n.find("albedo")) o.albedo = albedo->rgb();
+    if (const auto emission = n.find("emission")) o.emission = emission->rgb();
     if (const auto two_sided = n.find("two_sided")) o.two_sided = two_sided->boolean();
     return o;
 }
@@ -185,7 +161,9 @@ SolverSettings parse_solver(const Node& n) {
     SolverSettings s;
     if (const auto max_bounces = n.find("max_bounces")) {
         s.max_bounces = max_bounces->integer();
-        if (s.max_bounces < 0) max_bounces->fail("must be >= 0");
+        // -1 is the Scene's "every bounce", which a scene file says by leaving the key out; validate()
+        // refuses the other negative counts.
+        if (s.max_bounces == -1) max_bounces->fail("must be >= 0");
     }
     if (const auto delay = n.find("delay")) {
         const std::string d = delay->string();
@@ -203,8 +181,8 @@ SolverSettings parse_solver(const Node& n) {
 TimeAxis parse_time(const JsonNode& n) {
     n.check_keys({"bins", "bin_width", "start", "unit"});
     TimeAxis t;
-    t.bins = n.child("bins").positive_int();
-    t.bin_width = n.child("bin_width").positive();
+    t.bins = n.child("bins").integer();
+    t.bin_width = n.child("bin_width").number();
     if (const auto start = n.find("start")) t.start = start->number();
     if (const auto unit = n.find("unit")) {
         const std::string u = unit->string();
@@ -218,7 +196,15 @@ TimeAxis parse_time(const JsonNode& n) {
     return t;
 }
 
+// 0 is the Scene's "absent" (build_patches picks a size), so written out it is refused here;
+// validate() refuses negative sizes.
+double parse_max_edge(const Node& n) {
+    const double max_edge = n.number();
+    if (max_edge == 0.0) n.fail("must be > 0");
+    return max_edge;
+}
 
+// Builds the Scene from the document without judging its values: validate() does that afterwards.
 Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file) {
     if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
     const Node n{root, "", file};
@@ -234,33 +220,37 @@ Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file)
     }
     const Node objects = n.child("objects");
     const std::size_t count = objects.array_size();
-    if (count == 0) objects.fail("must hold at least one object");
     for (std::size_t i = 0; i < count; ++i) scene.objects.push_back(parse_object(objects.at(i)));
     if (const auto patches = n.find("patches")) {
         patches->check_keys({"max_edge"});
-        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = max_edge->positive();
+        if (const auto max_edge = patches->find("max_edge")) scene.max_edge = parse_max_edge(*max_edge);
     }
     if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
-    if (const auto sensor = n.find("sensor")) {
-        scene.sensor = parse_sensor(*sensor);
-        validate_sensor(*scene.sensor, scene.time);
-    }
+    if (const auto sensor = n.find("sensor")) scene.sensor = parse_sensor(*sensor);
     return scene;
 }
 
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
-    return build_scene(parse_json_text(text, file), file);
+    Scene scene = build_scene(parse_json_text(text, file), file);
+    validate(scene);
+    return scene;
 }
 
-Scene load_scene(const std::filesystem::path& file) { return build_scene(read_json_file(file, "scene file"), file); }
+Scene load_scene(const std::filesystem::path& file) {
+    Scene scene = build_scene(read_json_file(file, "scene file"), file);
+    validate(scene);
+    return scene;
+}
 
 TimeAxis read_render_time(const std::filesystem::path& render_json) {
     const nlohmann::json info = read_json_file(render_json, "render.json");
     const JsonNode root{info, "", render_json};
     root.expect_object();
-    return parse_time(root.child("time"));
+    const TimeAxis time = parse_time(root.child("time"));
+    validate_time(time, render_json, "time");
+    return time;
 }
 
 }  // namespace tprf

@@ -3,52 +3,347 @@
 #include "tprf/core/error.h"
 #include "tprf/core/time_kernel.h"
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <numbers>
 #include <sstream>
 #include <string>
+#include <system_error>
+#include <variant>
 
 namespace tprf {
 namespace {
 
+namespace fs = std::filesystem;
+
+// Relative tolerance below which two directions count as parallel: nearer than this, a rectangle or a
+// camera frame is numerically meaningless although not exactly degenerate.
+constexpr double kParallelTol = 1e-9;
+// How far from 1 a laser's direction may be: a parser normalises it (to a few ulps); a hand-built
+// scene that forgot to would give every laser spot a wrong time.
+constexpr double kUnitTol = 1e-9;
 // A pulse or jitter may reach at most this many render windows away from t = 0: beyond, its kernel
 // and the convolved profile would be sized by the pulse rather than by the render.
 constexpr double kMaxReachInWindows = 64.0;
+// Bounds that keep a SPAD's expected counts finite whatever the signal's scale.
+constexpr double kMaxPhotons = 1e20;
+constexpr double kMaxDarkRate = 1e30;
 
-}  // namespace
+bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
 
-void validate_sensor(const SensorSettings& s, const TimeAxis& time) {
-    const std::string root = s.json_path.empty() ? "" : s.json_path + ".";
+// A place in the input, named as the JSON parser names it: the file and the JSON path.
+struct At {
+    const fs::path& file;
+    std::string path;
+
+    [[noreturn]] void fail(std::string_view what) const { fail_input(file, path, what); }
+    At key(std::string_view k) const { return {file, path.empty() ? std::string(k) : path + "." + std::string(k)}; }
+    At index(std::size_t i) const { return {file, path + "[" + std::to_string(i) + "]"}; }
+};
+
+// The parser's own words for the same mistakes (json_node.cpp), so that both routes read alike.
+void finite(double v, const At& at) {
+    if (!std::isfinite(v)) at.fail("expected a finite number");
+}
+
+// A triple (position, direction or colour), each element named as its JSON array element.
+template <class Triple>
+void finite3(const Triple& v, const At& at) {
+    for (Eigen::Index i = 0; i < 3; ++i) finite(v[i], at.index(std::size_t(i)));
+}
+
+void positive(double v, const At& at) {
+    finite(v, at);
+    if (v <= 0.0) at.fail("must be > 0");
+}
+
+void positive(int v, const At& at) {
+    if (v <= 0) at.fail("must be > 0");
+}
+
+void non_negative(double v, const At& at) {
+    finite(v, at);
+    if (v < 0.0) at.fail("must be >= 0");
+}
+
+void non_negative(const Rgb& c, const At& at) {
+    finite3(c, at);
+    if ((c < 0.0).any()) at.fail("must be >= 0");
+}
+
+void non_zero(const Vec3& v, const At& at) {
+    finite3(v, at);
+    if (v.norm() == 0.0) at.fail("has zero length");
+}
+
+void check_camera(const Camera& c, const At& at) {
+    finite3(c.position, at.key("position"));
+    const At look_at = at.key("look_at");
+    finite3(c.look_at, look_at);
+    if (c.look_at == c.position) look_at.fail("equals camera.position, so there is no view direction");
+    const At up = at.key("up");
+    non_zero(c.up, up);
+    if (parallel(c.up, c.look_at - c.position)) up.fail("is parallel to the view direction (look_at - position)");
+    const At fov = at.key("fov");
+    finite(c.fov_deg, fov);
+    if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
+    positive(c.width, at.key("width"));
+    positive(c.height, at.key("height"));
+    positive(c.spp, at.key("spp"));
+}
+
+void check_light(const Light& light, const At& at) {
+    if (const auto* p = std::get_if<PointLight>(&light)) {
+        finite3(p->position, at.key("position"));
+        non_negative(p->intensity, at.key("intensity"));
+        return;
+    }
+    const Laser& l = std::get<Laser>(light);
+    finite3(l.origin, at.key("origin"));
+    const At direction = at.key("direction");
+    non_zero(l.direction, direction);
+    if (std::abs(l.direction.norm() - 1.0) > kUnitTol) direction.fail("must be a unit vector");
+    non_negative(l.power, at.key("power"));
+}
+
+void check_rectangle(const RectangleShape& r, const At& at) {
+    finite3(r.origin, at.key("origin"));
+    const At u = at.key("u");
+    const At v = at.key("v");
+    finite3(r.u, u);
+    finite3(r.v, v);
+    non_zero(r.u, u);
+    non_zero(r.v, v);
+    if (parallel(r.u, r.v)) v.fail("is parallel to u, so the rectangle has no area");
+}
+
+// The mesh is read by a later stage; checking here reports a bad path with the scene's other errors.
+void check_mesh_file(const fs::path& p, const At& at) {
+    if (p.empty()) at.fail("is empty");
+    std::error_code ec;
+    const fs::file_status st = fs::status(p, ec);
+    if (!fs::exists(st)) at.fail("mesh file " + p.string() + " does not exist");
+    if (!fs::is_regular_file(st)) at.fail("mesh file " + p.string() + " is not a regular file");
+    if (!std::ifstream(p, std::ios::binary)) at.fail("cannot read mesh file " + p.string());
+}
+
+// `at` names the matrix as the scene file's `transform.matrix` (16 numbers, row-major).
+void check_transform(const Eigen::Matrix4d& m, const At& at) {
+    for (Eigen::Index r = 0; r < 4; ++r)
+        for (Eigen::Index c = 0; c < 4; ++c) finite(m(r, c), at.index(std::size_t(4 * r + c)));
+    if (m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) at.fail("last row must be 0 0 0 1 (an affine transform)");
+    // Scale-relative, so that a tiny but uniform scale is not taken for a singular matrix.
+    const Eigen::Matrix3d a = m.topLeftCorner<3, 3>();
+    const double size = a.norm() / std::sqrt(3.0);
+    if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) at.fail("is singular");
+}
+
+void check_object(const Object& o, const At& at) {
+    if (const auto* r = std::get_if<RectangleShape>(&o.shape)) {
+        check_rectangle(*r, at);
+    } else {
+        const MeshShape& m = std::get<MeshShape>(o.shape);
+        check_mesh_file(m.file, at.key("file"));
+        check_transform(m.transform, at.key("transform").key("matrix"));
+    }
+    const At albedo = at.key("albedo");
+    finite3(o.albedo, albedo);
+    if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo.fail("must be in [0, 1]");
+    non_negative(o.emission, at.key("emission"));
+}
+
+// A table pulse as the parser leaves it after reading its CSV (which names lines; a hand-built table
+// has rows).
+void check_pulse_table(const SensorPulse& p, const At& at) {
+    const std::vector<double>& t = p.table_time;
+    const std::vector<double>& v = p.table_value;
+    if (t.size() != v.size()) at.fail("pulse table has " + std::to_string(t.size()) + " times but " +
+                                      std::to_string(v.size()) + " values");
+    if (t.size() < 2) at.fail("pulse table needs at least two rows");
+    for (std::size_t i = 0; i < t.size(); ++i) {
+        const std::string where = "pulse table, row " + std::to_string(i) + ": ";
+        if (!std::isfinite(t[i]) || !std::isfinite(v[i])) at.fail(where + "expected finite numbers");
+        if (v[i] < 0.0) at.fail(where + "value must be >= 0");
+        if (i > 0 && t[i] <= t[i - 1]) at.fail(where + "times must increase strictly");
+    }
+    // As the parser computes it: only the shape counts, so scaled to a peak of 1 the area cannot overflow.
+    const double peak = *std::max_element(v.begin(), v.end());
+    double area = 0.0;
+    for (std::size_t i = 1; i < t.size(); ++i) area += 0.5 * (v[i] / peak + v[i - 1] / peak) * (t[i] - t[i - 1]);
+    if (!(peak > 0.0) || !(area > 0.0) || !std::isfinite(area))
+        at.fail("pulse table has zero area, or times too far apart to integrate");
+}
+
+void check_pulse(const SensorPulse& p, const At& at) {
+    switch (p.shape) {
+        case PulseShape::Delta: break;
+        case PulseShape::Gaussian: positive(p.fwhm, at.key("fwhm")); break;
+        case PulseShape::Box: positive(p.width, at.key("width")); break;
+        case PulseShape::Table: check_pulse_table(p, at.key("file")); break;
+    }
+}
+
+// Gates are expanded into windows by the parser; paths name the gates block's keys.
+void check_gates(const Exposure& e, const At& at) {
+    for (const auto& [start, width] : e.windows) {
+        finite(start, at.key("start"));
+        positive(width, at.key("width"));
+    }
+    const At count = at.key("count");
+    if (e.windows.empty()) count.fail("must be > 0");
+    if (e.windows.size() > std::size_t(kMaxSensorMeasurements))
+        count.fail("more than " + std::to_string(kMaxSensorMeasurements) + " gates");
+    for (const auto& [start, width] : e.windows)
+        if (!std::isfinite(start + width)) at.fail("the last gate ends beyond the largest number");
+}
+
+void check_windows(const Exposure& e, const At& at) {
+    const At list = at.key("windows");
+    if (e.windows.empty()) list.fail("must hold at least one [start, width]");
+    if (e.windows.size() > std::size_t(kMaxSensorMeasurements))
+        list.fail("more than " + std::to_string(kMaxSensorMeasurements) + " windows");
+    for (std::size_t k = 0; k < e.windows.size(); ++k) {
+        const At w = list.index(k);
+        finite(e.windows[k][0], w.index(0));
+        positive(e.windows[k][1], w.index(1));
+        if (!std::isfinite(e.windows[k][0] + e.windows[k][1])) w.fail("ends beyond the largest number");
+    }
+}
+
+// The 3 x 3 normal matrix of the fit M(phi) = a + b cos(phi) + c sin(phi) over the phases.
+Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {
+    Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+    for (const double deg : phases_deg) {
+        const double phi = deg * std::numbers::pi / 180.0;
+        const Eigen::Vector3d row(1.0, std::cos(phi), std::sin(phi));
+        m += row * row.transpose();
+    }
+    return m;
+}
+
+void check_amcw(const Exposure& e, const At& at) {
+    positive(e.frequency_mhz, at.key("frequency_mhz"));
+    const At phases = at.key("phases_deg");
+    const std::size_t count = e.phases_deg.size();
+    for (std::size_t k = 0; k < count; ++k) finite(e.phases_deg[k], phases.index(k));
+    if (count > std::size_t(kMaxSensorMeasurements)) phases.fail("too many phases");
+    // The phase of the fit is determined only when cos and sin are both sampled.
+    const Eigen::Matrix3d m = phase_normal_matrix(e.phases_deg);
+    if (count < 3 || std::abs(m.determinant()) < 1e-9 * std::pow(double(count), 3))
+        phases.fail("needs at least 3 phases that determine a cosine's phase (e.g. [0, 90, 180, 270])");
+}
+
+void check_spad(const Exposure& e, const At& at) {
+    const At photons = at.key("photons");
+    positive(e.photons, photons);
+    if (e.photons > kMaxPhotons) photons.fail("must be at most 1e20 photons per unit of signal");
+    non_negative(e.jitter_fwhm, at.key("jitter_fwhm"));
+    const At dark = at.key("dark_rate");
+    non_negative(e.dark_rate, dark);
+    if (e.dark_rate > kMaxDarkRate) dark.fail("must be at most 1e30 counts per second");
+}
+
+void check_sensor_block(const SensorSettings& s, const At& at) {
+    check_pulse(s.pulse, at.key("pulse"));
+    const At exposure = at.key("exposure");
+    switch (s.exposure.type) {
+        case ExposureType::Gates: check_gates(s.exposure, exposure); break;
+        case ExposureType::Windows: check_windows(s.exposure, exposure); break;
+        case ExposureType::Amcw: check_amcw(s.exposure, exposure); break;
+        case ExposureType::Spad: check_spad(s.exposure, exposure); break;
+    }
+    const At noise = at.key("noise");
+    if (s.exposure.type == ExposureType::Spad && s.noise.sigma != 0.0)
+        noise.fail("a SPAD counts photons, whose noise is Poisson: leave out \"noise\"");
+    non_negative(s.noise.sigma, noise.key("sigma"));
+}
+
+// The pulse (and jitter) reach no further than kMaxReachInWindows windows, and some gate or window can
+// receive light. Assumes a checked block and time axis.
+void check_sensor_against_time(const SensorSettings& s, const TimeAxis& time, const At& at) {
     const double limit = kMaxReachInWindows * time.bins * time.bin_width;
-    auto check_reach = [&](double reach, const std::string& path) {
+    auto check_reach = [&](double reach, const At& where) {
         if (reach <= limit) return;
         std::ostringstream os;
         os << "reaches " << reach << " from t = 0, more than " << kMaxReachInWindows
            << " times the render's window (" << time.bins * time.bin_width << "): render a longer window";
-        fail_input(s.file, root + path, os.str());
+        where.fail(os.str());
     };
+    const At pulse = at.key("pulse");
     switch (s.pulse.shape) {
         case PulseShape::Delta: break;
-        case PulseShape::Gaussian: check_reach(kGaussianReach * s.pulse.fwhm / kFwhmPerSigma, "pulse.fwhm"); break;
-        case PulseShape::Box: check_reach(0.5 * s.pulse.width, "pulse.width"); break;
+        case PulseShape::Gaussian: check_reach(kGaussianReach * s.pulse.fwhm / kFwhmPerSigma, pulse.key("fwhm")); break;
+        case PulseShape::Box: check_reach(0.5 * s.pulse.width, pulse.key("width")); break;
         case PulseShape::Table:
-            check_reach(std::max(std::abs(s.pulse.table_time.front()), std::abs(s.pulse.table_time.back())), "pulse.file");
+            check_reach(std::max(std::abs(s.pulse.table_time.front()), std::abs(s.pulse.table_time.back())),
+                        pulse.key("file"));
             break;
     }
     if (s.exposure.type == ExposureType::Spad)
-        check_reach(kGaussianReach * s.exposure.jitter_fwhm / kFwhmPerSigma, "exposure.jitter_fwhm");
+        check_reach(kGaussianReach * s.exposure.jitter_fwhm / kFwhmPerSigma, at.key("exposure").key("jitter_fwhm"));
     if (s.exposure.type != ExposureType::Gates && s.exposure.type != ExposureType::Windows) return;
     const TimeKernel k = pulse_kernel(s.pulse, time.bin_width);
     const double reach_lo = time.start + k.first * k.step;
     const double reach_hi = time.start + time.bins * time.bin_width + (k.first + double(k.mass.size())) * k.step;
     for (const auto& [start, width] : s.exposure.windows)
         if (start < reach_hi && start + width > reach_lo) return;
-    const std::string path = root + "exposure";
     std::ostringstream os;
     os << "every " << (s.exposure.type == ExposureType::Gates ? "gate" : "window")
        << " lies outside the render's time window [" << time.start << ", "
        << time.start + time.bins * time.bin_width << ") and the pulse's reach: it would measure nothing";
-    fail_input(s.file, path, os.str());
+    at.key("exposure").fail(os.str());
+}
+
+void check_objects(const Scene& scene, const At& root) {
+    const At objects = root.key("objects");
+    if (scene.objects.empty()) objects.fail("must hold at least one object");
+    for (std::size_t i = 0; i < scene.objects.size(); ++i) {
+        const Object& o = scene.objects[i];
+        check_object(o, o.json_path.empty() ? objects.index(i) : At{scene.file, o.json_path});
+    }
+}
+
+// `patches` and `solver`: 0 and -1 are the Scene's "absent" (a parser rejects them written out).
+void check_settings(const Scene& scene, const At& root) {
+    const At max_edge = root.key("patches").key("max_edge");
+    finite(scene.max_edge, max_edge);
+    if (scene.max_edge < 0.0) max_edge.fail("must be > 0");
+    if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
+}
+
+}  // namespace
+
+void validate_time(const TimeAxis& time, const fs::path& file, std::string_view json_path) {
+    const At at{file, std::string(json_path)};
+    positive(time.bins, at.key("bins"));
+    positive(time.bin_width, at.key("bin_width"));
+    finite(time.start, at.key("start"));
+}
+
+void validate(const Scene& scene) {
+    const At root{scene.file, ""};
+    validate_time(scene.time, scene.file, "time");
+    if (scene.camera) check_camera(*scene.camera, root.key("camera"));
+    const At lights = root.key("lights");
+    for (std::size_t i = 0; i < scene.lights.size(); ++i) check_light(scene.lights[i], lights.index(i));
+    check_objects(scene, root);
+    check_settings(scene, root);
+    if (!scene.sensor) return;
+    const SensorSettings& s = *scene.sensor;
+    const At sensor{s.file.empty() ? scene.file : s.file, s.json_path.empty() ? "sensor" : s.json_path};
+    check_sensor_block(s, sensor);
+    check_sensor_against_time(s, scene.time, sensor);
+}
+
+void validate_sensor(const SensorSettings& sensor) { check_sensor_block(sensor, At{sensor.file, sensor.json_path}); }
+
+void validate_sensor(const SensorSettings& sensor, const TimeAxis& time) {
+    const At at{sensor.file, sensor.json_path};
+    check_sensor_block(sensor, at);
+    check_sensor_against_time(sensor, time, at);
 }
 
 }  // namespace tprf

@@ -1,17 +1,12 @@
 #include "tprf/transport/illumination.h"
 
-#include "tprf/core/error.h"
-#include "tprf/transport/links.h"
+#include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
-#include "tprf/scene/scene.h"
 #include "tprf/geometry/visibility.h"
-
-#include <omp.h>
+#include "tprf/transport/links.h"
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <variant>
 
 namespace tprf {
 namespace {
@@ -21,32 +16,35 @@ Vec3 sample_patch(const PatchSet& patches, std::size_t i, int s, int g) {
     return patch_point(patches, i, (s % g + 0.5) / g, (s / g + 0.5) / g);
 }
 
-// Direct light from a point source at `source` with radiant intensity `intensity(direction)`,
-// reflected by patch i: one pulse per stratified sample that sees the source.
-template <class IntensityFn>
-void light_from_point(const PatchSet& patches, const Visibility& vis, std::size_t i, const Vec3& source,
-                      double path_offset, std::uint8_t order, int grid, const IntensityFn& intensity,
-                      std::vector<Pulse>& out) {
+// Side of the stratified grid for about `samples` points.
+int grid_side(int samples) { return std::max(1, int(std::lround(std::sqrt(double(std::max(samples, 1)))))); }
+
+// Direct light of point source k reflected by patch i: one pulse per stratified sample that it
+// reaches, through the same arrive() that sensing points use.
+void light_from_point(const PatchSet& patches, const Visibility& vis, std::size_t i, const PointSource& source,
+                      std::int32_t k, int grid, std::vector<Pulse>& out) {
     const int samples = grid * grid;
-    const Vec3& n = patches.normal[i];
     for (int s = 0; s < samples; ++s) {
-        const Vec3 x = sample_patch(patches, i, s, grid);
-        const Vec3 d = source - x;
-        const double r = d.norm();
-        if (r <= 0.0) continue;
-        const double cos_x = n.dot(d) / r;
-        if (cos_x <= 0.0) continue;
-        const Rgb radiant = intensity(Vec3(-d / r));
-        if (!(radiant > 0.0).any()) continue;
-        if (vis.occluded(x + vis.epsilon() * n, source)) continue;
+        PointArrival a;
+        if (!arrive(source, sample_patch(patches, i, s, grid), patches.normal[i], vis, a)) continue;
         Pulse p;
-        p.path = path_offset + r;
-        p.energy = patches.albedo[i] * radiant * (cos_x / (r * r)) / double(samples);
-        p.order = order;
-        p.propagates = true;
-        p.exact_at_camera = true;
+        p.path = a.path;
+        p.energy = a.reflected(patches.albedo[i]) / double(samples);
+        p.order = source.order;
+        p.point_source = k;
         out.push_back(p);
     }
+}
+
+// The spot's own patch: the reflected power, spread over the patch, seen at the spot's path; its
+// onward light is the spot's point source, not the links.
+Pulse spot_pulse(const PatchSet& patches, std::size_t i, const PointSource& spot) {
+    Pulse p;
+    p.path = spot.path;
+    p.energy = spot.intensity / patches.area[i];
+    p.order = 1;
+    p.propagates = false;
+    return p;
 }
 
 // The direct light of emissive patch e at patch i through link k: the energy the exact form factor
@@ -88,85 +86,47 @@ void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t
     for (std::size_t k = first; k < out.size(); ++k) out[k].energy = energy * (out[k].energy[0] / total);
 }
 
-}  // namespace
-
-LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const PatchSet& /*patches*/,
-                          const Visibility& visibility) {
-    LaserSpot spot;
-    const RayHit hit = visibility.intersect(origin, direction, std::numeric_limits<double>::infinity());
-    if (!hit.hit || !hit.front) return spot;
-    spot.hit = true;
-    spot.patch = hit.patch;
-    spot.point = hit.point;
-    spot.path = hit.distance;
-    return spot;
+// An emissive patch's own light, seen at path 0; its onward light goes out with exact paths through
+// light_from_area, not through the links.
+Pulse self_pulse(const PatchSet& patches, std::size_t i) {
+    Pulse p;
+    p.energy = M_PI * patches.emission[i];  // exitance of a Lambertian emitter: pi L_e
+    p.order = 0;
+    p.propagates = false;
+    return p;
 }
 
-std::vector<LaserSpot> find_laser_spots(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
-    std::vector<LaserSpot> spots;
-    for (const Light& light : scene.lights)
-        if (const auto* laser = std::get_if<Laser>(&light)) {
-            spots.push_back(find_laser_spot(laser->origin, laser->direction, patches, visibility));
-            spots.back().power = laser->power;
-        }
-    return spots;
-}
-
-Emission compute_emission(const Scene& scene, const PatchSet& patches, const Links& links, const Visibility& vis,
-                          const EmitterOptions& options) {
-    const std::size_t n = patches.size();
-    const int grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.samples, 1))))));
-    const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-    const int area_grid = std::max(1, int(std::lround(std::sqrt(double(std::max(options.area_samples, 1))))));
-
-    const std::vector<LaserSpot> spots = find_laser_spots(scene, patches, vis);
-
-    std::vector<std::vector<Pulse>> per_patch(n);
-#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
-    for (std::size_t i = 0; i < n; ++i) {
-        std::vector<Pulse>& out = per_patch[i];
-        if ((patches.emission[i] > 0.0).any()) {
-            // Seen at path 0; its onward light is sent below with exact paths, not through the links.
-            Pulse p;
-            p.energy = M_PI * patches.emission[i];  // exitance of a Lambertian emitter: pi L_e
-            p.order = 0;
-            p.propagates = false;
-            out.push_back(p);
-        }
-        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
-            if ((patches.emission[links.source[k]] > 0.0).any())
-                light_from_area(patches, vis, i, links.source[k], links.ff[k], area_grid, out);
-        for (const Light& light : scene.lights)
-            if (const auto* point = std::get_if<PointLight>(&light))
-                light_from_point(patches, vis, i, point->position, 0.0, 1, grid,
-                                 [&](const Vec3&) { return point->intensity; }, out);
-        for (std::size_t l = 0; l < spots.size(); ++l) {
-            const LaserSpot& spot = spots[l];
-            if (!spot.hit) continue;
-            const Rgb reflected = patches.albedo[spot.patch] * spot.power;  // W leaving X
-            if (i == spot.patch) {
-                Pulse p;
-                p.path = spot.path;
-                p.energy = reflected / patches.area[i];
-                p.order = 1;
-                p.propagates = false;
-                out.push_back(p);
-                continue;
-            }
-            const Vec3& nx = patches.normal[spot.patch];
-            const Vec3 lifted = spot.point + vis.epsilon() * nx;
-            // X is a Lambertian point: radiant intensity albedo P cos(theta) / pi.
-            light_from_point(patches, vis, i, lifted, spot.path, 2, grid,
-                             [&](const Vec3& dir) { return reflected * std::max(0.0, nx.dot(dir)) / M_PI; }, out);
-        }
-    }
-
-    Emission e;
+Illumination to_csr(std::vector<std::vector<Pulse>>& per_patch) {
+    const std::size_t n = per_patch.size();
+    Illumination e;
     e.row.assign(n + 1, 0);
     for (std::size_t i = 0; i < n; ++i) e.row[i + 1] = e.row[i] + per_patch[i].size();
     e.pulses.reserve(e.row[n]);
     for (auto& v : per_patch) e.pulses.insert(e.pulses.end(), v.begin(), v.end());
     return e;
+}
+
+}  // namespace
+
+Illumination illuminate(const LightSources& sources, const PatchSet& patches, const Links& links,
+                        const Visibility& vis, const IlluminationOptions& options) {
+    const int grid = grid_side(options.samples), area_grid = grid_side(options.area_samples);
+    std::vector<std::vector<Pulse>> per_patch(patches.size());
+    parallel_for(patches.size(), {options.threads, 16, true}, [&](std::size_t i) {
+        std::vector<Pulse>& out = per_patch[i];
+        if ((patches.emission[i] > 0.0).any()) out.push_back(self_pulse(patches, i));
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
+            if ((patches.emission[links.source[k]] > 0.0).any())
+                light_from_area(patches, vis, i, links.source[k], links.ff[k], area_grid, out);
+        for (std::size_t s = 0; s < sources.points.size(); ++s) {
+            const PointSource& source = sources.points[s];
+            if (source.patch == i)
+                out.push_back(spot_pulse(patches, i, source));
+            else
+                light_from_point(patches, vis, i, source, std::int32_t(s), grid, out);
+        }
+    });
+    return to_csr(per_patch);
 }
 
 }  // namespace tprf

@@ -1,12 +1,12 @@
 #include "tprf/transport/links.h"
 
 #include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
 #include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 
 #include <flann/flann.hpp>
-#include <omp.h>
 
 #include <algorithm>
 #include <array>
@@ -122,76 +122,53 @@ std::size_t Links::bytes() const {
            ff.size() * sizeof(float) + distance.size() * sizeof(float);
 }
 
-Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, LinkStats* stats) {
+namespace {
+
+// The links of patch i to every later patch j > i that faces it and is not fully occluded: F_ij by
+// the rule its distance calls for (adaptive for near pairs, Gauss for middle ones, the centroid rule
+// for far ones), integrated over the smaller patch, times the visible fraction.
+void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
+              const std::vector<double>& radius, const std::vector<std::uint32_t>& near_i, std::size_t i,
+              std::vector<PairLink>& row, LinkStats& counts) {
     const std::size_t n = patches.size();
-    TPRF_CHECK_LT(n, std::size_t{0xFFFFFFFFu});
-    const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-    const std::vector<double> radius = circumradii(patches);
-    const std::vector<std::vector<std::uint32_t>> near = near_pairs(patches, radius, options.near_factor, threads);
-
     const double far2 = options.far_factor * options.far_factor;
-    std::vector<std::vector<PairLink>> pairs(n);
-    std::atomic<std::uint64_t> tested{0}, near_count{0}, ray_count{0}, done_work{0};
-    const double total_work = 0.5 * double(n) * double(n) + 1.0;
-    std::mutex progress_mutex;
-    double reported = 0.0;
-
-#pragma omp parallel num_threads(threads)
-    {
-        std::uint64_t my_tested = 0, my_near = 0, my_rays = 0;
-#pragma omp for schedule(dynamic, 8)
-        for (std::size_t i = 0; i < n; ++i) {
-            const double tol_i = 1e-9 * radius[i];
-            const std::vector<std::uint32_t>& near_i = near[i];
-            std::size_t near_cursor = 0;
-            std::vector<PairLink>& row = pairs[i];
-            for (std::size_t j = i + 1; j < n; ++j) {
-                const bool is_near = near_cursor < near_i.size() && near_i[near_cursor] == j;
-                if (is_near) ++near_cursor;
-                if (!any_in_front(patches, i, j, tol_i) || !any_in_front(patches, j, i, 1e-9 * radius[j])) continue;
-                ++my_tested;
-                // Integrate over the smaller patch, with the exact inner integral over the larger one.
-                const bool i_outer = patches.area[i] <= patches.area[j];
-                const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
-                double f_st;
-                if (is_near) {
-                    ++my_near;
-                    f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s],
-                                               patches.polygon(t), patches.corners(t), patches.normal[t],
-                                               options.quadrature);
-                } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() <
-                           far2 * (radius[i] + radius[j]) * (radius[i] + radius[j])) {
-                    f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
-                                                     patches.polygon(t), patches.corners(t), patches.normal[t]);
-                } else {
-                    f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
-                                                     patches.corners(t), patches.normal[t]);
-                }
-                if (!(f_st > 0.0)) continue;
-                const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
-                const double v = visible_fraction(patches, vis, i, j, options, my_rays);
-                if (v <= 0.0) continue;
-                const double f_ij = (i_outer ? f_st : f_ts) * v;
-                row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij)});
-            }
-            row.shrink_to_fit();
-            const std::uint64_t work = done_work.fetch_add(n - i) + (n - i);
-            if (options.progress) {
-                const double fraction = double(work) / total_work;
-                std::lock_guard<std::mutex> lock(progress_mutex);
-                if (fraction - reported >= 0.01) {
-                    reported = fraction;
-                    options.progress("links", std::min(fraction, 1.0));
-                }
-            }
+    const double tol_i = 1e-9 * radius[i];
+    std::size_t near_cursor = 0;
+    for (std::size_t j = i + 1; j < n; ++j) {
+        const bool is_near = near_cursor < near_i.size() && near_i[near_cursor] == j;
+        if (is_near) ++near_cursor;
+        if (!any_in_front(patches, i, j, tol_i) || !any_in_front(patches, j, i, 1e-9 * radius[j])) continue;
+        ++counts.pairs_tested;
+        // Integrate over the smaller patch, with the exact inner integral over the larger one.
+        const bool i_outer = patches.area[i] <= patches.area[j];
+        const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
+        double f_st;
+        if (is_near) {
+            ++counts.near_pairs;
+            f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s], patches.polygon(t),
+                                       patches.corners(t), patches.normal[t], options.quadrature);
+        } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() <
+                   far2 * (radius[i] + radius[j]) * (radius[i] + radius[j])) {
+            f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
+                                             patches.polygon(t), patches.corners(t), patches.normal[t]);
+        } else {
+            f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
+                                             patches.corners(t), patches.normal[t]);
         }
-        tested += my_tested;
-        near_count += my_near;
-        ray_count += my_rays;
+        if (!(f_st > 0.0)) continue;
+        const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
+        const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
+        if (v <= 0.0) continue;
+        const double f_ij = (i_outer ? f_st : f_ts) * v;
+        row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij)});
     }
+    row.shrink_to_fit();
+}
 
-    // Assemble the CSR by receiver. Row i takes its sources k < i (scattered from pairs[k], in
-    // increasing k) and then its own j > i, so that sources increase along every row.
+// The CSR by receiver. Row i takes its sources k < i (scattered from pairs[k], in increasing k) and
+// then its own j > i, so that sources increase along every row. Frees the pairs as it goes.
+Links assemble(const PatchSet& patches, std::vector<std::vector<PairLink>>& pairs) {
+    const std::size_t n = patches.size();
     Links links;
     links.row.assign(n + 1, 0);
     std::vector<std::uint64_t> lower(n, 0);
@@ -218,6 +195,52 @@ Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOp
         }
         std::vector<PairLink>().swap(pairs[i]);
     }
+    return links;
+}
+
+// Reports the share of pair work done, at most once per percent, from whichever worker finishes a row.
+class LinkProgress {
+public:
+    LinkProgress(const ProgressFn& progress, std::size_t n) : m_progress(progress), m_total(0.5 * double(n) * double(n) + 1.0) {}
+    void row_done(std::uint64_t pairs) {
+        const std::uint64_t work = m_done.fetch_add(pairs) + pairs;
+        if (!m_progress) return;
+        const double fraction = double(work) / m_total;
+        std::lock_guard<std::mutex> lock(m_mutex);
+        if (fraction - m_reported < 0.01) return;
+        m_reported = fraction;
+        m_progress("links", std::min(fraction, 1.0));
+    }
+
+private:
+    const ProgressFn& m_progress;
+    double m_total;
+    std::atomic<std::uint64_t> m_done{0};
+    std::mutex m_mutex;
+    double m_reported = 0.0;
+};
+
+}  // namespace
+
+Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, LinkStats* stats) {
+    const std::size_t n = patches.size();
+    TPRF_CHECK_LT(n, std::size_t{0xFFFFFFFFu});
+    const int threads = thread_count(options.threads);
+    const std::vector<double> radius = circumradii(patches);
+    const std::vector<std::vector<std::uint32_t>> near = near_pairs(patches, radius, options.near_factor, threads);
+    std::vector<std::vector<PairLink>> pairs(n);
+    std::atomic<std::uint64_t> tested{0}, near_count{0}, ray_count{0};
+    LinkProgress progress(options.progress, n);
+    // A progress callback may throw (a cancelled run): parallel_for hands that to this thread.
+    parallel_for(n, {threads, 8, true}, [&](std::size_t i) {
+        LinkStats counts;
+        pair_row(patches, vis, options, radius, near[i], i, pairs[i], counts);
+        tested += counts.pairs_tested;
+        near_count += counts.near_pairs;
+        ray_count += counts.rays;
+        progress.row_done(n - i);
+    });
+    Links links = assemble(patches, pairs);
     if (options.progress) options.progress("links", 1.0);
     if (stats) {
         stats->pairs_tested = tested;

@@ -2,6 +2,7 @@
 
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
 #include "tprf/transport/links.h"
 #include "tprf/geometry/patches.h"
 
@@ -75,7 +76,7 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
     return plan;
 }
 
-bool scene_is_grey(const PatchSet& patches, const Emission& emission) {
+bool scene_is_grey(const PatchSet& patches, const Illumination& emission) {
     auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
     for (const Rgb& a : patches.albedo)
         if (!grey(a)) return false;
@@ -157,314 +158,427 @@ int next_pow2(int v) {
     return r;
 }
 
-}  // namespace
 
-SolveStats solve_transient(const PatchSet& patches, const Links& links, const Emission& emission,
-                           const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
-    const std::size_t n = patches.size();
-    TPRF_CHECK_EQ(links.receivers(), n);
-    TPRF_CHECK_EQ(emission.row.size(), n + 1);
-    const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-    const int bt = next_pow2(std::clamp(options.block_bins, 1, 4096));
-    const int C = scene_is_grey(patches, emission) ? 1 : 3;
-    const double bin_m = time.bin_width_m(), start_m = time.start_m();
-    const double inv_bin = 1.0 / bin_m;
-    const float inv_bin_f = float(inv_bin);
-    const LayerPlan plan = plan_layers(options.max_bounces, options.bounce_terms);
-    const int L = plan.layers();
-
-    // Short and same-bin links, and the largest lag, in one pass over the links.
-    std::vector<std::uint64_t> short_row(n + 1, 0), same_row(n + 1, 0);
+// Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
+// the range of blocks. Computed once; the march only executes it.
+struct SolvePlan {
+    std::size_t n = 0;              // patches
+    int threads = 1;
+    int bt = 0;                     // block length, bins (a power of two)
+    int C = 3;                      // channels marched (1 for a grey scene)
+    DelayMode delay = DelayMode::Linear;
+    double start_m = 0.0, inv_bin = 0.0;
+    float inv_bin_f = 0.0f;
+    LayerPlan layers;
+    int L = 0;                      // layers
+    // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
+    std::vector<std::uint64_t> short_row, same_row;
     std::vector<ShortLink> short_links;
     std::vector<SameBinLink> same_links;
     int max_lag = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-            const Taps t = link_taps(links.distance[k], inv_bin_f, options.delay, links.ff[k]);
-            max_lag = std::max(max_lag, t.lag);
-            if (t.lag >= bt) continue;
-            if (t.lag == 0) {
-                same_links.push_back({links.source[k], t.w0});
-                short_links.push_back({links.source[k], 0, 0.0f, t.w1});
-            } else {
-                short_links.push_back({links.source[k], t.lag, t.w0, t.w1});
-            }
-        }
-        short_row[i + 1] = short_links.size();
-        same_row[i + 1] = same_links.size();
-    }
-
     // Ring: the window [t - lag - 1, t] of every read must fit, plus one block; mirrored so that any
     // window of bt + 1 bins is contiguous.
-    const int ring = next_pow2(max_lag + bt + 2);
-    const int mirror = bt + 1;
-    const std::size_t stride = std::size_t(ring + mirror) * std::size_t(C);
-    const std::size_t layers = std::size_t(L);
-    std::vector<std::vector<float>> rings(layers, std::vector<float>(n * stride, 0.0f));
-    const std::size_t block_values = n * std::size_t(bt) * std::size_t(C);
-    std::vector<std::vector<float>> acc(layers, std::vector<float>(block_values));
-    std::vector<std::vector<float>> emit(layers, std::vector<float>(block_values));
-    std::vector<float> base(std::size_t(L) * n * std::size_t(C)), iterate(std::size_t(L) * n * std::size_t(C));
-    std::vector<float> out_total(n * std::size_t(bt) * 3);
-    std::vector<float> out_terms(std::size_t(plan.terms) * n * std::size_t(bt) * 3);
+    int ring = 0, mirror = 0, rmask = 0;
+    std::size_t stride = 0;         // floats per patch and layer
+    std::int64_t T = 0, b_begin = 0, blocks = 0;
+    int fed_layers = 0;             // layers that gather from links
+    GatherKernel kernel = nullptr;  // the long-link kernel for (C, bt), or null for the generic one
 
-    // Pulses by bin (exact containment: a delta at path p lies in the bin that holds p).
-    auto pulse_bin = [&](const Pulse& p) { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); };
-    std::int64_t first_pulse_bin = 0;
-    for (const Pulse& p : emission.pulses) first_pulse_bin = std::min(first_pulse_bin, pulse_bin(p));
-    const std::int64_t T = time.bins;
+    std::size_t block_values() const { return n * std::size_t(bt) * std::size_t(C); }
+    // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
+    std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
+};
+
+// Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
+// bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin).
+void split_links(const Links& links, SolvePlan& plan) {
+    plan.short_row.assign(plan.n + 1, 0);
+    plan.same_row.assign(plan.n + 1, 0);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
+            const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            plan.max_lag = std::max(plan.max_lag, t.lag);
+            if (t.lag >= plan.bt) continue;
+            if (t.lag == 0) {
+                plan.same_links.push_back({links.source[k], t.w0});
+                plan.short_links.push_back({links.source[k], 0, 0.0f, t.w1});
+            } else {
+                plan.short_links.push_back({links.source[k], t.lag, t.w0, t.w1});
+            }
+        }
+        plan.short_row[i + 1] = plan.short_links.size();
+        plan.same_row[i + 1] = plan.same_links.size();
+    }
+}
+
+SolvePlan make_plan(const PatchSet& patches, const Links& links, const Illumination& illumination,
+                    const TimeAxis& time, const SolverOptions& options) {
+    SolvePlan plan;
+    plan.n = patches.size();
+    plan.threads = thread_count(options.threads);
+    plan.bt = next_pow2(std::clamp(options.block_bins, 1, 4096));
+    plan.C = scene_is_grey(patches, illumination) ? 1 : 3;
+    plan.delay = options.delay;
+    plan.start_m = time.start_m();
+    plan.inv_bin = 1.0 / time.bin_width_m();
+    plan.inv_bin_f = float(plan.inv_bin);
+    plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
+    plan.L = plan.layers.layers();
+    split_links(links, plan);
+    plan.ring = next_pow2(plan.max_lag + plan.bt + 2);
+    plan.mirror = plan.bt + 1;
+    plan.rmask = plan.ring - 1;
+    plan.stride = std::size_t(plan.ring + plan.mirror) * std::size_t(plan.C);
     // Light sent before the window opens still travels: march from the earliest pulse, block-aligned.
-    std::int64_t b_begin = first_pulse_bin;
-    b_begin = (b_begin >= 0) ? 0 : -((-b_begin + bt - 1) / bt) * bt;
-    const std::int64_t blocks = (T - b_begin + bt - 1) / bt;
+    std::int64_t first_pulse_bin = 0;
+    for (const Pulse& p : illumination.pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
+    plan.T = time.bins;
+    plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + plan.bt - 1) / plan.bt) * plan.bt;
+    plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
+    for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
+    plan.kernel = pick_kernel(plan.C, plan.bt);
+    return plan;
+}
 
-    SolveStats stats;
-    stats.block_bins = bt;
-    stats.ring_bins = ring;
-    stats.channels = C;
+// The march: ring buffers of every layer's recent radiosity, the block's accumulators, and the
+// steps that advance them one block at a time. Steps marked "in a region" are called by every thread
+// of one OpenMP parallel region and share their loops among them.
+class March {
+public:
+    March(const PatchSet& patches, const Links& links, const Illumination& illumination, const SolvePlan& plan)
+        : m_patches(patches), m_links(links), m_illumination(illumination), m_plan(plan),
+          m_rings(std::size_t(plan.L), std::vector<float>(plan.n * plan.stride, 0.0f)),
+          m_acc(std::size_t(plan.L), std::vector<float>(plan.block_values())),
+          m_emit(std::size_t(plan.L), std::vector<float>(plan.block_values())),
+          m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
+          m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
+          m_out_total(plan.n * std::size_t(plan.bt) * 3),
+          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * 3) {}
+
+    // Bytes of the ring buffers, block buffers and short-link lists.
+    std::size_t working_bytes() const;
+    // Step 1 (in a region): per receiver, the block's emission and every long link as one contiguous
+    // multiply-add over the block, reading history that is already final.
+    void long_pass(std::int64_t b0);
+    // Step 2 (in a region): bin by bin, short links, then the same-bin system by Jacobi iteration.
+    void short_pass(std::int64_t b0);
+    // Step 3: the block's bins inside the window, handed to the sink.
+    void emit_block(std::int64_t b0, const BlockSink& sink);
+    int worst_jacobi_iterations() const { return m_worst_iterations.load(); }
+
+private:
+    float* ring_at(int layer, std::size_t patch, std::int64_t bin) {
+        return m_rings[std::size_t(layer)].data() + patch * m_plan.stride +
+               std::size_t(int(bin & m_plan.rmask)) * std::size_t(m_plan.C);
+    }
+    void store(int layer, std::size_t patch, std::int64_t bin, const float* v);
+    // Layer that a pulse of order `order` enters besides the total (-1: none).
+    int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
+    void load_emission(std::size_t i, std::int64_t b0);
+    void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
+    void short_links_of(std::size_t i, std::int64_t b0, int o);
+    bool jacobi_sweep(std::int64_t bin);
+    void block_totals(std::size_t i, std::int64_t lo, int count);
+    void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
+
+    const PatchSet& m_patches;
+    const Links& m_links;
+    const Illumination& m_illumination;
+    const SolvePlan& m_plan;
+    std::vector<std::vector<float>> m_rings;    // per layer: N x (ring + mirror) x C
+    std::vector<std::vector<float>> m_acc;      // per layer: N x bt x C, long links' sums
+    std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C, the block's emission
+    std::vector<float> m_base, m_iterate;       // L x N x C: one bin before / during the Jacobi sweeps
+    std::vector<float> m_out_total, m_out_terms;
+    float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
+    std::atomic<int> m_worst_iterations{0};
+};
+
+std::size_t March::working_bytes() const {
+    const SolvePlan& p = m_plan;
     std::size_t working = 0;
-    for (const auto& r : rings) working += r.size() * sizeof(float);
-    working += 2 * std::size_t(L) * block_values * sizeof(float) + 2 * base.size() * sizeof(float) +
-               (out_total.size() + out_terms.size()) * sizeof(float) + short_links.size() * sizeof(ShortLink) +
-               same_links.size() * sizeof(SameBinLink) + 2 * (n + 1) * sizeof(std::uint64_t);
-    stats.working_bytes = working;
-    int fed_layers = 0;
-    for (int l = 0; l < L; ++l) fed_layers += plan.source[std::size_t(l)] >= 0;
-    const bool has_same_bin = !same_links.empty();
-    const int rmask = ring - 1;
-    auto ring_at = [&](int layer, std::size_t patch, std::int64_t bin) {
-        return rings[std::size_t(layer)].data() + patch * stride + std::size_t(int(bin & rmask)) * std::size_t(C);
-    };
-    auto store = [&](int layer, std::size_t patch, std::int64_t bin, const float* v) {
-        const int pos = int(bin & rmask);
-        float* r = rings[std::size_t(layer)].data() + patch * stride;
-        for (int c = 0; c < C; ++c) r[std::size_t(pos * C + c)] = v[c];
-        if (pos < mirror)
-            for (int c = 0; c < C; ++c) r[std::size_t((pos + ring) * C + c)] = v[c];
-    };
-    // Layer that an emission pulse of order `order` enters, besides the total (-1: none).
-    auto exact_layer = [&](int order) { return order < plan.exact ? order : -1; };
+    for (const auto& r : m_rings) working += r.size() * sizeof(float);
+    working += 2 * std::size_t(p.L) * p.block_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
+               (m_out_total.size() + m_out_terms.size()) * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
+               p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t);
+    return working;
+}
 
-    const std::size_t receiver_tiles = (n + kReceiverTile - 1) / kReceiverTile;
-    const GatherKernel kernel = pick_kernel(C, bt);
-    float jacobi_change = 0.0f, jacobi_largest = 0.0f;  // shared by the threads' max-reductions
-    std::atomic<int> worst_iterations{0};
+void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v) {
+    const int C = m_plan.C;
+    const int pos = int(bin & m_plan.rmask);
+    float* r = m_rings[std::size_t(layer)].data() + patch * m_plan.stride;
+    for (int c = 0; c < C; ++c) r[std::size_t(pos * C + c)] = v[c];
+    if (pos < m_plan.mirror)
+        for (int c = 0; c < C; ++c) r[std::size_t((pos + m_plan.ring) * C + c)] = v[c];
+}
 
-    using clock = std::chrono::steady_clock;
-    auto lap = [](clock::time_point& since) {
-        const auto now = clock::now();
-        const double s = std::chrono::duration<double>(now - since).count();
-        since = now;
-        return s;
+void March::load_emission(std::size_t i, std::int64_t b0) {
+    const int bt = m_plan.bt, C = m_plan.C;
+    for (int l = 0; l < m_plan.L; ++l) {
+        std::fill_n(m_acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+        std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+    }
+    for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
+        const Pulse& p = m_illumination.pulses[k];
+        const std::int64_t b = m_plan.pulse_bin(p);
+        if (!p.propagates || b < b0 || b >= b0 + bt) continue;
+        const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
+        const int targets[2] = {m_plan.layers.total, exact_layer(p.order)};
+        for (int l : targets)
+            if (l >= 0)
+                for (int c = 0; c < C; ++c) m_emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
+    }
+}
+
+// Receivers [i0, i1) of one tile: their links (sorted by source) in source tiles, so that the
+// histories one source tile reads stay in cache for all the tile's receivers.
+void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
+    const SolvePlan& p = m_plan;
+    std::uint64_t cursor[kReceiverTile];
+    for (int l = 0; l < p.L; ++l) {
+        const int src = p.layers.source[std::size_t(l)];
+        if (src < 0) continue;
+        const float* ring_src = m_rings[std::size_t(src)].data();
+        for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = m_links.row[i];
+        for (std::size_t s0 = 0; s0 < p.n; s0 += kSourceTile) {
+            const std::uint32_t s1 = std::uint32_t(std::min(p.n, s0 + kSourceTile));
+            for (std::size_t i = i0; i < i1; ++i) {
+                float* a = m_acc[std::size_t(l)].data() + i * std::size_t(p.bt * p.C);
+                if (p.kernel)
+                    p.kernel(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src, p.stride,
+                             p.rmask, b0, a);
+                else
+                    gather_long_any(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src,
+                                    p.stride, p.rmask, b0, p.C, p.bt, a);
+            }
+        }
+    }
+}
+
+void March::long_pass(std::int64_t b0) {
+    const std::size_t tiles = (m_plan.n + kReceiverTile - 1) / kReceiverTile;
+#pragma omp for schedule(dynamic, 1)
+    for (std::size_t tile = 0; tile < tiles; ++tile) {
+        const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.n, i0 + kReceiverTile);
+        for (std::size_t i = i0; i < i1; ++i) load_emission(i, b0);
+        gather_tile(i0, i1, b0);
+    }
+}
+
+// Receiver i at bin b0 + o: the long links' sum plus its short links, the emission, stored in the ring.
+void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
+    const SolvePlan& p = m_plan;
+    const int C = p.C;
+    const std::int64_t bin = b0 + o;
+    for (int l = 0; l < p.L; ++l) {
+        const int src = p.layers.source[std::size_t(l)];
+        float g[3] = {0, 0, 0};
+        const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+        if (src >= 0) {
+            for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
+            for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
+                const ShortLink& s = p.short_links[k];
+                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
+                if (s.lag > 0) {
+                    const float* h0 = ring_at(src, s.source, bin - s.lag);
+                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
+                } else {
+                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
+                }
+            }
+        }
+        float b[3];
+        for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
+        float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+        for (int c = 0; c < C; ++c) keep[c] = b[c];
+        store(l, i, bin, b);
+    }
+}
+
+// One Jacobi sweep of the same-bin system (in a region); true when it has converged to float
+// resolution, where further sweeps cannot change the stored values meaningfully.
+bool March::jacobi_sweep(std::int64_t bin) {
+    const SolvePlan& p = m_plan;
+    const int C = p.C;
+#pragma omp single
+    {
+        m_change = 0.0f;
+        m_largest = 0.0f;
+    }
+    float change = 0.0f, largest = 0.0f;
+#pragma omp for schedule(static) nowait
+    for (std::size_t i = 0; i < p.n; ++i) {
+        for (int l = 0; l < p.L; ++l) {
+            const int src = p.layers.source[std::size_t(l)];
+            const float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+            float* next = m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+            float g[3] = {0, 0, 0};
+            if (src >= 0)
+                for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
+                    const float* h = ring_at(src, p.same_links[k].source, bin);
+                    for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
+                }
+            const float* now = ring_at(l, i, bin);
+            for (int c = 0; c < C; ++c) {
+                next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
+                change = std::max(change, std::abs(next[c] - now[c]));
+                largest = std::max(largest, std::abs(next[c]));
+            }
+        }
+    }
+#pragma omp critical(tprf_jacobi_reduction)
+    {
+        m_change = std::max(m_change, change);
+        m_largest = std::max(m_largest, largest);
+    }
+#pragma omp barrier
+    // Read the shared result before the barrier that ends the next loop, so that the next sweep's
+    // reset cannot overtake a slow thread.
+    const bool converged = m_change <= 1e-7f * m_largest;
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < p.n; ++i)
+        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
+    return converged;
+}
+
+void March::short_pass(std::int64_t b0) {
+    for (int o = 0; o < m_plan.bt; ++o) {
+#pragma omp for schedule(static)
+        for (std::size_t i = 0; i < m_plan.n; ++i) short_links_of(i, b0, o);
+        if (m_plan.same_links.empty()) continue;
+        for (int iteration = 1; iteration <= 200; ++iteration) {
+            if (!jacobi_sweep(b0 + o)) continue;
+#pragma omp single
+            {
+                if (iteration > m_worst_iterations.load()) m_worst_iterations.store(iteration);
+            }
+            break;
+        }
+    }
+}
+
+// Patch i's total and per-order terms for the bins [lo, lo + count) of the output block.
+void March::block_totals(std::size_t i, std::int64_t lo, int count) {
+    const SolvePlan& p = m_plan;
+    const int C = p.C, L = p.L;
+    const LayerPlan& plan = p.layers;
+    auto put = [&](float* out, int o, int c, float v) {
+        out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
     };
-    for (std::int64_t blk = 0; blk < blocks; ++blk) {
-        const std::int64_t b0 = b_begin + blk * bt;
-        clock::time_point since = clock::now();
+    for (int o = 0; o < count; ++o) {
+        const std::int64_t bin = lo + o;
+        float total[3] = {0, 0, 0};
+        if (plan.total >= 0) {
+            const float* v = ring_at(plan.total, i, bin);
+            for (int c = 0; c < C; ++c) total[c] = v[c];
+        } else {
+            for (int l = 0; l < L; ++l) {
+                const float* v = ring_at(l, i, bin);
+                for (int c = 0; c < C; ++c) total[c] += v[c];
+            }
+        }
+        for (int c = 0; c < 3; ++c) put(m_out_total.data(), o, c, total[C == 1 ? 0 : c]);
+        for (int k = 0; k < plan.terms; ++k) {
+            float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * 3;
+            float v[3] = {0, 0, 0};
+            if (k < plan.exact) {
+                const float* r = ring_at(k, i, bin);
+                for (int c = 0; c < C; ++c) v[c] = r[c];
+            } else {  // the tail: every order from k on
+                for (int c = 0; c < C; ++c) v[c] = total[c];
+                for (int l = 0; l < plan.exact; ++l) {
+                    const float* r = ring_at(l, i, bin);
+                    for (int c = 0; c < C; ++c) v[c] -= r[c];
+                }
+            }
+            for (int c = 0; c < 3; ++c) put(term, o, c, v[C == 1 ? 0 : c]);
+        }
+    }
+}
+
+// Pulses seen but not propagated (the laser spot) join the output only.
+void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
+    const SolvePlan& p = m_plan;
+    const LayerPlan& plan = p.layers;
+    const std::size_t count = std::size_t(hi - lo);
+    for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
+        const Pulse& pulse = m_illumination.pulses[k];
+        const std::int64_t b = p.pulse_bin(pulse);
+        if (pulse.propagates || b < lo || b >= hi) continue;
+        if (plan.total < 0 && pulse.order >= plan.exact) continue;  // beyond max_bounces
+        const std::size_t o = std::size_t(b - lo);
+        for (int c = 0; c < 3; ++c) {
+            m_out_total[(i * count + o) * 3 + std::size_t(c)] += float(pulse.energy[c]);
+            if (plan.terms > 0) {
+                const int term = std::min<int>(pulse.order, plan.terms - 1);
+                m_out_terms[((std::size_t(term) * p.n + i) * count + o) * 3 + std::size_t(c)] += float(pulse.energy[c]);
+            }
+        }
+    }
+}
+
+void March::emit_block(std::int64_t b0, const BlockSink& sink) {
+    const std::int64_t lo = std::max<std::int64_t>(b0, 0), hi = std::min<std::int64_t>(b0 + m_plan.bt, m_plan.T);
+    if (lo >= hi) return;
+    const int count = int(hi - lo);
+    parallel_for(m_plan.n, {m_plan.threads, 1, false}, [&](std::size_t i) {
+        block_totals(i, lo, count);
+        block_spots(i, lo, hi);
+    });
+    SolveBlock block;
+    block.first_bin = int(lo);
+    block.bins = count;
+    block.patches = m_plan.n;
+    block.radiosity = m_out_total.data();
+    block.terms = m_plan.layers.terms;
+    block.per_order = m_plan.layers.terms > 0 ? m_out_terms.data() : nullptr;
+    if (sink) sink(block);
+}
+
+double lap(std::chrono::steady_clock::time_point& since) {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - since).count();
+    since = now;
+    return s;
+}
+
+}  // namespace
+
+SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& illumination,
+                           const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
+    TPRF_CHECK_EQ(links.receivers(), patches.size());
+    TPRF_CHECK_EQ(illumination.row.size(), patches.size() + 1);
+    const SolvePlan plan = make_plan(patches, links, illumination, time, options);
+    March march(patches, links, illumination, plan);
+    SolveStats stats;
+    stats.block_bins = plan.bt;
+    stats.ring_bins = plan.ring;
+    stats.channels = plan.C;
+    stats.working_bytes = march.working_bytes();
+    for (std::int64_t blk = 0; blk < plan.blocks; ++blk) {
+        const std::int64_t b0 = plan.b_begin + blk * plan.bt;
+        auto since = std::chrono::steady_clock::now();
         double long_seconds = 0.0;
         // One parallel region per block, so that the sink below runs outside it and can use every
         // thread itself (inside, a nested region would get one thread). Phase times from thread 0:
-        // every phase ends at a barrier, so they are the phases' wall times.
-#pragma omp parallel num_threads(threads)
+        // every phase ends at a barrier, so they are the phases' wall times. The steps throw nothing.
+#pragma omp parallel num_threads(plan.threads)
         {
-            const bool timer = omp_get_thread_num() == 0;
-
-            // 1. Per receiver: the block's emission, and every long link (lag >= bt) as one contiguous
-            //    multiply-add over the block, reading history that is already final. Receivers go in
-            //    tiles and their links (sorted by source) in source tiles, so that the histories one
-            //    source tile reads stay in cache for all the tile's receivers.
-#pragma omp for schedule(dynamic, 1)
-            for (std::size_t tile = 0; tile < receiver_tiles; ++tile) {
-                const std::size_t i0 = tile * kReceiverTile, i1 = std::min(n, i0 + kReceiverTile);
-                std::uint64_t cursor[kReceiverTile];
-                for (std::size_t i = i0; i < i1; ++i) {
-                    for (int l = 0; l < L; ++l) {
-                        std::fill_n(acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-                        std::fill_n(emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-                    }
-                    for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
-                        const Pulse& p = emission.pulses[k];
-                        const std::int64_t b = pulse_bin(p);
-                        if (!p.propagates || b < b0 || b >= b0 + bt) continue;
-                        const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
-                        const int targets[2] = {plan.total, exact_layer(p.order)};
-                        for (int l : targets)
-                            if (l >= 0)
-                                for (int c = 0; c < C; ++c) emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
-                    }
-                }
-                for (int l = 0; l < L; ++l) {
-                    const int src = plan.source[std::size_t(l)];
-                    if (src < 0) continue;
-                    const float* ring_src = rings[std::size_t(src)].data();
-                    for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = links.row[i];
-                    for (std::size_t s0 = 0; s0 < n; s0 += kSourceTile) {
-                        const std::uint32_t s1 = std::uint32_t(std::min(n, s0 + kSourceTile));
-                        for (std::size_t i = i0; i < i1; ++i) {
-                            float* a = acc[std::size_t(l)].data() + i * std::size_t(bt * C);
-                            if (kernel)
-                                kernel(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay, ring_src,
-                                       stride, rmask, b0, a);
-                            else
-                                gather_long_any(links, cursor[i - i0], links.row[i + 1], s1, inv_bin_f, options.delay,
-                                                ring_src, stride, rmask, b0, C, bt, a);
-                        }
-                    }
-                }
-            }
-
-            if (timer) long_seconds = lap(since);
-
-            // 2. Bin by bin: short links, then the same-bin system by Jacobi iteration.
-            for (int o = 0; o < bt; ++o) {
-                const std::int64_t bin = b0 + o;
-#pragma omp for schedule(static)
-                for (std::size_t i = 0; i < n; ++i) {
-                    for (int l = 0; l < L; ++l) {
-                        const int src = plan.source[std::size_t(l)];
-                        float g[3] = {0, 0, 0};
-                        const std::size_t at = i * std::size_t(bt * C) + std::size_t(o * C);
-                        if (src >= 0) {
-                            for (int c = 0; c < C; ++c) g[c] = acc[std::size_t(l)][at + std::size_t(c)];
-                            for (std::uint64_t k = short_row[i]; k < short_row[i + 1]; ++k) {
-                                const ShortLink& s = short_links[k];
-                                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
-                                if (s.lag > 0) {
-                                    const float* h0 = ring_at(src, s.source, bin - s.lag);
-                                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
-                                } else {
-                                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
-                                }
-                            }
-                        }
-                        float b[3];
-                        for (int c = 0; c < C; ++c)
-                            b[c] = emit[std::size_t(l)][at + std::size_t(c)] + float(patches.albedo[i][c]) * g[c];
-                        float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                        for (int c = 0; c < C; ++c) keep[c] = b[c];
-                        store(l, i, bin, b);
-                    }
-                }
-                if (has_same_bin) {
-                    for (int iteration = 1; iteration <= 200; ++iteration) {
-#pragma omp single
-                        {
-                            jacobi_change = 0.0f;
-                            jacobi_largest = 0.0f;
-                        }
-#pragma omp for schedule(static) reduction(max : jacobi_change, jacobi_largest)
-                        for (std::size_t i = 0; i < n; ++i) {
-                            for (int l = 0; l < L; ++l) {
-                                const int src = plan.source[std::size_t(l)];
-                                const float* keep = base.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                                float* next = iterate.data() + (std::size_t(l) * n + i) * std::size_t(C);
-                                float g[3] = {0, 0, 0};
-                                if (src >= 0)
-                                    for (std::uint64_t k = same_row[i]; k < same_row[i + 1]; ++k) {
-                                        const float* h = ring_at(src, same_links[k].source, bin);
-                                        for (int c = 0; c < C; ++c) g[c] += same_links[k].w * h[c];
-                                    }
-                                const float* now = ring_at(l, i, bin);
-                                for (int c = 0; c < C; ++c) {
-                                    next[c] = keep[c] + float(patches.albedo[i][c]) * g[c];
-                                    jacobi_change = std::max(jacobi_change, std::abs(next[c] - now[c]));
-                                    jacobi_largest = std::max(jacobi_largest, std::abs(next[c]));
-                                }
-                            }
-                        }
-                        // Read the shared result before the barrier that ends the next loop, so that the
-                        // next iteration's reset cannot overtake a slow thread.
-                        const bool converged = jacobi_change <= 1e-7f * jacobi_largest;
-#pragma omp for schedule(static)
-                        for (std::size_t i = 0; i < n; ++i)
-                            for (int l = 0; l < L; ++l)
-                                store(l, i, bin, iterate.data() + (std::size_t(l) * n + i) * std::size_t(C));
-                        // Float resolution: further sweeps cannot change the stored values meaningfully.
-                        if (converged) {
-#pragma omp single
-                            {
-                                if (iteration > worst_iterations.load()) worst_iterations.store(iteration);
-                            }
-                            break;
-                        }
-                    }
-                }
-            }
-
-        }  // omp parallel
+            march.long_pass(b0);
+            if (omp_get_thread_num() == 0) long_seconds = lap(since);
+            march.short_pass(b0);
+        }
         stats.seconds_long += long_seconds;
         stats.seconds_short += lap(since);
-
-        // 3. Hand the block's bins inside the window to the sink.
-        const std::int64_t lo = std::max<std::int64_t>(b0, 0), hi = std::min<std::int64_t>(b0 + bt, T);
-        if (lo < hi) {
-            const int count = int(hi - lo);
-            auto put = [&](float* out, std::size_t i, int o, int c, float v) {
-                out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
-            };
-#pragma omp parallel for schedule(static) num_threads(threads)
-            for (std::size_t i = 0; i < n; ++i) {
-                for (int o = 0; o < count; ++o) {
-                    const std::int64_t bin = lo + o;
-                    float total[3] = {0, 0, 0};
-                    if (plan.total >= 0) {
-                        const float* v = ring_at(plan.total, i, bin);
-                        for (int c = 0; c < C; ++c) total[c] = v[c];
-                    } else {
-                        for (int l = 0; l < L; ++l) {
-                            const float* v = ring_at(l, i, bin);
-                            for (int c = 0; c < C; ++c) total[c] += v[c];
-                        }
-                    }
-                    for (int c = 0; c < 3; ++c) put(out_total.data(), i, o, c, total[C == 1 ? 0 : c]);
-                    for (int k = 0; k < plan.terms; ++k) {
-                        float* term = out_terms.data() + std::size_t(k) * n * std::size_t(count) * 3;
-                        float v[3] = {0, 0, 0};
-                        if (k < plan.exact) {
-                            const float* r = ring_at(k, i, bin);
-                            for (int c = 0; c < C; ++c) v[c] = r[c];
-                        } else {  // the tail: every order from k on
-                            for (int c = 0; c < C; ++c) v[c] = total[c];
-                            for (int l = 0; l < plan.exact; ++l) {
-                                const float* r = ring_at(l, i, bin);
-                                for (int c = 0; c < C; ++c) v[c] -= r[c];
-                            }
-                        }
-                        for (int c = 0; c < 3; ++c) put(term, i, o, c, v[C == 1 ? 0 : c]);
-                    }
-                }
-                // Pulses seen but not propagated (the laser spot) join the output only.
-                for (std::uint64_t k = emission.row[i]; k < emission.row[i + 1]; ++k) {
-                    const Pulse& p = emission.pulses[k];
-                    const std::int64_t b = pulse_bin(p);
-                    if (p.propagates || b < lo || b >= hi) continue;
-                    if (plan.total < 0 && p.order >= plan.exact) continue;  // beyond max_bounces
-                    const int o = int(b - lo);
-                    for (int c = 0; c < 3; ++c) {
-                        out_total[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] += float(p.energy[c]);
-                        if (plan.terms > 0) {
-                            const int term = std::min<int>(p.order, plan.terms - 1);
-                            out_terms[((std::size_t(term) * n + i) * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] +=
-                                float(p.energy[c]);
-                        }
-                    }
-                }
-            }
-            SolveBlock block;
-            block.first_bin = int(lo);
-            block.bins = count;
-            block.patches = n;
-            block.radiosity = out_total.data();
-            block.terms = plan.terms;
-            block.per_order = plan.terms > 0 ? out_terms.data() : nullptr;
-            if (sink) sink(block);
-        }
-        if (options.progress) options.progress("solve", double(blk + 1) / double(blocks));
+        march.emit_block(b0, sink);
+        if (options.progress) options.progress("solve", double(blk + 1) / double(plan.blocks));
         stats.seconds_sink += lap(since);
     }
-
-    stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(fed_layers) * std::uint64_t(blocks) * std::uint64_t(bt);
-    stats.max_jacobi_iterations = worst_iterations.load();
-    stats.short_links = short_links.size();
+    stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(plan.fed_layers) *
+                             std::uint64_t(plan.blocks) * std::uint64_t(plan.bt);
+    stats.max_jacobi_iterations = march.worst_jacobi_iterations();
+    stats.short_links = plan.short_links.size();
     return stats;
 }
 

@@ -86,7 +86,7 @@ struct generic_product_impl<tprf::SteadyOperator, Rhs, SparseShape, DenseShape, 
 
 namespace tprf {
 
-std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
+std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Illumination& emission,
                               int max_bounces) {
     const std::size_t n = patches.size();
     TPRF_CHECK_EQ(links.receivers(), n);

@@ -3,14 +3,15 @@
 /// steady image.
 
 #include "tprf/core/types.h"
+#include "tprf/core/time_axis.h"
 #include "tprf/scene/scene.h"
 
 #include <vector>
 
 namespace tprf {
 
-struct CameraGather;
-struct Emission;
+struct Gather;
+struct Illumination;
 struct SolveBlock;
 
 /// Accumulates radiance into a transient cube of shape (H, W, T, 3), pixel-major (each pixel's time
@@ -20,7 +21,7 @@ class TransientFilm {
 public:
     /// `order`: -1 for all orders; k >= 0 to film one per-order term (SolveBlock::per_order[k]), the
     /// last term holding every order >= k when `last_is_tail`.
-    TransientFilm(const CameraGather& gather, const Emission& emission, const TimeAxis& time, DelayMode delay,
+    TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time, DelayMode delay,
                   float* cube, int order = -1, bool last_is_tail = false, int threads = 0);
 
     /// Adds the exact direct-light arrivals (once).
@@ -31,9 +32,11 @@ public:
 
 private:
     bool takes_order(int order) const;
+    void copy_indirect(const SolveBlock& block);
+    void add_taps(std::size_t pixel, int first_bin, std::size_t bins);
 
-    const CameraGather& m_gather;
-    const Emission& m_emission;
+    const Gather& m_gather;
+    const Illumination& m_illumination;
     TimeAxis m_time;
     DelayMode m_delay;
     float* m_cube;
@@ -45,6 +48,6 @@ private:
 
 /// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same
 /// taps and exact direct light, without time.
-std::vector<float> steady_image(const CameraGather& gather, const Emission& emission, const std::vector<Rgb>& steady);
+std::vector<float> steady_image(const Gather& gather, const Illumination& illumination, const std::vector<Rgb>& steady);
 
 }  // namespace tprf

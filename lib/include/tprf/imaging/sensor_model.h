@@ -14,7 +14,6 @@
 
 #include <array>
 #include <cstdint>
-#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -60,9 +59,24 @@ void apply_sensor(const SensorSettings& sensor, const TimeAxis& time, const floa
 /// beside the camera), in [0, c / (2 f)); 0 when the measurements carry no modulation.
 double amcw_depth(const SensorSettings& sensor, const float* measurements /* K x 3 */);
 
-/// A PNG for one pixel, like the paper's figures 5 to 7: its TPRF, the TPRF convolved with the
-/// pulse, and its measurements (channel mean).
-void write_sensor_plot(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,
-                       const float* profile /* T x 3 */, const float* measurements /* K x 3 */, int x, int y);
+/// What sensor_plot.png shows for one pixel, like the paper's figures 5 to 7 (channel means): its TPRF,
+/// the TPRF convolved with the pulse, and its measurements. Times in the scene's time unit.
+struct SensorPlot {
+    int x = 0, y = 0;                       ///< the pixel: column, row
+    std::string exposure;                   ///< gates, windows, amcw or spad
+    std::string time_unit;                  ///< m or ps
+    double start = 0.0, end = 0.0;          ///< the render's time window
+    std::vector<double> tprf_edges;         ///< T + 1 bin edges
+    std::vector<double> tprf;               ///< T: the TPRF as energy per unit time (radiance s per time unit)
+    std::vector<double> convolved_time;     ///< bin centres of the TPRF convolved with the pulse (beyond the
+                                            ///< window where the pulse reaches)
+    std::vector<double> convolved;          ///< its energy per unit time, as tprf
+    std::vector<double> measurement_at;     ///< K: a gate's or window's centre, a phase (degrees), a SPAD bin's start
+    std::vector<double> measurements;       ///< K: the measurements (for a SPAD, photon counts per bin)
+};
+
+/// The data of sensor_plot.png for pixel (x, y): its profile (T x 3) and its measurements (K x 3).
+SensorPlot sensor_plot(const SensorSettings& sensor, const TimeAxis& time, const float* profile /* T x 3 */,
+                       const float* measurements /* K x 3 */, int x, int y);
 
 }  // namespace tprf

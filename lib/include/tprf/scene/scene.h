@@ -19,8 +19,8 @@ namespace tprf {
 /// Pinhole camera (SPEC: vertical fov in degrees, row 0 at the top).
 struct Camera {
     Vec3 position = Vec3::Zero();   ///< metres
-    Vec3 look_at = Vec3::UnitX();   ///< metres
-    Vec3 up = Vec3::UnitZ();        ///< not parallel to look_at - position
+    Vec3 look_at = Vec3::UnitX();   ///< metres, != position
+    Vec3 up = Vec3::UnitZ();        ///< non-zero, not parallel to look_at - position
     double fov_deg = 40.0;          ///< vertical field of view, (0, 180)
     int width = 0;                  ///< pixels, > 0
     int height = 0;                 ///< pixels, > 0
@@ -37,7 +37,7 @@ struct PointLight {
 /// Laser: deposits `power` at the first surface point it hits.
 struct Laser {
     Vec3 origin = Vec3::Zero();     ///< metres
-    Vec3 direction = Vec3::UnitX(); ///< unit vector (from `direction`, or normalize(target - origin))
+    Vec3 direction = Vec3::UnitX(); ///< unit vector, within 1e-9 (from `direction`, or normalize(target - origin))
     Rgb power = Rgb::Zero();        ///< W per channel, >= 0
 };
 
@@ -46,14 +46,16 @@ using Light = std::variant<PointLight, Laser>;
 /// A rectangle with corners origin, origin+u, origin+u+v, origin+v; front normal normalize(u x v).
 struct RectangleShape {
     Vec3 origin = Vec3::Zero();
-    Vec3 u = Vec3::UnitX();
-    Vec3 v = Vec3::UnitY();
+    Vec3 u = Vec3::UnitX();         ///< metres, non-zero
+    Vec3 v = Vec3::UnitY();         ///< metres, non-zero, not parallel to u
 };
 
 /// A mesh file read through OpenMesh, with its transform (scale, then rotate, then translate).
 struct MeshShape {
-    std::filesystem::path file;                          ///< absolute, or relative to the working directory
-    Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< affine, maps file coordinates to metres
+    std::filesystem::path file;                          ///< absolute, or relative to the working directory; readable
+    /// Affine (last row 0 0 0 1) and not singular: maps file coordinates to metres. Messages name it as
+    /// the scene file's `transform.matrix`.
+    Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();
 };
 
 /// One entry of `objects`.
@@ -62,7 +64,7 @@ struct Object {
     Rgb albedo = Rgb::Constant(0.5);   ///< Lambertian reflectance per channel, in [0, 1]
     Rgb emission = Rgb::Zero();        ///< radiance L_e, W/(m^2 sr), from the front side, >= 0
     bool two_sided = false;
-    std::string json_path;             ///< e.g. "objects[2]", for later error messages
+    std::string json_path;             ///< e.g. "objects[2]", for error messages; "" means objects[its index]
 };
 
 /// How a delay that falls between two bins is placed.
@@ -70,21 +72,24 @@ enum class DelayMode { Nearest, Linear };
 
 /// The optional `solver` block.
 struct SolverSettings {
-    int max_bounces = -1;               ///< -1: every bounce that arrives inside the window
+    int max_bounces = -1;               ///< >= 0, or -1: every bounce that arrives inside the window
     DelayMode delay = DelayMode::Linear;
     bool bounces = false;               ///< also write the per-bounce terms
 };
 
-/// A validated scene.
+/// A scene. Whatever builds one (a parser, a test, a binding) calls validate() (scene/validate.h)
+/// before handing it to a later stage; each field's comment says what validate() requires, and every
+/// number must be finite. Messages name the scene file's JSON paths: `time`, `camera`, `lights[i]`,
+/// an object's json_path, `patches.max_edge`, `solver.max_bounces`, the sensor's json_path.
 struct Scene {
     std::filesystem::path file;         ///< the scene file (for messages and relative paths)
     TimeAxis time;
     std::optional<Camera> camera;
     std::vector<Light> lights;
     std::vector<Object> objects;
-    double max_edge = 0.0;              ///< patches.max_edge, metres; 0 when absent (build_patches picks one)
+    double max_edge = 0.0;              ///< patches.max_edge, metres, > 0; 0 when absent (build_patches picks one)
     SolverSettings solver;
-    std::optional<SensorSettings> sensor;  ///< the optional `sensor` block
+    std::optional<SensorSettings> sensor;  ///< the optional `sensor` block (named "sensor" when its json_path is "")
 };
 
 }  // namespace tprf

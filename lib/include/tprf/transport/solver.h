@@ -19,7 +19,7 @@ namespace tprf {
 
 struct PatchSet;
 struct Links;
-struct Emission;
+struct Illumination;
 
 /// Options of the transient solve.
 struct SolverOptions {
@@ -63,7 +63,7 @@ struct SolveStats {
 };
 
 /// Marches over the scene's time axis and hands every block of final bins to `sink`.
-SolveStats solve_transient(const PatchSet& patches, const Links& links, const Emission& emission,
+SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& emission,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
 
 }  // namespace tprf

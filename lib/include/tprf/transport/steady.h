@@ -9,14 +9,14 @@ namespace tprf {
 
 struct PatchSet;
 struct Links;
-struct Emission;
+struct Illumination;
 
 /// Solves (I - diag(albedo) F) B = E for every channel with BiCGSTAB (Eigen) to a relative residual
 /// below 1e-8, where E is each patch's time-integrated propagating emission; pulses that do not
 /// propagate (the laser spot) are added afterwards. With max_bounces >= 0, sums the Neumann series
 /// up to that order instead. Returns N radiosities, W/m^2: by linearity, the sum over time of the
 /// transient radiosity when the window holds all the light.
-std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Emission& emission,
+std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Illumination& emission,
                               int max_bounces = -1);
 
 }  // namespace tprf

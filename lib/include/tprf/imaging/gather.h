@@ -1,0 +1,67 @@
+#pragma once
+/// The gather: what each sensing point sees, as taps on the patch profiles and exact direct arrivals.
+///
+/// Light of later bounces comes from the patch profiles, interpolated at the point between the
+/// neighbouring patches of the same surface (a smooth compact kernel over the centroids FLANN finds
+/// near it), and shifted by the exact last leg. Direct light of point sources (point lights, laser
+/// spots) is evaluated exactly at the point by the same arrive() that lights the patches
+/// (transport/light_sources.h), with shadow rays and its exact path, so first arrivals are sharp; the
+/// film leaves the matching patch pulses (Pulse::point_source) out of the profiles, so that nothing
+/// is counted twice.
+
+#include "tprf/core/progress.h"
+#include "tprf/core/types.h"
+#include "tprf/imaging/sensing_points.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace tprf {
+
+struct PatchSet;
+struct LightSources;
+class Visibility;
+
+/// One patch's share of one output: radiance = weight * B_patch (t - leg), weight including 1/pi,
+/// the interpolation weight and the point's weight.
+struct PixelTap {
+    std::uint32_t patch = 0;
+    float weight = 0.0f;
+    float leg = 0.0f;   ///< metres of optical path added (0 with camera.unwarp)
+    /// Earliest path at which any light can reach the sensor through this point (the straight
+    /// line from the nearest source to the point, plus the leg), metres. A patch profile is an
+    /// average over its patch, so its leading edge can run a few patch sizes ahead of what reaches
+    /// this very point; the film moves such light to this bound instead of showing light before it
+    /// could have arrived.
+    float earliest = 0.0f;
+};
+
+/// An exact direct-light arrival at one output: radiance times one second, at an exact path.
+struct DirectArrival {
+    std::uint32_t pixel = 0;    ///< the output (row * width + column for a camera)
+    double path = 0.0;          ///< whole optical path, metres (the last leg left out when unwarped)
+    Rgb radiance = Rgb::Zero(); ///< W s / (m^2 sr), already weighted by the point's share
+    std::uint8_t order = 1;     ///< bounce order (1: point light; 2: lit by the laser point)
+};
+
+/// Everything the film needs to turn patch profiles into outputs.
+struct Gather {
+    int width = 0;                         ///< outputs = width * height (a camera's image size)
+    int height = 0;
+    std::vector<std::uint64_t> row;        ///< outputs + 1 offsets into `taps`
+    std::vector<PixelTap> taps;
+    std::vector<DirectArrival> direct;     ///< sorted by output
+};
+
+/// Options of the gather.
+struct GatherOptions {
+    int threads = 0;        ///< 0: all cores
+    ProgressFn progress;    ///< phase "camera"
+};
+
+/// Prepares the gather of `points` (outputs laid out as width x height). Outputs without points
+/// get no taps and stay zero.
+Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
+                     const LightSources& sources, const Visibility& visibility, const GatherOptions& options = {});
+
+}  // namespace tprf

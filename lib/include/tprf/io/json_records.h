@@ -1,0 +1,49 @@
+#pragma once
+/// The JSON records of an output directory: render.json (what a render did, SPEC.md "Output
+/// directory") and sensor.json (what each sensor measurement is, docs/sensor.md). Both appear
+/// atomically under their final name. The JSON library stays inside this file's source.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/scene/scene.h"
+#include "tprf/scene/sensor_settings.h"
+#include "tprf/transport/solver.h"
+
+#include <array>
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+namespace tprf {
+
+/// Seconds spent in each phase of a render (render.json's `seconds`).
+struct PhaseSeconds {
+    double load = 0, patches = 0, links = 0, solve = 0, gather = 0, write = 0, total = 0;
+};
+
+/// Everything render.json records.
+struct RenderRecord {
+    std::filesystem::path scene_file;
+    std::size_t patches = 0;
+    std::size_t links = 0;
+    TimeAxis time;
+    Camera camera;
+    SolverSettings solver;
+    int bounce_terms = 0;
+    SolveStats stats;
+    PhaseSeconds seconds;
+    std::optional<ExposureType> sensor;   ///< the sensor block's exposure, if the scene has one
+    int measurements = 0;                 ///< the sensor's measurements per pixel and channel
+    double peak_rss_mb = 0.0;
+    int dropped_degenerate = 0;
+};
+
+/// Writes render.json.
+void write_render_json(const std::filesystem::path& path, const RenderRecord& record);
+
+/// Writes sensor.json: the exposure, K, what each measurement k is (a window [start, width], a phase
+/// in degrees or a histogram bin's start), the noise or SPAD settings and the plotted pixel.
+void write_sensor_json(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,
+                       int measurements, std::array<int, 2> plot_pixel);
+
+}  // namespace tprf

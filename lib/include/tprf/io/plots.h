@@ -1,0 +1,39 @@
+#pragma once
+/// Figures are drawn by python/tprf_plots.py with matplotlib, in a child process: the library writes
+/// a figure's data (JSON or CSV) and hands it to the script; it renders no fonts itself.
+///
+/// The script is $TPRF_PLOT_SCRIPT when that is set; else the copy that `cmake --install` put beside
+/// the running program (PREFIX/bin/tprf, PREFIX/share/tprf/tprf_plots.py), so that an installed tprf
+/// uses its own; else the copy in the source tree this library was built from (a build tree); else
+/// PREFIX/share/tprf/tprf_plots.py for the prefix configured at build time. The Python is $TPRF_PYTHON
+/// when that is set (a path, or a name looked up on the PATH); else the first `python3` along the
+/// PATH that can import matplotlib and numpy (a pyenv shim first on the PATH without them is passed
+/// over for the system's /usr/bin/python3, say).
+
+#include "tprf/imaging/sensor_model.h"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tprf {
+
+/// Writes the data of sensor_plot.png as JSON, atomically (docs/sensor.md, "Outputs", lists the keys):
+/// what `tprf_plots.py sensor DATA.json OUT.png` draws. Non-finite values are written as null.
+void write_sensor_plot_json(const std::filesystem::path& path, const SensorPlot& plot);
+
+/// The path of python/tprf_plots.py, as described above (the configured install path when no copy exists).
+std::filesystem::path plot_script();
+
+/// Runs `PYTHON plot_script() ARGS...` (no shell) and waits for it, trying the Pythons described
+/// above in turn. Returns true when the script drew its figure; false when no Python could import
+/// matplotlib and numpy (the script exits with status 3 then) or none could be started.
+/// Throws tprf::Error when the script fails otherwise (bad data, an unwritable output), with the
+/// last line the script wrote to stderr.
+bool run_plot_script(const std::vector<std::string>& args);
+
+/// One line for the user when run_plot_script returned false: that `png` was not drawn, how to install
+/// matplotlib, and the command that draws it later (`python3 SCRIPT ARGS...`, quoted for a POSIX shell).
+std::string plot_not_drawn_message(const std::filesystem::path& png, const std::vector<std::string>& args);
+
+}  // namespace tprf

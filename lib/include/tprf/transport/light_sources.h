@@ -1,0 +1,79 @@
+#pragma once
+/// The light sources of a scene in one description, shared by every stage that needs direct light:
+/// the illumination of the patches (transport/illumination.h) and the exact direct light at sensing
+/// points (imaging/gather.h) evaluate the same point sources through the same function.
+///
+/// A point light is a point source; a laser becomes the spot it hits, which sends the light it
+/// reflects on as a Lambertian point (its own patch is lit by the spot's power directly). Emissive
+/// patches are area sources: their light enters through the links' exact form factors.
+
+#include "tprf/core/types.h"
+
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace tprf {
+
+struct Scene;
+struct PatchSet;
+class Visibility;
+
+/// No patch.
+inline constexpr std::uint32_t kNoPatch = std::numeric_limits<std::uint32_t>::max();
+
+/// A point that sends light in all directions of a hemisphere or sphere.
+struct PointSource {
+    Vec3 position = Vec3::Zero();   ///< where shadow rays end, metres (a laser spot: lifted off its surface)
+    Vec3 origin = Vec3::Zero();     ///< the true point, metres (for the earliest-arrival bound)
+    double path = 0.0;              ///< optical path travelled before light leaves it, metres
+    Rgb intensity = Rgb::Zero();    ///< W/sr per channel: isotropic, or the peak of a cosine lobe
+    Vec3 lobe = Vec3::Zero();       ///< zero: isotropic; else the unit normal of a Lambertian lobe
+    std::uint32_t patch = kNoPatch; ///< the patch it lies on, which it does not light
+    std::uint8_t order = 1;         ///< bounce order of the light it delivers (1: point light, 2: laser spot)
+
+    /// Radiant intensity towards the unit direction `dir`, W/sr.
+    Rgb intensity_towards(const Vec3& dir) const;
+};
+
+/// The hit point of a laser, if it hits a front side.
+struct LaserSpot {
+    bool hit = false;
+    std::uint32_t patch = 0;
+    Vec3 point = Vec3::Zero();  ///< metres
+    double path = 0.0;          ///< |origin - point|, metres
+    Rgb power = Rgb::Zero();    ///< the laser's power, W per channel
+};
+
+/// Every source of a scene.
+struct LightSources {
+    std::vector<PointSource> points;     ///< point lights (scene order), then the lasers' spots
+    std::vector<LaserSpot> spots;        ///< one per laser, in scene order (hit or not)
+    std::vector<std::uint32_t> emissive; ///< patches with emission > 0
+};
+
+/// Where a laser's ray first meets the scene (a back side absorbs: hit stays false).
+LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visibility& visibility);
+
+/// Collects the scene's sources over its patches (lasers traced to their spots).
+LightSources light_sources(const Scene& scene, const PatchSet& patches, const Visibility& visibility);
+
+/// Direct light of a point source at a surface point, before the surface's albedo.
+struct PointArrival {
+    double path = 0.0;              ///< the source's path plus the straight leg to the point, metres
+    Rgb intensity = Rgb::Zero();    ///< W/sr towards the point
+    double cos_over_r2 = 0.0;       ///< cos(theta at the point) / r^2, m^-2
+
+    /// The exitance the point reflects (albedo times irradiance), W/m^2 per channel.
+    Rgb reflected(const Rgb& albedo) const { return albedo * intensity * cos_over_r2; }
+};
+
+/// Light of `source` reaching the point x with unit normal n on its front side, with a shadow ray from
+/// x (lifted along n) to the source. False when x is behind, unlit, or in shadow.
+bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visibility& visibility,
+            PointArrival& out);
+
+/// The shortest optical path by which any light of `sources` can reach x, metres (0 without sources).
+double earliest_path(const LightSources& sources, const PatchSet& patches, const Vec3& x);
+
+}  // namespace tprf

@@ -1,0 +1,137 @@
+#include "tprf/imaging/gather.h"
+
+#include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/transport/light_sources.h"
+
+#include <flann/flann.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace tprf {
+namespace {
+
+// Patches whose centroids lie near each point: one batched radius search wide enough for the largest
+// kernel; each point's own support (twice its patch's circumradius) is applied by its caller.
+struct Neighbours {
+    std::vector<std::vector<std::size_t>> index;
+    std::vector<std::vector<double>> distance2;
+};
+
+Neighbours find_neighbours(const SensingPoints& points, const PatchSet& patches, const std::vector<double>& radius,
+                           int threads) {
+    Neighbours found;
+    const std::vector<SensingPoint>& pts = points.points;
+    if (pts.empty()) return found;
+    const std::size_t n = patches.size();
+    std::vector<double> xyz(3 * n), queries(3 * pts.size());
+    for (std::size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = patches.centroid[i][k];
+    for (std::size_t h = 0; h < pts.size(); ++h)
+        for (int k = 0; k < 3; ++k) queries[3 * h + std::size_t(k)] = pts[h].point[k];
+    flann::Matrix<double> centroids(xyz.data(), n, 3), query(queries.data(), pts.size(), 3);
+    flann::Index<flann::L2_Simple<double>> tree(centroids, flann::KDTreeSingleIndexParams(12));
+    tree.buildIndex();
+    double support = 0.0;
+    for (const SensingPoint& p : pts) support = std::max(support, 2.0 * radius[p.patch]);
+    flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
+    params.cores = thread_count(threads);
+    tree.radiusSearch(query, found.index, found.distance2, float(support * support), params);
+    return found;
+}
+
+// Interpolation weights at a point on patch p: a smooth compact kernel (1 - (d/support)^2)^2 over the
+// patches of the same surface, so that the profile varies continuously across patch borders and no
+// faceting shows. Normalised; the patch alone when no neighbour is inside the support.
+std::vector<std::pair<std::uint32_t, double>> kernel_weights(const PatchSet& patches, std::uint32_t p, double radius,
+                                                             const std::vector<std::size_t>& near,
+                                                             const std::vector<double>& near_d2) {
+    const double support = 2.0 * radius;
+    const Vec3& np = patches.normal[p];
+    std::vector<std::pair<std::uint32_t, double>> weights;
+    double total = 0.0;
+    for (std::size_t k = 0; k < near.size(); ++k) {
+        const std::size_t q = near[k];
+        if (patches.object[q] != patches.object[p] || patches.normal[q].dot(np) < 0.7) continue;
+        const double u = near_d2[k] / (support * support);
+        if (u >= 1.0) continue;
+        const double w = (1 - u) * (1 - u);
+        weights.emplace_back(std::uint32_t(q), w);
+        total += w;
+    }
+    if (total <= 0.0) return {{p, 1.0}};
+    for (auto& w : weights) w.second /= total;
+    return weights;
+}
+
+// Exact direct light of every point source at the sensing point, seen along its leg.
+void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patches, const LightSources& sources,
+                     const Visibility& vis, std::vector<DirectArrival>& out) {
+    const Rgb& albedo = patches.albedo[sp.patch];
+    for (const PointSource& source : sources.points) {
+        if (source.patch == sp.patch) continue;
+        PointArrival a;
+        if (!arrive(source, sp.point, patches.normal[sp.patch], vis, a)) continue;
+        out.push_back({sp.output, a.path + sp.leg, a.reflected(albedo) * (weight / M_PI), source.order});
+    }
+}
+
+// Per-output lists in a fixed order (their filling order follows the threads), as one CSR.
+Gather assemble(int width, int height, std::vector<std::vector<PixelTap>>& taps,
+                std::vector<std::vector<DirectArrival>>& direct) {
+    Gather g;
+    g.width = width;
+    g.height = height;
+    const std::size_t outputs = taps.size();
+    g.row.assign(outputs + 1, 0);
+    for (std::size_t px = 0; px < outputs; ++px) {
+        std::sort(taps[px].begin(), taps[px].end(), [](const PixelTap& a, const PixelTap& b) {
+            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
+        });
+        std::sort(direct[px].begin(), direct[px].end(), [](const DirectArrival& a, const DirectArrival& b) {
+            return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+        });
+        g.row[px + 1] = g.row[px] + taps[px].size();
+    }
+    g.taps.reserve(g.row[outputs]);
+    for (auto& t : taps) g.taps.insert(g.taps.end(), t.begin(), t.end());
+    for (auto& d : direct) g.direct.insert(g.direct.end(), d.begin(), d.end());
+    return g;
+}
+
+}  // namespace
+
+Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
+                     const LightSources& sources, const Visibility& vis, const GatherOptions& options) {
+    const std::size_t n = patches.size();
+    std::vector<double> radius(n);
+    for (std::size_t i = 0; i < n; ++i) radius[i] = circumradius(patches, i);
+    const Neighbours near = find_neighbours(points, patches, radius, options.threads);
+    if (options.progress) options.progress("camera", 0.6);
+
+    const std::vector<SensingPoint>& pts = points.points;
+    std::vector<std::vector<PixelTap>> per_point_taps(pts.size());
+    std::vector<std::vector<DirectArrival>> per_point_direct(pts.size());
+    const double weight = points.weight;
+    parallel_for(pts.size(), {options.threads, 256, true}, [&](std::size_t h) {
+        const SensingPoint& sp = pts[h];
+        const float earliest = float(earliest_path(sources, patches, sp.point)) + sp.leg;
+        for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
+            per_point_taps[h].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
+        direct_arrivals(sp, weight, patches, sources, vis, per_point_direct[h]);
+    });
+    std::vector<std::vector<PixelTap>> taps(points.outputs);
+    std::vector<std::vector<DirectArrival>> direct(points.outputs);
+    for (std::size_t h = 0; h < pts.size(); ++h) {
+        const std::uint32_t o = pts[h].output;
+        taps[o].insert(taps[o].end(), per_point_taps[h].begin(), per_point_taps[h].end());
+        direct[o].insert(direct[o].end(), per_point_direct[h].begin(), per_point_direct[h].end());
+    }
+    Gather g = assemble(width, height, taps, direct);
+    if (options.progress) options.progress("camera", 1.0);
+    return g;
+}
+
+}  // namespace tprf

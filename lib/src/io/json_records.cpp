@@ -1,0 +1,79 @@
+#include "tprf/io/json_records.h"
+
+#include "tprf/io/atomic_file.h"
+
+#include <nlohmann/json.hpp>
+
+namespace tprf {
+namespace {
+
+const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
+
+// What the k-th measurement is.
+nlohmann::json measurement_axis(const SensorSettings& s, const TimeAxis& time, int K) {
+    nlohmann::json axis = nlohmann::json::array();
+    for (int k = 0; k < K; ++k) {
+        switch (s.exposure.type) {
+            case ExposureType::Gates:
+            case ExposureType::Windows: axis.push_back(s.exposure.windows[std::size_t(k)]); break;
+            case ExposureType::Amcw: axis.push_back(s.exposure.phases_deg[std::size_t(k)]); break;
+            case ExposureType::Spad: axis.push_back(time.start + k * time.bin_width); break;
+        }
+    }
+    return axis;
+}
+
+nlohmann::json solver_json(const RenderRecord& r) {
+    return {{"delay", r.solver.delay == DelayMode::Linear ? "linear" : "nearest"},
+            {"max_bounces", r.solver.max_bounces},
+            {"bounce_terms", r.bounce_terms},
+            {"channels", r.stats.channels},
+            {"block_bins", r.stats.block_bins},
+            {"ring_bins", r.stats.ring_bins},
+            {"working_mb", double(r.stats.working_bytes) / 1e6},
+            {"link_bin_updates", r.stats.link_bin_updates}};
+}
+
+nlohmann::json seconds_json(const PhaseSeconds& s) {
+    return {{"load", s.load},     {"patches", s.patches}, {"links", s.links}, {"solve", s.solve},
+            {"gather", s.gather}, {"write", s.write},     {"total", s.total}};
+}
+
+}  // namespace
+
+void write_render_json(const std::filesystem::path& path, const RenderRecord& r) {
+    nlohmann::json j;
+    j["version"] = TPRF_VERSION;
+    j["scene"] = r.scene_file.string();
+    j["patches"] = r.patches;
+    j["links"] = r.links;
+    j["bins"] = r.time.bins;
+    j["time"] = {{"bins", r.time.bins}, {"bin_width", r.time.bin_width}, {"start", r.time.start},
+                 {"unit", unit_name(r.time.unit)}};
+    j["camera"] = {{"width", r.camera.width}, {"height", r.camera.height}, {"spp", r.camera.spp},
+                   {"unwarp", r.camera.unwarp}};
+    j["solver"] = solver_json(r);
+    j["seconds"] = seconds_json(r.seconds);
+    if (r.sensor) j["sensor"] = {{"exposure", exposure_name(*r.sensor)}, {"measurements", r.measurements}};
+    j["peak_rss_mb"] = r.peak_rss_mb;
+    j["dropped_degenerate_faces"] = r.dropped_degenerate;
+    write_text_file(path, j.dump(2) + "\n");
+}
+
+void write_sensor_json(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,
+                       int K, std::array<int, 2> plot_pixel) {
+    nlohmann::json j;
+    j["exposure"] = exposure_name(sensor.exposure.type);
+    j["measurements"] = K;
+    j["axis"] = measurement_axis(sensor, time, K);
+    j["clamp"] = sensor.clamp;
+    if (sensor.exposure.type == ExposureType::Spad)
+        j["spad"] = {{"photons", sensor.exposure.photons}, {"jitter_fwhm", sensor.exposure.jitter_fwhm},
+                     {"dark_rate", sensor.exposure.dark_rate}, {"seed", sensor.exposure.seed}};
+    else
+        j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
+    j["plot_pixel"] = plot_pixel;
+    write_text_file(path, j.dump(2) + "\n");
+}
+
+}  // namespace tprf

@@ -1,0 +1,64 @@
+#pragma once
+// Private to the pipeline: the staging folder that makes a run's outputs appear all at once, and the
+// steps that `tprf render` and `tprf sensor` share.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/scene/sensor_settings.h"
+
+#include <array>
+#include <chrono>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tprf {
+
+/// Outputs are written into a hidden staging folder inside the output directory, then moved into
+/// place one by one once every one of them is complete; on failure the folder is removed.
+class Staging {
+public:
+    explicit Staging(const std::filesystem::path& out);
+    ~Staging();
+    Staging(const Staging&) = delete;
+    Staging& operator=(const Staging&) = delete;
+
+    /// The staging path of output `name` (a file or a folder), recorded as written.
+    std::filesystem::path path(const std::string& name);
+
+    /// Drops output `name` (not written after all).
+    void forget(const std::string& name);
+    /// Where output `name` will be once published.
+    std::filesystem::path final_path(const std::string& name) const { return m_out / name; }
+
+    /// Moves every staged output into place, then, when the directory held an earlier render, removes
+    /// that run's outputs that this one did not write (`owned`: names, or prefixes ending in '*'), so
+    /// that the directory never mixes two runs (a depth.npy of an earlier AMCW sensor beside gated
+    /// measurements, say).
+    void publish(const std::vector<std::string>& owned);
+    /// The outputs written, relative to the output directory.
+    const std::vector<std::string>& names() const { return m_names; }
+
+private:
+    std::filesystem::path m_out, m_dir;
+    std::vector<std::string> m_names;
+    bool m_earlier_run = false;
+};
+
+/// What a sensor run writes (SPEC.md, "Output directory"; docs/sensor.md).
+const std::vector<std::string>& sensor_outputs();
+
+/// The plot pixel: the image centre by default; one outside the image is a bad flag.
+std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, int width, int height);
+
+/// measurements.npy, depth.npy (amcw), sensor.json, sensor_plot.json and sensor_plot.png: what a sensor
+/// block turns a cube (H, W, T, 3) into. Returns K. When no Python with matplotlib can draw the plot,
+/// the data is still written and `warnings` gets a line saying how to draw it.
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
+                         int height, int width, std::array<int, 2> pixel, int threads,
+                         std::vector<std::string>& warnings);
+
+/// Seconds from `start` to now.
+double seconds_since(std::chrono::steady_clock::time_point start);
+
+}  // namespace tprf
