@@ -236,15 +236,32 @@ TEST(Scene, AbsoluteMeshPathIsKept) {
 TEST(Scene, UnreadableMeshFileIsAnError) {
     TempDir dir;
     const fs::path mesh = dir.path / "meshes" / "tri.obj";
-    fs::permissions(mesh, fs::perms::none);
-    // Permissions do not stop root (as in many containers), so the case can only be checked elsewhere.
-    if (std::ifstream(mesh)) GTEST_SKIP() << "running with privileges that ignore file permissions";
+    // Permission bits do not stop root (CI runs as root), but a write-only sysctl file cannot be read
+    // by anyone: the mesh path becomes a link to it.
+    const fs::path unreadable = "/proc/sys/vm/drop_caches";
+    if (!fs::exists(unreadable) || std::ifstream(unreadable)) GTEST_SKIP() << unreadable << " is missing or readable here";
+    fs::remove(mesh);
+    fs::create_symlink(unreadable, mesh);
     try {
         tprf::parse_scene(spec_scene().dump(), dir.path / "scene.json");
         FAIL() << "expected tprf::Error";
     } catch (const tprf::Error& e) {
         EXPECT_NE(std::string(e.what()).find("objects[1].file: cannot read mesh file"), std::string::npos)
             << e.what();
+    }
+}
+
+TEST(Scene, MeshPathThatIsAFolderIsAnError) {
+    TempDir dir;
+    const fs::path mesh = dir.path / "meshes" / "tri.obj";
+    fs::remove(mesh);
+    fs::create_directory(mesh);
+    try {
+        tprf::parse_scene(spec_scene().dump(), dir.path / "scene.json");
+        FAIL() << "expected tprf::Error";
+    } catch (const tprf::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("objects[1].file: "), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("is not a regular file"), std::string::npos) << e.what();
     }
 }
 
