@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 
 packages=(build-essential cmake pkg-config libopenmesh-dev libeigen3-dev libopenexr-dev libflann-dev
-          liblz4-dev libembree-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev libgmock-dev
+          libembree-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev libgmock-dev
           libbenchmark-dev libpng-dev python3-matplotlib python3-numpy python3-pytest)
 missing=()
 for p in "${packages[@]}"; do
