@@ -421,9 +421,10 @@ bool draw_scaling(const fs::path& harness, const fs::path& accuracy, const fs::p
     const std::vector<std::string> args = {"scaling", harness.string(), accuracy.string(), png.string(),
                                            "--bin-width", general(p.bin_width), "--accuracy-bins",
                                            std::to_string(p.accuracy_bins)};
-    if (tprf::run_plot_script(args)) return true;
+    std::string failure;
+    if (tprf::run_plot_script(args, &failure)) return true;
     fs::remove(png);
-    std::fprintf(stderr, "tprf_harness: %s\n", tprf::plot_not_drawn_message(png, args).c_str());
+    std::fprintf(stderr, "tprf_harness: %s\n", tprf::plot_not_drawn_message(png, args, failure).c_str());
     return false;
 }
 

@@ -312,10 +312,19 @@ TEST(Solver, OneAndTwoThreadsGiveIdenticalProfiles) {
     SolverOptions one, two;
     one.threads = 1;
     two.threads = 2;
-    // Short blocks and fine bins exercise long links, short links and the same-bin iteration.
+    // Short blocks and fine bins exercise long links and short links (the nearest centroids are
+    // 0.14 m apart: 7 bins, so no link falls within one bin here).
     one.block_bins = two.block_bins = 8;
     const Profiles a = solve(p, time_axis(300, 0.02), one), b = solve(p, time_axis(300, 0.02), two);
+    EXPECT_GT(a.stats.short_links, 0u);
     EXPECT_EQ(a.total, b.total);
+    // Bins of 0.25 m put every link between neighbouring squares (0.14 m to 0.2 m apart) within one
+    // bin: the same-bin Jacobi iteration, whose max-reduction is shared by the threads, must run
+    // (more than one sweep) and give the same profiles for one and two threads.
+    const Profiles c = solve(p, time_axis(40, 0.25), one), d = solve(p, time_axis(40, 0.25), two);
+    EXPECT_GT(c.stats.max_jacobi_iterations, 1);
+    EXPECT_EQ(c.stats.max_jacobi_iterations, d.stats.max_jacobi_iterations);
+    EXPECT_EQ(c.total, d.total);
 }
 
 TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {

@@ -3,6 +3,7 @@
 #include "tprf/core/random.h"
 
 #include <array>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -91,5 +92,9 @@ double Random::poisson(double mean) {
         if (std::log(v) + log_alpha - std::log(a / (us * us) + b) <= log_poisson_pmf(k, mean, log_mean)) return k;
     }
 }
+
+double Random::add_normal(double v, double sigma) { return v + sigma * normal(); }
+
+double expected_counts(double photons, double signal, double dark) { return photons * std::max(0.0, signal) + dark; }
 
 }  // namespace tprf

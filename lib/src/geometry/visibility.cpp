@@ -28,8 +28,11 @@ struct EmbreeErrors {
 void embree_error(void* user, RTCError code, const char* message) {
     if (code == RTC_ERROR_NONE) return;
     auto* errors = static_cast<EmbreeErrors*>(user);
-    std::lock_guard<std::mutex> lock(errors->mutex);
-    if (errors->first.empty()) errors->first = std::string("Embree: ") + (message ? message : "unknown error");
+    try {
+        std::lock_guard<std::mutex> lock(errors->mutex);
+        if (errors->first.empty()) errors->first = std::string("Embree: ") + (message ? message : "unknown error");
+    } catch (...) {  // no memory left even for the message: the builder still sees that it failed
+    }
 }
 
 // Two-sided objects give each polygon twice with opposite normals; Embree returns either copy, so a

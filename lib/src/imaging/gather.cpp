@@ -1,11 +1,12 @@
 #include "tprf/imaging/gather.h"
 
+#include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
+#include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/transport/light_sources.h"
 
-#include <flann/flann.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -13,33 +14,17 @@
 namespace tprf {
 namespace {
 
-// Patches whose centroids lie near each point: one batched radius search wide enough for the largest
-// kernel; each point's own support (twice its patch's circumradius) is applied by its caller.
-struct Neighbours {
-    std::vector<std::vector<std::size_t>> index;
-    std::vector<std::vector<double>> distance2;
-};
-
+// Patches whose centroids lie near each point: one search wide enough for the largest kernel; each
+// point's own support (twice its patch's circumradius) is applied by kernel_weights.
 Neighbours find_neighbours(const SensingPoints& points, const PatchSet& patches, const std::vector<double>& radius,
                            int threads) {
-    Neighbours found;
-    const std::vector<SensingPoint>& pts = points.points;
-    if (pts.empty()) return found;
-    const std::size_t n = patches.size();
-    std::vector<double> xyz(3 * n), queries(3 * pts.size());
-    for (std::size_t i = 0; i < n; ++i)
-        for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = patches.centroid[i][k];
-    for (std::size_t h = 0; h < pts.size(); ++h)
-        for (int k = 0; k < 3; ++k) queries[3 * h + std::size_t(k)] = pts[h].point[k];
-    flann::Matrix<double> centroids(xyz.data(), n, 3), query(queries.data(), pts.size(), 3);
-    flann::Index<flann::L2_Simple<double>> tree(centroids, flann::KDTreeSingleIndexParams(12));
-    tree.buildIndex();
     double support = 0.0;
-    for (const SensingPoint& p : pts) support = std::max(support, 2.0 * radius[p.patch]);
-    flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
-    params.cores = thread_count(threads);
-    tree.radiusSearch(query, found.index, found.distance2, float(support * support), params);
-    return found;
+    std::vector<Vec3> queries(points.points.size());
+    for (std::size_t h = 0; h < queries.size(); ++h) {
+        queries[h] = points.points[h].point;
+        support = std::max(support, 2.0 * radius[points.points[h].patch]);
+    }
+    return radius_search(patches.centroid, queries, support, threads);
 }
 
 // Interpolation weights at a point on patch p: a smooth compact kernel (1 - (d/support)^2)^2 over the
@@ -105,6 +90,11 @@ Gather assemble(int width, int height, std::vector<std::vector<PixelTap>>& taps,
 
 Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
                      const LightSources& sources, const Visibility& vis, const GatherOptions& options) {
+    TPRF_CHECK_EQ(points.outputs, std::size_t(width) * std::size_t(height));
+    for (const SensingPoint& sp : points.points) {
+        TPRF_CHECK_LT(std::size_t(sp.output), points.outputs);
+        TPRF_CHECK_LT(std::size_t(sp.patch), patches.size());
+    }
     const std::size_t n = patches.size();
     std::vector<double> radius(n);
     for (std::size_t i = 0; i < n; ++i) radius[i] = circumradius(patches, i);

@@ -207,12 +207,12 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
             for (int c = 0; c < 3; ++c) {
                 double v = acc[c];
                 if (spad) {
-                    const double mean = s.exposure.photons * std::max(0.0, v) + dark;
+                    const double mean = expected_counts(s.exposure.photons, v, dark);
                     // Beyond 1e15 expected counts the Poisson spread (1/sqrt(mean)) is below float
                     // precision (and Random::poisson takes means up to 2^52 only): the count is its mean.
                     v = mean > kMaxPoissonMean ? mean : rng->poisson(mean);
                 } else {
-                    if (s.noise.sigma > 0.0) v += s.noise.sigma * rng->normal();
+                    if (s.noise.sigma > 0.0) v = rng->add_normal(v, s.noise.sigma);
                     if (s.clamp) v = std::max(0.0, v);
                 }
                 // Saturated rather than infinite when a signal's scale exceeds a float's range.

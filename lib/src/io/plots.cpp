@@ -48,11 +48,19 @@ std::vector<std::string> pythons() {
     if (std::string p = environment("TPRF_PYTHON"); !p.empty()) return {p};
     std::vector<std::string> out;
     std::vector<fs::path> seen;
-    const std::string path = environment("PATH");
+    std::string path = environment("PATH");
+    if (path.empty()) {  // as execvp: the system's default search path
+        char buf[256] = "";
+        if (::confstr(_CS_PATH, buf, sizeof buf) > 0) path = buf;
+    }
     std::size_t begin = 0;
     while (begin <= path.size()) {
         const std::size_t end = std::min(path.find(':', begin), path.size());
-        const fs::path dir = end == begin ? fs::path(".") : fs::path(path.substr(begin, end - begin));
+        if (end == begin) {  // an empty element (the current directory) is not searched for a plot tool
+            begin = end + 1;
+            continue;
+        }
+        const fs::path dir = path.substr(begin, end - begin);
         const fs::path candidate = dir / "python3";
         std::error_code ec;
         const fs::path real = fs::canonical(candidate, ec);
@@ -109,8 +117,12 @@ ChildResult run_child(const std::vector<std::string>& argv) {
     }
     ::close(fds[0]);
     int status = 0;
-    while (::waitpid(pid, &status, 0) < 0)
-        if (errno != EINTR) throw Error(std::string("waiting for ") + argv[0] + ": " + std::strerror(errno));
+    while (::waitpid(pid, &status, 0) < 0) {
+        if (errno == EINTR) continue;
+        // ECHILD: the host process reaps children itself (SIGCHLD ignored); the status is unknown.
+        r.err += std::string("cannot wait for ") + argv[0] + ": " + std::strerror(errno);
+        return r;
+    }
     if (WIFEXITED(status))
         r.exit_status = WEXITSTATUS(status);
     else if (WIFSIGNALED(status))
@@ -203,7 +215,7 @@ fs::path plot_script() {
     return TPRF_PLOT_SCRIPT_INSTALLED;
 }
 
-bool run_plot_script(const std::vector<std::string>& args) {
+bool run_plot_script(const std::vector<std::string>& args, std::string* failure) {
     const fs::path script = plot_script();
     for (const std::string& python : pythons()) {
         std::vector<std::string> argv = {python, script.string()};
@@ -214,15 +226,22 @@ bool run_plot_script(const std::vector<std::string>& args) {
         const std::string why = r.signal != 0 ? "killed by signal " + std::to_string(r.signal)
                                               : "exit status " + std::to_string(r.exit_status);
         const std::string line = last_line(r.err);
-        throw Error(python + " " + script.string() + " " + (args.empty() ? "" : args[0]) + ": " + why +
-                    (line.empty() ? "" : ": " + line));
+        // The figure is a view of data already written: its failure is reported, not fatal.
+        if (failure) *failure = python + " " + script.string() + ": " + why + (line.empty() ? "" : ": " + line);
+        return false;
     }
     return false;
 }
 
-std::string plot_not_drawn_message(const fs::path& png, const std::vector<std::string>& args) {
+std::string plot_not_drawn_message(const fs::path& png, const std::vector<std::string>& args,
+                                   const std::string& failure) {
     const std::string python = environment("TPRF_PYTHON");
     std::string message = png.string();
+    if (!failure.empty()) {
+        message += " not drawn: " + failure + "; draw it again with: python3 " + shell_word(plot_script().string());
+        for (const std::string& a : args) message += ' ' + shell_word(a);
+        return message;
+    }
     if (python.empty()) {
         message += " not drawn: no python3 on the PATH can import matplotlib";
     } else {

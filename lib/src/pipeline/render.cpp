@@ -177,7 +177,7 @@ void write_views(const Scene& scene, const RenderOptions& options, const float* 
         report.measurements = write_sensor_outputs(staging, *scene.sensor, scene.time, cube, camera.height,
                                                    camera.width, plot_pixel(options.plot_pixel, camera.width,
                                                                             camera.height),
-                                                   options.threads, report.warnings);
+                                                   options, report.warnings);
     if (options.video) {
         const std::filesystem::path mp4 = staging.path("light_in_flight.mp4");
         write_video(mp4, mp4.parent_path() / ".video-frames", cube, camera.height, camera.width, bins);

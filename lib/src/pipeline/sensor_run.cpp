@@ -32,7 +32,7 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     Staging staging(dir);
     if (options.progress) options.progress("sensor", 0.0);
     report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width, pixel,
-                                               options.threads, report.warnings);
+                                               options, report.warnings);
     staging.publish(sensor_outputs());
     report.written = staging.names();
     if (options.progress) options.progress("sensor", 1.0);

@@ -74,7 +74,7 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
 }
 
 int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
-                         int height, int width, std::array<int, 2> pixel, int threads,
+                         int height, int width, std::array<int, 2> pixel, const PipelineOptions& run,
                          std::vector<std::string>& warnings) {
     const int K = measurement_count(sensor, time);
     const std::size_t H = std::size_t(height), W = std::size_t(width);
@@ -83,7 +83,7 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const T
     if (sensor.exposure.type == ExposureType::Amcw)
         depth = std::make_unique<NpyMap>(staging.path("depth.npy"), std::vector<std::size_t>{H, W});
     SensorOptions options;
-    options.threads = threads;
+    options.threads = run.threads;
     apply_sensor(sensor, time, cube, height, width, measurements.data(), depth ? depth->data() : nullptr, options);
     const std::size_t p = std::size_t(pixel[1]) * W + std::size_t(pixel[0]);
     const std::filesystem::path data = staging.path("sensor_plot.json");
@@ -95,11 +95,13 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const T
     // The figure last: it is the one output that needs Python, and its absence is not an error.
     const std::filesystem::path png = staging.path("sensor_plot.png");
     const std::vector<std::string> args = {"sensor", data.string(), png.string()};
-    if (!run_plot_script(args)) {
+    std::string failure = run.draw_plots ? "" : "not asked for (PipelineOptions::draw_plots)";
+    if (!run.draw_plots || !run_plot_script(args, &failure)) {
         staging.forget("sensor_plot.png");
         warnings.push_back(plot_not_drawn_message(staging.final_path("sensor_plot.png"),
                                                   {"sensor", staging.final_path("sensor_plot.json").string(),
-                                                   staging.final_path("sensor_plot.png").string()}));
+                                                   staging.final_path("sensor_plot.png").string()},
+                                                  failure));
     }
     return K;
 }

@@ -3,6 +3,7 @@
 // steps that `tprf render` and `tprf sensor` share.
 
 #include "tprf/core/time_axis.h"
+#include "tprf/pipeline/info.h"
 #include "tprf/scene/sensor_settings.h"
 
 #include <array>
@@ -53,9 +54,10 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
 
 /// measurements.npy, depth.npy (amcw), sensor.json, sensor_plot.json and sensor_plot.png: what a sensor
 /// block turns a cube (H, W, T, 3) into. Returns K. When no Python with matplotlib can draw the plot,
-/// the data is still written and `warnings` gets a line saying how to draw it.
+/// (or options.draw_plots is off), the data is still written and `warnings` gets a line saying how to
+/// draw it.
 int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
-                         int height, int width, std::array<int, 2> pixel, int threads,
+                         int height, int width, std::array<int, 2> pixel, const PipelineOptions& options,
                          std::vector<std::string>& warnings);
 
 /// Seconds from `start` to now.

@@ -3,10 +3,10 @@
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
 #include "tprf/geometry/form_factors.h"
+#include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 
-#include <flann/flann.hpp>
 
 #include <algorithm>
 #include <array>
@@ -70,19 +70,10 @@ std::vector<std::vector<std::uint32_t>> near_pairs(const PatchSet& patches, cons
     const std::size_t n = patches.size();
     std::vector<std::vector<std::uint32_t>> out(n);
     if (n < 2) return out;
-    std::vector<double> xyz(3 * n);
-    for (std::size_t i = 0; i < n; ++i)
-        for (int c = 0; c < 3; ++c) xyz[3 * i + std::size_t(c)] = patches.centroid[i][c];
-    flann::Matrix<double> points(xyz.data(), n, 3);
-    flann::Index<flann::L2_Simple<double>> index(points, flann::KDTreeSingleIndexParams(12));
-    index.buildIndex();
     const double r_max = *std::max_element(radius.begin(), radius.end());
-    const double search = near_factor * 2.0 * r_max;
-    flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
-    params.cores = threads;
-    std::vector<std::vector<std::size_t>> indices;
-    std::vector<std::vector<double>> dist2;
-    index.radiusSearch(points, indices, dist2, static_cast<float>(search * search), params);
+    const Neighbours found = radius_search(patches.centroid, patches.centroid, near_factor * 2.0 * r_max, threads);
+    const auto& indices = found.index;
+    const auto& dist2 = found.distance2;
     for (std::size_t i = 0; i < n; ++i) {
         for (std::size_t k = 0; k < indices[i].size(); ++k) {
             const std::size_t j = indices[i][k];

@@ -76,11 +76,11 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
     return plan;
 }
 
-bool scene_is_grey(const PatchSet& patches, const Illumination& emission) {
+bool scene_is_grey(const PatchSet& patches, const Illumination& illumination) {
     auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
     for (const Rgb& a : patches.albedo)
         if (!grey(a)) return false;
-    for (const Pulse& p : emission.pulses)
+    for (const Pulse& p : illumination.pulses)
         if (!grey(p.energy)) return false;
     return true;
 }
@@ -146,9 +146,9 @@ GatherKernel pick_kernel(int C, int bt) {
     return nullptr;
 }
 
-// Tiles of the long-link pass (see step 1 of the march): 32 receivers' block accumulators (at most
-// 32 x 3 x bt floats) and 128 sources' rings (128 x ring x 3 floats, under 1 MB for rings of 512) fit
-// in a core's L2 together.
+// Tiles of the long-link pass (March::long_pass): a tile of 256 receivers walks its links in tiles of
+// 64 sources, so that those sources' rings (64 x ring x 3 floats, under 0.5 MB for rings of 512) stay
+// in a core's L2 while every receiver of the tile reads them (sizes measured, bench/RESULTS.md).
 constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
 
@@ -157,7 +157,6 @@ int next_pow2(int v) {
     while (r < v) r <<= 1;
     return r;
 }
-
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.

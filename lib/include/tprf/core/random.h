@@ -102,10 +102,18 @@ public:
     /// evaluated in a form without cancellation (docs/sensor.md), so it stays exact up to the largest means.
     double poisson(double mean);
 
+    /// v + sigma * normal(), rounded in two steps: random.cpp is compiled without fused multiply-add,
+    /// so the noisy value is the same on every build whatever -march allows.
+    double add_normal(double v, double sigma);
+
 private:
     Xoshiro256StarStar m_gen;
     double m_spare = 0.0;
     bool m_has_spare = false;
 };
+
+/// A SPAD's expected counts, photons * max(0, signal) + dark, rounded in two steps on every build (no
+/// fused multiply-add), so that the Poisson draw that follows sees the same mean everywhere.
+double expected_counts(double photons, double signal, double dark);
 
 }  // namespace tprf

@@ -27,13 +27,16 @@ std::filesystem::path plot_script();
 
 /// Runs `PYTHON plot_script() ARGS...` (no shell) and waits for it, trying the Pythons described
 /// above in turn. Returns true when the script drew its figure; false when no Python could import
-/// matplotlib and numpy (the script exits with status 3 then) or none could be started.
-/// Throws tprf::Error when the script fails otherwise (bad data, an unwritable output), with the
-/// last line the script wrote to stderr.
-bool run_plot_script(const std::vector<std::string>& args);
+/// matplotlib and numpy (the script exits with status 3 then), none could be started, or the script
+/// failed otherwise (a crash, bad data, an unwritable output): then `failure`, when given, says how,
+/// with the last line the script wrote to stderr. A figure is a view of data already written, so its
+/// failure is never an exception.
+bool run_plot_script(const std::vector<std::string>& args, std::string* failure = nullptr);
 
-/// One line for the user when run_plot_script returned false: that `png` was not drawn, how to install
-/// matplotlib, and the command that draws it later (`python3 SCRIPT ARGS...`, quoted for a POSIX shell).
-std::string plot_not_drawn_message(const std::filesystem::path& png, const std::vector<std::string>& args);
+/// One line for the user when run_plot_script returned false: that `png` was not drawn and why (the
+/// script's `failure`, or no matplotlib and how to install it), and the command that draws it later
+/// (`python3 SCRIPT ARGS...`, quoted for a POSIX shell).
+std::string plot_not_drawn_message(const std::filesystem::path& png, const std::vector<std::string>& args,
+                                   const std::string& failure = "");
 
 }  // namespace tprf

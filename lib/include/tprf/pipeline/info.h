@@ -14,6 +14,9 @@ namespace tprf {
 struct PipelineOptions {
     int threads = 0;        ///< 0: all cores
     ProgressFn progress;    ///< may be empty
+    /// Draw figures (sensor_plot.png) with python/tprf_plots.py in a child process. Off: only their
+    /// data is written (sensor_plot.json), for callers that must not fork or draw themselves.
+    bool draw_plots = true;
 };
 
 /// What `tprf info` prints: the scene's size without rendering it.

@@ -27,7 +27,9 @@ struct PointSource {
     Vec3 position = Vec3::Zero();   ///< where shadow rays end, metres (a laser spot: lifted off its surface)
     Vec3 origin = Vec3::Zero();     ///< the true point, metres (for the earliest-arrival bound)
     double path = 0.0;              ///< optical path travelled before light leaves it, metres
-    Rgb intensity = Rgb::Zero();    ///< W/sr per channel: isotropic, or the peak of a cosine lobe
+    /// Isotropic (lobe zero): the radiant intensity, W/sr per channel. With a lobe: the power it sends,
+    /// W per channel, so that the intensity towards dir is intensity * max(0, lobe . dir) / pi.
+    Rgb intensity = Rgb::Zero();
     Vec3 lobe = Vec3::Zero();       ///< zero: isotropic; else the unit normal of a Lambertian lobe
     std::uint32_t patch = kNoPatch; ///< the patch it lies on, which it does not light
     std::uint8_t order = 1;         ///< bounce order of the light it delivers (1: point light, 2: laser spot)
@@ -48,7 +50,7 @@ struct LaserSpot {
 /// Every source of a scene.
 struct LightSources {
     std::vector<PointSource> points;     ///< point lights (scene order), then the lasers' spots
-    std::vector<LaserSpot> spots;        ///< one per laser, in scene order (hit or not)
+    std::vector<LaserSpot> spots;        ///< where each laser landed, in scene order (hit or not)
     std::vector<std::uint32_t> emissive; ///< patches with emission > 0
 };
 

@@ -63,7 +63,7 @@ struct SolveStats {
 };
 
 /// Marches over the scene's time axis and hands every block of final bins to `sink`.
-SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& emission,
+SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& illumination,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
 
 }  // namespace tprf
