@@ -1,6 +1,8 @@
 #include "tprf/core/error.h"
 #include "tprf/scene/parse_json.h"
 
+#include "test_scenes.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -18,21 +20,8 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 using tprf::Vec3;
 
-// A scratch directory holding a scene's mesh file; removed with everything in it.
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::random_device rd;
-        path = fs::temp_directory_path() / ("tprf_scene_test_" + std::to_string(rd()) + std::to_string(rd()));
-        fs::create_directories(path / "meshes");
-        std::ofstream(path / "meshes" / "tri.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
+struct TempDir : tprf::test::MeshDir {
+    TempDir() : tprf::test::MeshDir("tprf_scene_test_") {}
 };
 
 // The SPEC example, with a mesh file that the test writes.

@@ -4,8 +4,30 @@
 #include "tprf/scene/scene.h"
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
 
 namespace tprf::test {
+
+/// A scratch directory holding a one-triangle mesh, meshes/tri.obj (what the scene tests' files name);
+/// removed with everything in it.
+struct MeshDir {
+    std::filesystem::path path;
+    explicit MeshDir(const std::string& prefix) {
+        std::random_device rd;
+        path = std::filesystem::temp_directory_path() / (prefix + std::to_string(rd()) + std::to_string(rd()));
+        std::filesystem::create_directories(path / "meshes");
+        std::ofstream(path / "meshes" / "tri.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    }
+    ~MeshDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(path, ec);
+    }
+    MeshDir(const MeshDir&) = delete;
+    MeshDir& operator=(const MeshDir&) = delete;
+};
 
 /// A time axis of `bins` bins of `width` metres from `start`.
 inline TimeAxis time_axis(int bins, double width, double start = 0.0) {

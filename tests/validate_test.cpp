@@ -6,6 +6,8 @@
 #include "tprf/core/error.h"
 #include "tprf/scene/parse_json.h"
 
+#include "test_scenes.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -28,21 +30,8 @@ using tprf::Vec3;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// A scratch directory holding the scene's mesh file; removed with everything in it.
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::random_device rd;
-        path = fs::temp_directory_path() / ("tprf_validate_test_" + std::to_string(rd()) + std::to_string(rd()));
-        fs::create_directories(path / "meshes");
-        std::ofstream(path / "meshes" / "tri.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
+struct TempDir : tprf::test::MeshDir {
+    TempDir() : tprf::test::MeshDir("tprf_validate_test_") {}
 };
 
 // One scene written as JSON ...

@@ -26,17 +26,6 @@ namespace {
 constexpr double kMaxReachInWindows = 64.0;
 constexpr double kMaxPoissonMean = 1e15;
 
-// The 3 x 3 normal matrix of the fit M(phi) = a + b cos(phi) + c sin(phi) over the phases.
-Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {
-    Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
-    for (const double deg : phases_deg) {
-        const double phi = deg * std::numbers::pi / 180.0;
-        const Eigen::Vector3d row(1.0, std::cos(phi), std::sin(phi));
-        m += row * row.transpose();
-    }
-    return m;
-}
-
 
 // The kernel the exposure sees: the pulse, and for a SPAD its timing jitter too.
 TimeKernel exposure_kernel(const SensorSettings& s, double bin_width) {

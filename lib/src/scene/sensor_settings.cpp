@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace tprf {
 namespace {
@@ -60,6 +61,16 @@ TimeKernel pulse_kernel(const SensorPulse& p, double bin_width) {
         case PulseShape::Table: return table_kernel(p, bin_width);
     }
     throw InternalError("unknown pulse shape");
+}
+
+Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {
+    Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+    for (const double deg : phases_deg) {
+        const double phi = deg * std::numbers::pi / 180.0;
+        const Eigen::Vector3d row(1.0, std::cos(phi), std::sin(phi));
+        m += row * row.transpose();
+    }
+    return m;
 }
 
 }  // namespace tprf

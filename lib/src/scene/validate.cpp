@@ -213,17 +213,6 @@ void check_windows(const Exposure& e, const At& at) {
     }
 }
 
-// The 3 x 3 normal matrix of the fit M(phi) = a + b cos(phi) + c sin(phi) over the phases.
-Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {
-    Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
-    for (const double deg : phases_deg) {
-        const double phi = deg * std::numbers::pi / 180.0;
-        const Eigen::Vector3d row(1.0, std::cos(phi), std::sin(phi));
-        m += row * row.transpose();
-    }
-    return m;
-}
-
 void check_amcw(const Exposure& e, const At& at) {
     positive(e.frequency_mhz, at.key("frequency_mhz"));
     const At phases = at.key("phases_deg");

@@ -4,6 +4,8 @@
 
 #include "tprf/core/time_kernel.h"
 
+#include <Eigen/Core>
+
 #include <array>
 #include <cstdint>
 #include <filesystem>
@@ -59,6 +61,10 @@ struct SensorSettings {
 
 /// The name of an exposure type as the scene file writes it ("gates", "amcw", ...).
 const char* exposure_name(ExposureType type);
+
+/// The 3 x 3 normal matrix of the least-squares fit M(phi) = a + b cos(phi) + c sin(phi) over the AMCW
+/// phases (degrees): singular when the phases cannot determine a phase (fewer than 3 distinct).
+Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg);
 
 /// The pulse as a kernel fine enough for bins of `bin_width` (step at most 1/16 of a bin and of the
 /// pulse's own width).
