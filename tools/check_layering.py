@@ -6,7 +6,8 @@
 - nlohmann/json.hpp appears in no public header, and in sources only in scene/ (parsing) and
   io/json_records.cpp (writing render.json and sensor.json);
 - only scene/ and pipeline/ include the scene parser (scene/parse_json.h);
-- OpenMP (omp.h) appears in no public header.
+- OpenMP (omp.h) appears in no public header;
+- no include climbs out of its folder with "../" (which would hide a stage from these checks).
 
     tools/check_layering.py [LIB_DIR]      (default: lib next to this script's folder)
 
@@ -43,6 +44,8 @@ def main():
                 continue
             inc = m.group(1)
             where = f"{f}:{n}"
+            if ".." in pathlib.PurePosixPath(inc).parts:
+                problems.append(f"{where}: includes {inc}: name another stage's header as tprf/<stage>/...")
             t = re.match(r"tprf/([a-z_]+)/", inc)
             if t:
                 other = t.group(1)
