@@ -1,5 +1,6 @@
 // The command line's contract (SPEC.md, "Command line"): exit status 2 and one message for bad input,
 // and nothing written for it.
+#include "test_process.h"
 #include "tprf/io/npy.h"
 
 #include <gtest/gtest.h>
@@ -21,23 +22,10 @@
 namespace {
 
 namespace fs = std::filesystem;
+using tprf::test::Outcome;
+using tprf::test::read_bytes;
 
-struct Outcome {
-    int status = -1;
-    std::string err;
-};
-
-Outcome run(const std::string& args) {
-    const fs::path err = fs::temp_directory_path() / ("tprf_cli_err_" + std::to_string(std::random_device{}()));
-    const std::string command = std::string(TPRF_BINARY) + " " + args + " -q >/dev/null 2>" + err.string();
-    const int raw = std::system(command.c_str());
-    Outcome r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    std::ifstream in(err);
-    r.err.assign(std::istreambuf_iterator<char>(in), {});
-    fs::remove(err);
-    return r;
-}
+Outcome run(const std::string& args) { return tprf::test::run_tprf(args); }
 
 // Runs the command and returns its standard output (stderr is dropped).
 std::string run_stdout(const std::string& args, int& status) {

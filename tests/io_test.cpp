@@ -1,3 +1,4 @@
+#include "test_process.h"
 #include "tprf/io/atomic_file.h"
 #include "tprf/core/error.h"
 #include "tprf/io/image_io.h"
@@ -23,6 +24,7 @@
 namespace {
 
 namespace fs = std::filesystem;
+using tprf::test::read_bytes;
 
 // Each test writes into a directory of its own, so that tests may run in parallel.
 class Io : public ::testing::Test {
@@ -44,11 +46,6 @@ protected:
 
     fs::path m_dir;
 };
-
-std::string read_bytes(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 void write_bytes(const fs::path& path, const std::string& bytes) {
     std::ofstream(path, std::ios::binary) << bytes;

@@ -2,6 +2,7 @@
 // number that geometry or physics fixes in advance: arrival bins from path lengths, closed-form view
 // factors, energy conservation, and the shapes and orientation SPEC.md gives. Scenes are small (a few
 // hundred patches, images of at most 64 x 64), except the Cornell box.
+#include "test_process.h"
 #include "test_scenes.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
@@ -38,6 +39,10 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using tprf::Vec3;
+using tprf::test::Outcome;
+using tprf::test::read_bytes;
+using tprf::test::run_tprf;
+using tprf::test::shell;
 
 // A path known from geometry is compared with a bin only when it lies at least this far from the bin's
 // edges: Embree intersects in float and the film carries the camera leg as a float, so a rendered path
@@ -58,30 +63,6 @@ json vec(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 bool have_program(const std::string& name) {
     return std::system(("command -v " + name + " >/dev/null 2>&1").c_str()) == 0;
-}
-
-struct Outcome {
-    int status = -1;
-    std::string err;
-};
-
-// Runs a shell command line; returns its exit status and standard error.
-Outcome shell(const std::string& command) {
-    const fs::path err = fs::temp_directory_path() / ("tprf_outputs_err_" + std::to_string(std::random_device{}()));
-    const int raw = std::system((command + " 2>" + err.string()).c_str());
-    Outcome r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    std::ifstream in(err);
-    r.err.assign(std::istreambuf_iterator<char>(in), {});
-    fs::remove(err);
-    return r;
-}
-
-Outcome run_tprf(const std::string& args) { return shell(std::string(TPRF_BINARY) + " " + args + " -q >/dev/null"); }
-
-std::string read_bytes(const fs::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 // transient.npy and its kind, (H, W, T, 3) float32.

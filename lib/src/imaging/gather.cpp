@@ -63,26 +63,40 @@ void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patc
     }
 }
 
-// Per-output lists in a fixed order (their filling order follows the threads), as one CSR.
-Gather assemble(int width, int height, std::vector<std::vector<PixelTap>>& taps,
-                std::vector<std::vector<DirectArrival>>& direct) {
+// Sorts each run of consecutive elements of one output by `less`.
+template <class T, class Output, class Less>
+void sort_runs(std::vector<T>& v, Output output, Less less) {
+    for (std::size_t a = 0; a < v.size();) {
+        std::size_t b = a + 1;
+        while (b < v.size() && output(v[b]) == output(v[a])) ++b;
+        std::sort(v.begin() + std::ptrdiff_t(a), v.begin() + std::ptrdiff_t(b), less);
+        a = b;
+    }
+}
+
+// The points' lists as one CSR by output: the points come in output order, so their lists laid end to
+// end give every output's taps and arrivals in one run.
+Gather assemble(const SensingPoints& points, int width, int height, const std::vector<std::vector<PixelTap>>& taps,
+                const std::vector<std::vector<DirectArrival>>& direct) {
     Gather g;
     g.width = width;
     g.height = height;
-    const std::size_t outputs = taps.size();
-    g.row.assign(outputs + 1, 0);
-    for (std::size_t px = 0; px < outputs; ++px) {
-        std::sort(taps[px].begin(), taps[px].end(), [](const PixelTap& a, const PixelTap& b) {
-            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
-        });
-        std::sort(direct[px].begin(), direct[px].end(), [](const DirectArrival& a, const DirectArrival& b) {
-            return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
-        });
-        g.row[px + 1] = g.row[px] + taps[px].size();
+    g.row.assign(points.outputs + 1, 0);
+    for (std::size_t h = 0; h < taps.size(); ++h) g.row[points.points[h].output + 1] += taps[h].size();
+    for (std::size_t o = 0; o < points.outputs; ++o) g.row[o + 1] += g.row[o];
+    g.taps.reserve(g.row[points.outputs]);
+    for (std::size_t h = 0; h < taps.size(); ++h) {
+        g.taps.insert(g.taps.end(), taps[h].begin(), taps[h].end());
+        g.direct.insert(g.direct.end(), direct[h].begin(), direct[h].end());
     }
-    g.taps.reserve(g.row[outputs]);
-    for (auto& t : taps) g.taps.insert(g.taps.end(), t.begin(), t.end());
-    for (auto& d : direct) g.direct.insert(g.direct.end(), d.begin(), d.end());
+    for (std::size_t o = 0; o < points.outputs; ++o)
+        std::sort(g.taps.begin() + std::ptrdiff_t(g.row[o]), g.taps.begin() + std::ptrdiff_t(g.row[o + 1]),
+                  [](const PixelTap& a, const PixelTap& b) {
+                      return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
+                  });
+    sort_runs(g.direct, [](const DirectArrival& d) { return d.pixel; }, [](const DirectArrival& a, const DirectArrival& b) {
+        return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+    });
     return g;
 }
 
@@ -91,9 +105,11 @@ Gather assemble(int width, int height, std::vector<std::vector<PixelTap>>& taps,
 Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
                      const LightSources& sources, const Visibility& vis, const GatherOptions& options) {
     TPRF_CHECK_EQ(points.outputs, std::size_t(width) * std::size_t(height));
-    for (const SensingPoint& sp : points.points) {
+    for (std::size_t h = 0; h < points.points.size(); ++h) {
+        const SensingPoint& sp = points.points[h];
         TPRF_CHECK_LT(std::size_t(sp.output), points.outputs);
         TPRF_CHECK_LT(std::size_t(sp.patch), patches.size());
+        if (h > 0) TPRF_CHECK_LE(points.points[h - 1].output, sp.output);  // in output order
     }
     const std::size_t n = patches.size();
     std::vector<double> radius(n);
@@ -112,14 +128,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             per_point_taps[h].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
         direct_arrivals(sp, weight, patches, sources, vis, per_point_direct[h]);
     });
-    std::vector<std::vector<PixelTap>> taps(points.outputs);
-    std::vector<std::vector<DirectArrival>> direct(points.outputs);
-    for (std::size_t h = 0; h < pts.size(); ++h) {
-        const std::uint32_t o = pts[h].output;
-        taps[o].insert(taps[o].end(), per_point_taps[h].begin(), per_point_taps[h].end());
-        direct[o].insert(direct[o].end(), per_point_direct[h].begin(), per_point_direct[h].end());
-    }
-    Gather g = assemble(width, height, taps, direct);
+    Gather g = assemble(points, width, height, per_point_taps, per_point_direct);
     if (options.progress) options.progress("camera", 1.0);
     return g;
 }

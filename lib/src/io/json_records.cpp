@@ -76,4 +76,20 @@ void write_sensor_json(const std::filesystem::path& path, const SensorSettings& 
     write_text_file(path, j.dump(2) + "\n");
 }
 
+void write_sensor_plot_json(const std::filesystem::path& path, const SensorPlot& p) {
+    const bool spad = p.exposure == "spad", amcw = p.exposure == "amcw";
+    nlohmann::json j;  // nlohmann writes non-finite numbers as null
+    j["pixel"] = {p.x, p.y};
+    j["exposure"] = p.exposure;
+    j["window"] = {p.start, p.end};
+    j["units"] = {{"time", p.time_unit},
+                  {"tprf", "radiance s per " + p.time_unit},
+                  {"measurement_at", amcw ? "degrees" : p.time_unit},
+                  {"measurements", spad ? "counts per bin" : "measurement"}};
+    j["tprf"] = {{"bin_edges", p.tprf_edges}, {"density", p.tprf}};
+    j["tprf_pulse"] = {{"time", p.convolved_time}, {"density", p.convolved}};
+    j["measurements"] = {{"at", p.measurement_at}, {"value", p.measurements}};
+    write_text_file(path, j.dump() + "\n");
+}
+
 }  // namespace tprf

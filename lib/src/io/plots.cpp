@@ -147,58 +147,7 @@ std::string shell_word(const std::string& s) {
     return out + "'";
 }
 
-/// A JSON string: quotes, backslashes and control characters escaped.
-std::string json_string(std::string_view s) {
-    std::string out = "\"";
-    for (const char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(c));
-            out += buf;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
-}
-
-/// A JSON number with 12 significant digits (the data come from float32 cubes); null when not finite.
-std::string json_number(double v) {
-    if (!std::isfinite(v)) return "null";
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.12g", v);
-    return buf;
-}
-
-std::string json_array(const std::vector<double>& values) {
-    std::string out = "[";
-    for (std::size_t i = 0; i < values.size(); ++i) out += (i ? ", " : "") + json_number(values[i]);
-    return out + "]";
-}
-
 }  // namespace
-
-void write_sensor_plot_json(const fs::path& path, const SensorPlot& p) {
-    const bool spad = p.exposure == "spad", amcw = p.exposure == "amcw";
-    const std::string density = "radiance s per " + p.time_unit;
-    std::string j = "{\n";
-    j += "  \"pixel\": [" + std::to_string(p.x) + ", " + std::to_string(p.y) + "],\n";
-    j += "  \"exposure\": " + json_string(p.exposure) + ",\n";
-    j += "  \"window\": " + json_array({p.start, p.end}) + ",\n";
-    j += "  \"units\": {\"time\": " + json_string(p.time_unit) + ", \"tprf\": " + json_string(density) +
-         ", \"measurement_at\": " + json_string(amcw ? "degrees" : p.time_unit) +
-         ", \"measurements\": " + json_string(spad ? "counts per bin" : "measurement") + "},\n";
-    j += "  \"tprf\": {\"bin_edges\": " + json_array(p.tprf_edges) + ",\n           \"density\": " +
-         json_array(p.tprf) + "},\n";
-    j += "  \"tprf_pulse\": {\"time\": " + json_array(p.convolved_time) + ",\n                 \"density\": " +
-         json_array(p.convolved) + "},\n";
-    j += "  \"measurements\": {\"at\": " + json_array(p.measurement_at) + ",\n                   \"value\": " +
-         json_array(p.measurements) + "}\n}\n";
-    write_text_file(path, j);
-}
 
 fs::path plot_script() {
     if (std::string s = environment("TPRF_PLOT_SCRIPT"); !s.empty()) return s;

@@ -92,11 +92,12 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const T
     write_sensor_json(staging.path("sensor.json"), sensor, time, K, pixel);
     measurements.commit();
     if (depth) depth->commit();
-    // The figure last: it is the one output that needs Python, and its absence is not an error.
+    // The figure last: it is the one output that needs Python, and its absence is not an error. A
+    // caller that draws nothing itself keeps sensor_plot.json.
+    if (!run.draw_plots) return K;
     const std::filesystem::path png = staging.path("sensor_plot.png");
-    const std::vector<std::string> args = {"sensor", data.string(), png.string()};
-    std::string failure = run.draw_plots ? "" : "not asked for (PipelineOptions::draw_plots)";
-    if (!run.draw_plots || !run_plot_script(args, &failure)) {
+    std::string failure;
+    if (!run_plot_script({"sensor", data.string(), png.string()}, &failure)) {
         staging.forget("sensor_plot.png");
         warnings.push_back(plot_not_drawn_message(staging.final_path("sensor_plot.png"),
                                                   {"sensor", staging.final_path("sensor_plot.json").string(),

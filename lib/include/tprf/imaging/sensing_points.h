@@ -19,7 +19,7 @@ struct SensingPoint {
     float leg = 0.0f;           ///< metres of optical path from the point to the sensor (0: unwarped)
 };
 
-/// A set of sensing points, in output order.
+/// A set of sensing points, in output order (non-decreasing `output`).
 struct SensingPoints {
     std::size_t outputs = 0;            ///< number of measurements (pixels)
     double weight = 1.0;                ///< each point's share of its output (a pixel sample: 1 / spp)

@@ -1,9 +1,11 @@
 #pragma once
 /// The JSON records of an output directory: render.json (what a render did, SPEC.md "Output
-/// directory") and sensor.json (what each sensor measurement is, docs/sensor.md). Both appear
+/// directory"), sensor.json (what each sensor measurement is, docs/sensor.md) and sensor_plot.json (the
+/// data of sensor_plot.png). All appear
 /// atomically under their final name. The JSON library stays inside this file's source.
 
 #include "tprf/core/time_axis.h"
+#include "tprf/imaging/sensor_model.h"
 #include "tprf/scene/scene.h"
 #include "tprf/scene/sensor_settings.h"
 #include "tprf/transport/solver.h"
@@ -45,5 +47,9 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& re
 /// in degrees or a histogram bin's start), the noise or SPAD settings and the plotted pixel.
 void write_sensor_json(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,
                        int measurements, std::array<int, 2> plot_pixel);
+
+/// Writes the data of sensor_plot.png (docs/sensor.md, "Outputs", lists the keys): what
+/// `tprf_plots.py sensor DATA.json OUT.png` draws. Non-finite values are written as null.
+void write_sensor_plot_json(const std::filesystem::path& path, const SensorPlot& plot);
 
 }  // namespace tprf

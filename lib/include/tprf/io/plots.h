@@ -10,17 +10,11 @@
 /// PATH that can import matplotlib and numpy (a pyenv shim first on the PATH without them is passed
 /// over for the system's /usr/bin/python3, say).
 
-#include "tprf/imaging/sensor_model.h"
-
 #include <filesystem>
 #include <string>
 #include <vector>
 
 namespace tprf {
-
-/// Writes the data of sensor_plot.png as JSON, atomically (docs/sensor.md, "Outputs", lists the keys):
-/// what `tprf_plots.py sensor DATA.json OUT.png` draws. Non-finite values are written as null.
-void write_sensor_plot_json(const std::filesystem::path& path, const SensorPlot& plot);
 
 /// The path of python/tprf_plots.py, as described above (the configured install path when no copy exists).
 std::filesystem::path plot_script();
