@@ -62,18 +62,49 @@ private:
     std::chrono::steady_clock::time_point m_start{}, m_last{};
 };
 
-int run_info(const std::string& scene_file, int threads, bool quiet) {
+// The estimate of a render (tprf::estimate_resources), printed before anything heavy runs.
+tprf::ResourceEstimate print_estimate(const tprf::Scene& scene, const tprf::PipelineOptions& options) {
+    const tprf::ResourceEstimate e = tprf::estimate_resources(scene, options);
+    const double limit = double(tprf::memory_limit_bytes(options)), mb = 1e6;
+    std::printf("estimate %zu patches, about %.4g links (%s); peak memory %.0f MB in the %s stage, %s %.0f MB\n",
+                e.patches, double(e.links), scene.links.method == tprf::LinkMethod::Flat ? "flat" : "hierarchical",
+                double(e.peak_bytes) / mb, e.peak_stage.c_str(),
+                double(e.peak_bytes) > limit ? "OVER the render limit of" : "limit", limit / mb);
+    std::printf("estimate MB: base %.0f, meshes %.0f, patches %.0f, visibility %.0f, links %.0f (+%.0f while built), "
+                "pulses %.0f, camera %.0f, solver %.0f, cubes %.0f, write %.0f\n",
+                double(e.base_bytes) / mb, double(e.mesh_bytes) / mb, double(e.patch_bytes) / mb,
+                double(e.visibility_bytes) / mb, double(e.link_bytes) / mb, double(e.link_build_bytes) / mb,
+                double(e.illumination_bytes) / mb, double(e.gather_bytes) / mb, double(e.solver_bytes) / mb,
+                double(e.cube_bytes) / mb, double(e.write_bytes) / mb);
+    const tprf::PhaseSeconds& s = e.seconds;
+    std::printf("estimate seconds: patches %.2f, links %.2f, gather %.2f, solve %.2f, write %.2f, total %.2f\n",
+                s.patches, s.links, s.gather, s.solve, s.write, s.total);
+    std::fflush(stdout);
+    return e;
+}
+
+int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool quiet) {
     const tprf::Scene scene = tprf::load_scene(scene_file);
-    ProgressBar bar(quiet);
     tprf::PipelineOptions options;
     options.threads = threads;
+    options.max_memory_gb = max_memory_gb;
+    std::printf("scene    %s\n", scene_file.c_str());
+    const tprf::ResourceEstimate e = print_estimate(scene, options);
+    if (e.link_stage_bytes > tprf::memory_limit_bytes(options)) {
+        // Building the links to count them would exceed the limit: the counts stay estimates.
+        std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
+        std::printf("links    not built: the link stage needs about %.0f MB, over the limit of %.0f MB\n",
+                    double(e.link_stage_bytes) / 1e6, double(tprf::memory_limit_bytes(options)) / 1e6);
+        std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
+        return 0;
+    }
+    ProgressBar bar(quiet);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::SceneSummary s = tprf::describe_scene(scene, options);
     bar.finish();
     if (s.dropped_degenerate > 0)
         std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
                      s.dropped_degenerate);
-    std::printf("scene    %s\n", scene_file.c_str());
     std::printf("patches  %zu (max_edge %.6g m)\n", s.patches, s.max_edge);
     std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
                 static_cast<unsigned long long>(s.pairs_tested));
@@ -143,8 +174,12 @@ int main(int argc, char** argv) {
     bool quiet = false;
     app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
     app.add_flag("-q,--quiet", quiet, "no progress bar");
-    auto* info = app.add_subcommand("info", "print patch count, link count, link memory and the time window");
+    auto* info = app.add_subcommand("info", "print the estimated peak memory and seconds of a render, then the patch "
+                                            "count, link count, link memory and the time window");
     info->add_option("scene", scene_file, "scene JSON file")->required();
+    double info_max_memory = 0.0;
+    info->add_option("--max-memory", info_max_memory, "the render limit to compare the estimate with, GB")
+        ->check(CLI::PositiveNumber);
     tprf::RenderOptions render;
     std::string output;
     auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
@@ -154,6 +189,10 @@ int main(int argc, char** argv) {
     rend->add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
     rend->add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
     rend->add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
+    rend->add_option("--max-memory", render.max_memory_gb,
+                     "refuse (exit 2, before allocating) a render whose estimated peak memory exceeds GB "
+                     "(default: 80% of the memory available)")
+        ->check(CLI::PositiveNumber);
     auto pixel_option = [](std::optional<std::array<int, 2>>& target) {
         return [&target](const std::string& text) {
             const std::string error = parse_pixel(text, target);
@@ -176,7 +215,7 @@ int main(int argc, char** argv) {
         return rc == 0 ? 0 : 2;
     }
     try {
-        if (info->parsed()) return run_info(scene_file, threads, quiet);
+        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, quiet);
         if (rend->parsed()) {
             render.output = output;
             render.threads = threads;

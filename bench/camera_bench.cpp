@@ -6,7 +6,7 @@
 #include "tprf/imaging/camera.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/imaging/film.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/transport/solver.h"
 #include "tprf/geometry/visibility.h"
@@ -26,7 +26,7 @@ struct Stage {
     tprf::Scene scene;
     tprf::PatchSet patches;
     std::unique_ptr<tprf::Visibility> visibility;
-    tprf::Links links;
+    tprf::LinkSet links;
     tprf::LightSources sources;
     tprf::Illumination emission;
 };
@@ -40,11 +40,11 @@ const Stage& stage() {
         out->visibility = std::make_unique<tprf::Visibility>(out->patches);
         tprf::LinkOptions link_options;
         link_options.threads = kThreads;
-        out->links = tprf::compute_links(out->patches, *out->visibility, link_options);
+        out->links = tprf::flat_link_set(out->patches, *out->visibility, link_options);
         tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
         out->sources = tprf::light_sources(out->scene, out->patches, *out->visibility);
-        out->emission = tprf::illuminate(out->sources, out->patches, out->links, *out->visibility, emitter_options);
+        out->emission = tprf::illuminate(out->sources, out->patches, out->links.emitters, *out->visibility, emitter_options);
         return out;
     }();
     return *s;

@@ -4,7 +4,7 @@
 #include "machine.h"
 
 #include "tprf/transport/illumination.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/transport/solver.h"
 #include "tprf/geometry/visibility.h"
@@ -27,7 +27,7 @@ constexpr double kBinWidth = 0.005;  // metres of optical path
 struct Problem {
     tprf::Scene scene;
     tprf::PatchSet patches;
-    tprf::Links links;
+    tprf::LinkSet links;
     tprf::Illumination emission;
 };
 
@@ -43,10 +43,10 @@ const Problem& problem() {
         const tprf::Visibility visibility(out->patches);
         tprf::LinkOptions link_options;
         link_options.threads = kThreads;
-        out->links = tprf::compute_links(out->patches, visibility, link_options);
+        out->links = tprf::flat_link_set(out->patches, visibility, link_options);
         tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
-        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, out->links, visibility, emitter_options);
+        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, out->links.emitters, visibility, emitter_options);
         return out;
     }();
     return *p;
@@ -85,15 +85,15 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options) {
     // Links shorter than a block are applied bin by bin from scattered history, not by the kernel above.
     const double inv_bin = 1.0 / p.scene.time.bin_width_m();
     std::size_t short_links = 0;
-    for (float d : p.links.distance)
+    for (float d : p.links.links.distance)
         if (std::floor(double(d) * inv_bin) < double(stats.block_bins)) ++short_links;
     // Every block streams each link's source, form factor and distance once (12 bytes).
     const double blocks = std::ceil(double(kBins) / double(stats.block_bins));
-    const double link_stream_gbs = 12.0 * double(p.links.size()) * blocks / seconds / 1e9;
+    const double link_stream_gbs = 12.0 * double(p.links.links.size()) * blocks / seconds / 1e9;
 
     state.counters["patches"] = double(p.patches.size());
     state.counters["bins"] = double(p.scene.time.bins);
-    state.counters["links"] = double(p.links.size());
+    state.counters["links"] = double(p.links.links.size());
     state.counters["channels"] = double(stats.channels);
     state.counters["seconds"] = seconds;
     state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
@@ -105,7 +105,7 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options) {
     state.counters["fraction_of_peak"] = machine.fma_gflops > 0.0 ? gflops / machine.fma_gflops : 0.0;
     state.counters["bandwidth_GB_s"] = machine.bandwidth_gbs;
     state.counters["link_stream_GB_s"] = link_stream_gbs;
-    state.counters["short_link_fraction"] = double(short_links) / double(p.links.size());
+    state.counters["short_link_fraction"] = double(short_links) / double(p.links.links.size());
     state.counters["working_MB"] = double(stats.working_bytes) / 1e6;
     state.counters["ring_bins"] = double(stats.ring_bins);
     state.counters["block_bins"] = double(stats.block_bins);

@@ -1,7 +1,7 @@
 #include "tprf/transport/solver.h"
 
 #include "tprf/transport/illumination.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/transport/steady.h"
 #include "tprf/geometry/visibility.h"
@@ -19,7 +19,7 @@ namespace {
 // Everything the solver needs, built from a scene.
 struct Prepared {
     PatchSet patches;
-    Links links;
+    LinkSet links;
     Illumination emission;
 };
 
@@ -27,8 +27,8 @@ Prepared prepare(const Scene& scene) {
     Prepared p;
     p.patches = build_patches(scene);
     const Visibility vis(p.patches);
-    p.links = compute_links(p.patches, vis);
-    p.emission = illuminate(light_sources(scene, p.patches, vis), p.patches, p.links, vis);
+    p.links = flat_link_set(p.patches, vis);
+    p.emission = illuminate(light_sources(scene, p.patches, vis), p.patches, p.links.emitters, vis);
     return p;
 }
 
@@ -201,14 +201,14 @@ TEST(Solver, LinearDelaySplitsABinBetweenTheTwoItOverlaps) {
     const Visibility vis(patches);
     Prepared p;
     p.patches = patches;
-    p.links = compute_links(patches, vis);
+    p.links = flat_link_set(patches, vis);
     // The pulse by hand, so that it goes through the link (an emissive patch's own light would be
     // sent with exact point-to-point paths instead): exitance pi W s / m^2 at path 0.
     p.emission.row = {0, 1, 1};
     Pulse pulse;
     pulse.energy = Rgb::Constant(M_PI);
     p.emission.pulses = {pulse};
-    ASSERT_EQ(p.links.size(), 2u);
+    ASSERT_EQ(p.links.links.size(), 2u);
     // What reaches the upper square: albedo F pi, with F from Howell's C-11. The link stage takes the
     // centroid rule this far out, whose error is second order in size / distance, (0.007 / 1.23)^2 =
     // 3e-5 (measured: 2.2e-5 high); 1e-4 is about 4 times that.
@@ -241,7 +241,7 @@ TEST(Solver, AreaLightPulsesCarryExactPathsAndTheFormFactorsEnergy) {
     scene.objects.push_back(test::rectangle(Vec3(0, 0, 1), 0.4 * Vec3::UnitY(), 0.4 * Vec3::UnitX(), 0.5, 2.0));
     const Prepared p = prepare(scene);
     ASSERT_EQ(p.patches.size(), 2u);
-    ASSERT_EQ(p.links.size(), 2u);
+    ASSERT_EQ(p.links.links.size(), 2u);
     // The receiver's pulses: order 1, between the nearest and farthest corner pairs, many paths.
     double lo = 1e9, hi = 0.0;
     for (int a = 0; a < 4; ++a)
@@ -266,7 +266,7 @@ TEST(Solver, AreaLightPulsesCarryExactPathsAndTheFormFactorsEnergy) {
     EXPECT_GE(std::unique(paths.begin(), paths.end()) - paths.begin(), 4);
     EXPECT_GT(paths.back() - paths.front(), 0.4 * (hi - lo));  // points at 1/4 and 3/4 of each side
     // Energy: albedo F B_e with the exact (link) form factor, to float precision.
-    EXPECT_NEAR(total[0], 0.5 * p.links.ff[0] * M_PI * 2.0, 1e-6 * total[0]);
+    EXPECT_NEAR(total[0], 0.5 * p.links.links.ff[0] * M_PI * 2.0, 1e-6 * total[0]);
     // The emitter shows its own exitance at path 0 and does not send it through the links again.
     ASSERT_EQ(p.emission.row[2] - p.emission.row[1], 1u);
     EXPECT_FALSE(p.emission.pulses[p.emission.row[1]].propagates);
@@ -339,7 +339,7 @@ TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {
     const std::size_t n = 96, links = 96 * 80;
     const int d = 72, b = 32;
     ASSERT_EQ(p.patches.size(), n);
-    ASSERT_EQ(p.links.size(), links);
+    ASSERT_EQ(p.links.links.size(), links);
     SolverOptions options;
     options.block_bins = b;
     std::vector<std::size_t> bytes;

@@ -1,6 +1,7 @@
 #include "tprf/geometry/patches.h"
 
 #include "tprf/core/error.h"
+#include "tprf/core/random.h"
 #include "tprf/scene/mesh_io.h"
 #include "tprf/scene/scene.h"
 
@@ -232,6 +233,127 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     }
     TPRF_CHECK_EQ(patches.size(), total);
     return patches;
+}
+
+namespace {
+
+// A uniform double in [0, 1) from one 64-bit draw.
+double unit(SplitMix64& random) { return double(random.next() >> 11) * 0x1.0p-53; }
+
+// One object as the census sees it: its triangles (none for a rectangle) with the running count of
+// their patches, and its patches per side.
+struct CensusObject {
+    std::vector<Triangle> triangles;
+    std::vector<std::size_t> running;  // patches per side of triangles 0..t
+    std::size_t per_side = 0;
+};
+
+CensusObject census_object(const Object& object, const PolygonMesh& mesh, double max_edge) {
+    CensusObject c;
+    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+        const Grid g = rectangle_grid(*r, max_edge);
+        c.per_side = g.nu * g.nv;
+        return c;
+    }
+    triangulate(mesh, c.triangles);
+    c.running.reserve(c.triangles.size());
+    for (const Triangle& t : c.triangles) {
+        const std::size_t n = pieces(longest_edge(t), max_edge);
+        c.per_side += n * n;
+        c.running.push_back(c.per_side);
+    }
+    return c;
+}
+
+// Patch `local` (0 <= local < per_side) of one side of an object, at a uniform point.
+PatchSample census_sample(const Object& object, const CensusObject& c, double max_edge, std::size_t local,
+                          SplitMix64& random) {
+    PatchSample s;
+    const double a = unit(random), b = unit(random);
+    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+        const Grid g = rectangle_grid(*r, max_edge);
+        const double i = double(local % g.nu), j = double(local / g.nu);
+        s.point = r->origin + (i + a) / double(g.nu) * r->u + (j + b) / double(g.nv) * r->v;
+        s.normal = r->u.cross(r->v).normalized();
+        return s;
+    }
+    const auto at = std::upper_bound(c.running.begin(), c.running.end(), local);
+    const Triangle& t = c.triangles[std::size_t(at - c.running.begin())];
+    const double su = std::sqrt(a);
+    s.point = (1 - su) * t[0] + su * (1 - b) * t[1] + su * b * t[2];
+    s.normal = (t[1] - t[0]).cross(t[2] - t[0]).normalized();
+    return s;
+}
+
+// Meshes loaded as build_patches loads them, and every object's bounds.
+std::vector<PolygonMesh> census_meshes(const Scene& scene, PatchCensus& census) {
+    std::vector<PolygonMesh> meshes(scene.objects.size());
+    census.bounds.resize(scene.objects.size());
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const Object& object = scene.objects[k];
+        Eigen::AlignedBox3d& box = census.bounds[k];
+        if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+            for (const Vec3& p :
+                 {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->u + r->v), Vec3(r->origin + r->v)})
+                box.extend(p);
+            continue;
+        }
+        const auto& m = std::get<MeshShape>(object.shape);
+        meshes[k] = load_mesh(m.file, m.transform, scene.file, "objects[" + std::to_string(k) + "].file");
+        census.dropped_degenerate += meshes[k].dropped_degenerate;
+        census.mesh_faces += meshes[k].faces.size();
+        for (const Vec3& p : meshes[k].vertices) box.extend(p);
+    }
+    return meshes;
+}
+
+// Each object's share of `samples` by its patch count (running rounding: the shares add up).
+void draw_samples(const Scene& scene, const std::vector<PolygonMesh>& meshes, const std::vector<std::size_t>& counts,
+                  std::size_t samples, std::uint64_t seed, PatchCensus& census) {
+    SplitMix64 random(seed);
+    std::size_t before = 0;
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const auto share = [&](std::size_t upto) {
+            return std::size_t(std::llround(double(samples) * double(upto) / double(census.patches)));
+        };
+        const std::size_t draws = share(before + counts[k]) - share(before);
+        before += counts[k];
+        if (draws == 0) continue;
+        const Object& object = scene.objects[k];
+        const CensusObject c = census_object(object, meshes[k], census.max_edge);
+        for (std::size_t d = 0; d < draws; ++d) {
+            const std::size_t index = std::min(counts[k] - 1, std::size_t(unit(random) * double(counts[k])));
+            PatchSample s = census_sample(object, c, census.max_edge, index % c.per_side, random);
+            if (index >= c.per_side) s.normal = -s.normal;  // the back copy of a two-sided object
+            s.object = std::uint32_t(k);
+            census.samples.push_back(s);
+        }
+    }
+}
+
+}  // namespace
+
+PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t seed) {
+    PatchCensus census;
+    const std::vector<PolygonMesh> meshes = census_meshes(scene, census);
+    if (scene.objects.empty()) return census;
+    Eigen::AlignedBox3d box;
+    for (const Eigen::AlignedBox3d& b : census.bounds) box.extend(b);
+    census.diagonal = box.diagonal().norm();
+    census.max_edge = scene.max_edge > 0.0 ? scene.max_edge : census.diagonal / 16.0;
+    TPRF_CHECK_LT(0.0, census.max_edge);
+    std::vector<std::size_t> counts(scene.objects.size());
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const Object& object = scene.objects[k];
+        const std::size_t per_side = census_object(object, meshes[k], census.max_edge).per_side;
+        const std::size_t sides = object.two_sided ? 2 : 1;
+        counts[k] = per_side * sides;
+        census.patches += counts[k];
+        census.corners += counts[k] * (std::holds_alternative<RectangleShape>(object.shape) ? 4 : 3);
+        if ((object.emission > 0.0).any()) census.emissive += counts[k];
+    }
+    if (samples > 0 && census.patches > 0) draw_samples(scene, meshes, counts, samples, seed, census);
+    return census;
 }
 
 }  // namespace tprf

@@ -31,7 +31,9 @@ nlohmann::json solver_json(const RenderRecord& r) {
             {"block_bins", r.stats.block_bins},
             {"ring_bins", r.stats.ring_bins},
             {"working_mb", double(r.stats.working_bytes) / 1e6},
-            {"link_bin_updates", r.stats.link_bin_updates}};
+            {"link_bin_updates", r.stats.link_bin_updates},
+            {"short_links", r.stats.short_links},
+            {"max_jacobi_iterations", r.stats.max_jacobi_iterations}};
 }
 
 nlohmann::json seconds_json(const PhaseSeconds& s) {

@@ -1,12 +1,22 @@
 #include "tprf/pipeline/info.h"
 
 #include "staging.h"
+#include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
-#include "tprf/transport/links.h"
+#include "tprf/imaging/camera.h"
+#include "tprf/imaging/sensor_model.h"
+#include "tprf/transport/link_set.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
+#include <sstream>
+#include <utility>
 
 namespace tprf {
 
@@ -26,12 +36,351 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     link_options.threads = options.threads;
     link_options.progress = options.progress;
     LinkStats link_stats;
-    const Links links = compute_links(patches, visibility, link_options, &link_stats);
-    s.links = links.size();
+    LinkSet links;
+    if (scene.links.method == LinkMethod::Flat)
+        links = flat_link_set(patches, visibility, link_options, &link_stats);
+    else
+        links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options);
+    s.links = links.links.size();
     s.link_bytes = links.bytes();
     s.pairs_tested = link_stats.pairs_tested;
     s.seconds_links = seconds_since(t0);
     return s;
+}
+
+// ---- Resource estimate (SPEC.md v2, "Links and scale": `tprf info`, `--max-memory`) ----
+//
+// Every constant below was measured on the project's machine (AMD EPYC, 2 cores, 23.5 GiB; see
+// bench/RESULTS.md for the runs the throughputs come from): bytes from VmRSS and VmHWM around each stage
+// (meshes/corner.json and meshes/cornell-box.json at their own and at finer patch sizes), seconds on 2
+// threads. Repeated runs on that shared machine vary by up to 30%; the estimate aims at a factor of 2.
+
+namespace {
+
+constexpr double kMB = 1e6;
+constexpr double kGB = 1e9;
+
+// Memory, bytes.
+constexpr double kBaseBytes = 16 * kMB;          // the process before any stage: code, libraries, threads
+constexpr double kPatchBytes = 108;              // a patch's arrays besides its corners (centroid ... object)
+constexpr double kCornerBytes = 24;              // one corner (a Vec3)
+constexpr double kMeshBytesPerFace = 150;        // a mesh file while it is loaded and triangulated (54k faces: 65)
+constexpr double kEmbreeBytesPerPatch = 180;     // Embree's quads and BVH (RTC_BUILD_QUALITY_HIGH), at its peak
+constexpr double kLinkBytes = 12;                // a link: source u32, form factor f32, distance f32
+constexpr double kRowBytes = 8;                  // a CSR row offset per receiver
+constexpr double kLinkBuildBytes = 4;            // the link builder's pair lists, per link (8 bytes a pair)
+constexpr double kTreeBytesPerNode = 100;        // a cluster tree node (bounds, cone, ranges, levels)
+constexpr double kPulseBytes = 64;               // a pulse (40 bytes) and the per-patch lists it was built in
+constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lists, taps before and after assembly
+constexpr double kGatherBytesPerPatch = 100;     // FLANN's index over the centroids
+constexpr double kShortLinkBytes = 16;           // a link shorter than a block, in the solver's own list
+constexpr double kSameBinLinkBytes = 8;          // a link within one bin
+constexpr int kBlockBins = 32;                   // SolverOptions::block_bins
+constexpr int kPointSourceSamples = 16;          // IlluminationOptions::samples: pulses per patch and point source
+constexpr int kAreaSourcePulses = 16;            // pulses per link from an emitter (4 points on each side)
+
+// Link counts.
+constexpr std::size_t kPairSamples = 1024;       // patches sampled to estimate which pairs face each other
+/// Hierarchical links per patch and per doubling of the patch count: links = c N log2 N. A first guess,
+/// to be calibrated on the hierarchical method's own runs (bench/RESULTS.md).
+constexpr double kHierarchicalLinksPerPatchLog2 = 30.0;
+
+// Seconds on 2 threads.
+constexpr double kPatchSeconds = 4e-7;               // per patch (110k patches in 0.04 s)
+constexpr double kMeshSecondsPerFace = 1.5e-6;       // reading a mesh file and cutting it (54k faces: 0.08 s)
+constexpr double kEmbreeSeconds = 1.2e-6;            // per patch (110k patches in 0.12 s)
+constexpr double kPairsPerSecond = 4.2e6;            // flat links: unordered pairs considered (4.1-4.4 M/s)
+constexpr double kHierarchicalLinkSeconds = 2e-6;    // per hierarchical link, a first guess to be calibrated
+constexpr double kPulseSeconds = 2e-7;               // per pulse, shadow rays included
+constexpr double kSampleSeconds = 2e-6;              // per camera sample (0.35-1.0 M samples/s)
+constexpr double kTapBinSeconds = 1.0 / 1.5e9;       // the film: one tap applied to one bin
+constexpr double kLinkBinSeconds[2] = {1.0 / 8e9, 1.0 / 4e9};  // the solve: link-bin updates, grey / colour
+constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin by bin
+constexpr double kWriteSeconds = 0.2;                // the images and render.json
+constexpr double kCubeBytesPerSecond = 0.7e9;        // writing back the memory-mapped cubes
+constexpr double kSteadySecondsPerLink = 3e-8;       // the steady state (BiCGSTAB on the links, 3 channels)
+constexpr int kTapsPerSample = 8;                    // neighbouring patches a camera sample interpolates between
+constexpr int kTapsPerPixel = 32;                    // at most, once the samples of a pixel are merged
+
+// A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
+std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
+
+int next_pow2(int v) {
+    int r = 1;
+    while (r < v) r <<= 1;
+    return r;
+}
+
+bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
+
+// The solver marches one channel when every albedo and every source is grey (as the solver decides).
+bool scene_grey(const Scene& scene) {
+    for (const Object& o : scene.objects)
+        if (!grey(o.albedo) || !grey(o.emission)) return false;
+    for (const Light& l : scene.lights) {
+        if (const auto* p = std::get_if<PointLight>(&l); p && !grey(p->intensity)) return false;
+        if (const auto* p = std::get_if<Laser>(&l); p && !grey(p->power)) return false;
+    }
+    return true;
+}
+
+// What the sampled patch pairs say: the share that face each other, the same among pairs with an
+// emitter, and among the facing ones the share shorter than a block and within one bin.
+struct PairShares {
+    double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0;
+};
+
+PairShares pair_shares(const Scene& scene, const PatchCensus& census, double block_m, double bin_m) {
+    PairShares s;
+    std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0;
+    const auto& v = census.samples;
+    for (std::size_t i = 0; i < v.size(); ++i) {
+        const bool emits_i = (scene.objects[v[i].object].emission > 0.0).any();
+        for (std::size_t j = i + 1; j < v.size(); ++j) {
+            const Vec3 d = v[j].point - v[i].point;
+            const double r = d.norm(), tol = 1e-9 * r;
+            const bool faces = d.dot(v[i].normal) > tol && -d.dot(v[j].normal) > tol;
+            const bool emits = emits_i || (scene.objects[v[j].object].emission > 0.0).any();
+            ++pairs;
+            emitter_pairs += emits;
+            if (!faces) continue;
+            ++facing;
+            emitter_facing += emits;
+            shorter += r < block_m;
+            same += r < bin_m;
+        }
+    }
+    if (pairs > 0) s.facing = double(facing) / double(pairs);
+    s.emitter_facing = emitter_pairs > 0 ? double(emitter_facing) / double(emitter_pairs) : s.facing;
+    if (facing > 0) {
+        s.shorter_than_block = double(shorter) / double(facing);
+        s.same_bin = double(same) / double(facing);
+    }
+    return s;
+}
+
+// Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver.cpp
+// plan_layers): {layers, solver terms, per-bounce cubes}.
+std::array<int, 3> bounce_layout(const SolverSettings& s) {
+    const int cubes = s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0;
+    if (s.max_bounces >= 0) return {s.max_bounces + 1, cubes > 0 ? s.max_bounces + 1 : 0, cubes};
+    if (cubes > 1) return {cubes, cubes, cubes};
+    return {1, 0, cubes};
+}
+
+// Whether a ray from `o` along `d` meets the object from its front (a rectangle exactly; a mesh: its
+// bounding box, either side).
+bool ray_meets(const Object& object, const Eigen::AlignedBox3d& box, const Vec3& o, const Vec3& d) {
+    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+        const Vec3 n = r->u.cross(r->v);
+        const double along = d.dot(n);
+        if (along == 0.0 || (along > 0.0 && !object.two_sided)) return false;
+        const double t = (r->origin - o).dot(n) / along;
+        if (!(t > 0.0)) return false;
+        const Vec3 w = o + t * d - r->origin;
+        const double uu = r->u.dot(r->u), uv = r->u.dot(r->v), vv = r->v.dot(r->v);
+        const double wu = w.dot(r->u), wv = w.dot(r->v), det = uu * vv - uv * uv;
+        const double a = (wu * vv - wv * uv) / det, b = (wv * uu - wu * uv) / det;
+        return a >= 0.0 && a <= 1.0 && b >= 0.0 && b <= 1.0;
+    }
+    double near = 0.0, far = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) {
+        double t0 = (box.min()[k] - o[k]) / d[k], t1 = (box.max()[k] - o[k]) / d[k];
+        if (t0 > t1) std::swap(t0, t1);
+        near = std::max(near, t0);
+        far = std::min(far, t1);
+    }
+    return near <= far;
+}
+
+// The share of pixels that see some object (occlusion left out), from the centre rays of at most
+// 64 x 64 pixels: a pixel that sees nothing gets no taps, and its part of the cube is never touched.
+double lit_share(const Scene& scene, const PatchCensus& census) {
+    const Camera& camera = *scene.camera;
+    const int gx = std::min(camera.width, 64), gy = std::min(camera.height, 64);
+    int lit = 0;
+    for (int y = 0; y < gy; ++y)
+        for (int x = 0; x < gx; ++x) {
+            const Vec3 d = camera_ray(camera, (x + 0.5) * camera.width / gx, (y + 0.5) * camera.height / gy);
+            for (std::size_t k = 0; k < scene.objects.size(); ++k)
+                if (ray_meets(scene.objects[k], census.bounds[k], camera.position, d)) {
+                    ++lit;
+                    break;
+                }
+        }
+    return double(lit) / double(gx * gy);
+}
+
+// Links and the cluster tree, their bytes and the builder's seconds, for the scene's method. Returns
+// the links whose source emits (LinkSet::emitters), which the illumination spreads into pulses.
+double estimate_links(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
+    const double n = double(census.patches), others = std::max(n - 1.0, 0.0);
+    const double flat = shares.facing * n * others;  // facing pairs, both directions (visibility not removed)
+    const double emitter_links = double(census.emissive) * others * shares.emitter_facing;
+    double links = flat, rows = n, tree = 0.0, seconds = 0.5 * n * others / kPairsPerSecond;
+    e.nodes = census.patches;
+    if (scene.links.method == LinkMethod::Hierarchical) {
+        links = std::min(flat, kHierarchicalLinksPerPatchLog2 * n * std::log2(std::max(n, 2.0)));
+        e.nodes = census.patches > 0 ? 2 * census.patches - 1 : 0;
+        rows = double(e.nodes);
+        tree = kTreeBytesPerNode * rows;
+        seconds = kHierarchicalLinkSeconds * links;
+    }
+    e.links = to_size(links);
+    e.link_bytes = to_size(kLinkBytes * (links + emitter_links) + kRowBytes * (rows + n) + tree);
+    e.link_build_bytes = to_size(kLinkBuildBytes * links);
+    e.seconds.links = kEmbreeSeconds * n + seconds;
+    return emitter_links;
+}
+
+// The illumination's pulses and the camera's gather; the film's seconds (taps x bins) are counted here
+// too, as render.json counts them.
+void estimate_camera(const Scene& scene, const PatchCensus& census, double emitter_links, ResourceEstimate& e) {
+    const double n = double(census.patches);
+    const double pulses = kPointSourceSamples * n * double(scene.lights.size()) + kAreaSourcePulses * emitter_links +
+                          double(census.emissive);
+    e.illumination_bytes = to_size(kPulseBytes * pulses);
+    double seconds = kPulseSeconds * pulses;
+    if (scene.camera) {
+        e.lit_pixels = lit_share(scene, census);
+        const double pixels = double(scene.camera->width) * double(scene.camera->height) * e.lit_pixels;
+        const int spp = std::max(1, scene.camera->spp);
+        e.samples = to_size(pixels * spp);
+        const double taps = pixels * std::min(kTapsPerSample * spp, kTapsPerPixel);
+        e.gather_bytes = to_size(kGatherBytesPerSample * double(e.samples) + kGatherBytesPerPatch * n);
+        const int films = 1 + bounce_layout(scene.solver)[2];
+        seconds += kSampleSeconds * double(e.samples) + kTapBinSeconds * taps * scene.time.bins * films;
+    }
+    e.seconds.gather = seconds;
+}
+
+// The march: rings of every node that sends (the largest delay is the scene's diagonal), block buffers,
+// the lists of links shorter than a block and the films' block scratch.
+void estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
+    const auto [layers, terms, cubes] = bounce_layout(scene.solver);
+    const double bin_m = scene.time.bin_width_m();
+    const int max_lag = int(std::min(census.diagonal / bin_m, 1e8));
+    e.channels = scene_grey(scene) ? 1 : 3;
+    e.layers = layers;
+    e.ring_bins = next_pow2(max_lag + kBlockBins + 2);
+    const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
+    const double rings = L * nodes * (e.ring_bins + kBlockBins + 1) * C * 4;
+    const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
+    const double outputs = (1.0 + terms + 1.0 + cubes) * n * kBlockBins * 3 * 4;  // solver's and films' blocks
+    const double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
+                                            shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
+    e.solver_bytes = to_size(rings + blocks + outputs + lists);
+    // Layers that gather from links (solver.cpp plan_layers): all but the first order's, or the one total.
+    const double fed = (layers == 1 && scene.solver.max_bounces < 0) ? 1 : layers - 1;
+    const double link_bins = double(e.links) * scene.time.bins * fed;
+    e.seconds.solve = link_bins * (kLinkBinSeconds[e.channels == 1 ? 0 : 1] +
+                                   shares.shorter_than_block * kShortLinkBinSeconds * C / 3.0);
+}
+
+// The memory-mapped cubes the solve fills (the transient cube, per-bounce cubes, patch profiles), and
+// what the write phase adds: the steady state, the images, the sensor's measurements.
+void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_profiles, ResourceEstimate& e) {
+    const double n = double(census.patches), T = scene.time.bins;
+    double cube = 0.0, image = 0.0, measurements = 0.0;
+    if (scene.camera) {
+        const double pixels = double(scene.camera->width) * double(scene.camera->height);
+        cube = (1.0 + bounce_layout(scene.solver)[2]) * pixels * e.lit_pixels * T * 3 * 4;
+        image = 4.0 * pixels * 3 * 4;  // the steady image, its preview and the writers' copies
+        if (scene.sensor) measurements = pixels * (measurement_count(*scene.sensor, scene.time) * 3 + 1) * 4;
+    }
+    if (patch_profiles) cube += n * T * 3 * 4;
+    e.cube_bytes = to_size(cube);
+    const double steady = 12.0 * n * 8;  // BiCGSTAB's vectors, one channel at a time, and the N radiosities
+    e.write_bytes = to_size(steady + image + measurements);
+    e.seconds.write = kWriteSeconds + (cube + measurements) / kCubeBytesPerSecond +
+                      kSteadySecondsPerLink * double(e.links);
+}
+
+// The peak: the largest sum of what is held at once, stage by stage in the order of a render.
+void sum_peak(ResourceEstimate& e) {
+    const std::size_t held = e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes;
+    const std::pair<std::size_t, const char*> stages[] = {
+        {e.base_bytes + e.mesh_bytes + e.patch_bytes, "patches"},
+        {held + e.link_build_bytes, "links"},
+        {held + e.illumination_bytes + e.gather_bytes, "gather"},
+        {held + e.illumination_bytes + e.gather_bytes + e.solver_bytes + e.cube_bytes, "solve"},
+        {held + e.illumination_bytes + e.gather_bytes + e.cube_bytes + e.write_bytes, "write"},
+    };
+    e.link_stage_bytes = std::max(stages[0].first, stages[1].first);
+    for (const auto& [bytes, stage] : stages)
+        if (bytes > e.peak_bytes) {
+            e.peak_bytes = bytes;
+            e.peak_stage = stage;
+        }
+}
+
+// MemAvailable from /proc/meminfo, bytes (0 when it cannot be read).
+std::size_t memory_available() {
+    std::ifstream meminfo("/proc/meminfo");
+    std::string line;
+    while (std::getline(meminfo, line))
+        if (line.rfind("MemAvailable:", 0) == 0) return std::size_t(std::stod(line.substr(13)) * 1024.0);
+    return 0;
+}
+
+// "0.425 GB", "18.8 GB", "20011234 GB".
+std::string gb(double bytes) {
+    char buf[48];
+    std::snprintf(buf, sizeof buf, bytes < 1e3 * kGB ? "%.3g GB" : "%.0f GB", bytes / kGB);
+    return buf;
+}
+
+}  // namespace
+
+ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& options, bool patch_profiles) {
+    ResourceEstimate e;
+    const PatchCensus census = count_patches(scene, kPairSamples);
+    const double n = double(census.patches);
+    e.patches = census.patches;
+    e.max_edge = census.max_edge;
+    e.base_bytes = to_size(kBaseBytes);
+    e.mesh_bytes = to_size(kMeshBytesPerFace * double(census.mesh_faces));
+    e.patch_bytes = to_size(kPatchBytes * n + kCornerBytes * double(census.corners));
+    e.visibility_bytes = to_size(kEmbreeBytesPerPatch * n);
+    e.seconds.patches = kPatchSeconds * n + kMeshSecondsPerFace * double(census.mesh_faces);
+    const double bin_m = scene.time.bin_width_m();
+    const PairShares shares = pair_shares(scene, census, kBlockBins * bin_m, bin_m);
+    e.facing_fraction = shares.facing;
+    const double emitter_links = estimate_links(scene, census, shares, e);
+    estimate_camera(scene, census, emitter_links, e);
+    estimate_solver(scene, census, shares, e);
+    estimate_outputs(scene, census, patch_profiles, e);
+    sum_peak(e);
+    // The throughputs are for 2 threads; every stage but loading the meshes runs in parallel.
+    const double scale = 2.0 / double(thread_count(options.threads));
+    PhaseSeconds& s = e.seconds;
+    for (double* phase : {&s.links, &s.solve, &s.gather, &s.write}) *phase *= scale;
+    s.total = s.load + s.patches + s.links + s.solve + s.gather + s.write;
+    return e;
+}
+
+std::size_t memory_limit_bytes(const PipelineOptions& options) {
+    if (options.max_memory_gb > 0.0) return to_size(options.max_memory_gb * kGB);
+    return to_size(0.8 * double(memory_available()));
+}
+
+void check_memory(const Scene& scene, const PipelineOptions& options, bool patch_profiles) {
+    const std::size_t limit = memory_limit_bytes(options);
+    if (limit == 0) return;  // no /proc/meminfo and no --max-memory: nothing to check against
+    const ResourceEstimate e = estimate_resources(scene, options, patch_profiles);
+    if (e.peak_bytes <= limit) return;
+    std::ostringstream what;
+    char links[32];
+    std::snprintf(links, sizeof links, "%.3g", double(e.links));
+    what << "estimated peak memory " << gb(double(e.peak_bytes)) << " (" << e.patches << " patches, about "
+         << links << " links: links " << gb(double(e.link_bytes)) << ", solver " << gb(double(e.solver_bytes))
+         << ", cubes " << gb(double(e.cube_bytes)) << ") exceeds the limit of " << gb(double(limit))
+         << (options.max_memory_gb > 0.0 ? " (--max-memory)" : " (80% of the memory available; --max-memory GB)")
+         << "; nothing was rendered. To shrink it: raise patches.max_edge, lower time.bins or camera.width and "
+            "camera.height, "
+         << (scene.links.method == LinkMethod::Flat ? "set links.method to \"hierarchical\" or " : "")
+         << "raise links.tolerance";
+    fail_input(scene.file, "", what.str());
 }
 
 double peak_rss_mb() {

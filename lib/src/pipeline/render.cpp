@@ -13,7 +13,7 @@
 #include "tprf/scene/parse_json.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/transport/solver.h"
 #include "tprf/transport/steady.h"
 
@@ -51,7 +51,7 @@ void write_patches_csv(const std::filesystem::path& path, const PatchSet& p) {
 struct Transport {
     PatchSet patches;
     std::unique_ptr<Visibility> visibility;
-    Links links;
+    LinkSet links;
     LightSources sources;
     Illumination illumination;
     Gather gather;
@@ -70,15 +70,16 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     LinkOptions link_options;
     link_options.threads = options.threads;
     link_options.progress = options.progress;
-    t.links = compute_links(t.patches, *t.visibility, link_options);
-    report.links = t.links.size();
+    t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
+    report.links = t.links.links.size();
     report.seconds.links = seconds_since(start);
 
     start = Clock::now();
     t.sources = light_sources(scene, t.patches, *t.visibility);
     IlluminationOptions light_options;
     light_options.threads = options.threads;
-    t.illumination = illuminate(t.sources, t.patches, t.links, *t.visibility, light_options);
+    light_options.merge_bins = &scene.time;
+    t.illumination = illuminate(t.sources, t.patches, t.links.emitters, *t.visibility, light_options);
     t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, {options.threads, options.progress});
     report.seconds.gather = seconds_since(start);
 }
@@ -204,13 +205,14 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
 }
 
 // Everything that can be wrong with the request is found before any work: the scene, the camera,
-// ffmpeg for a video, the plot pixel and the output directory.
+// ffmpeg for a video, the plot pixel, the estimated peak memory and the output directory.
 Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options) {
     Scene scene = load_scene(scene_file);
     if (!scene.camera) fail_input(scene_file, "camera", "missing: tprf render needs a camera");
     if (options.video && !have_ffmpeg())
         throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
     plot_pixel(options.plot_pixel, scene.camera->width, scene.camera->height);
+    check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
     check_output_dir(options.output);
     return scene;
 }

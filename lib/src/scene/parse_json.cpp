@@ -204,11 +204,27 @@ double parse_max_edge(const Node& n) {
     return max_edge;
 }
 
+LinkSettings parse_links(const Node& n) {
+    n.check_keys({"method", "tolerance"});
+    LinkSettings links;
+    if (const auto method = n.find("method")) {
+        const std::string m = method->string();
+        if (m == "flat")
+            links.method = LinkMethod::Flat;
+        else if (m == "hierarchical")
+            links.method = LinkMethod::Hierarchical;
+        else
+            method->fail("unknown link method " + in_quotes(m) + " (expected \"hierarchical\" or \"flat\")");
+    }
+    if (const auto tolerance = n.find("tolerance")) links.tolerance = tolerance->number();
+    return links;
+}
+
 // Builds the Scene from the document without judging its values: validate() does that afterwards.
 Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file) {
     if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
     const Node n{root, "", file};
-    n.check_keys({"time", "camera", "lights", "objects", "patches", "solver", "sensor"});
+    n.check_keys({"time", "camera", "lights", "objects", "patches", "links", "solver", "sensor"});
 
     Scene scene;
     scene.file = file;
@@ -225,6 +241,7 @@ Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file)
         patches->check_keys({"max_edge"});
         if (const auto max_edge = patches->find("max_edge")) scene.max_edge = parse_max_edge(*max_edge);
     }
+    if (const auto links = n.find("links")) scene.links = parse_links(*links);
     if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
     if (const auto sensor = n.find("sensor")) scene.sensor = parse_sensor(*sensor);
     return scene;

@@ -300,6 +300,10 @@ void check_settings(const Scene& scene, const At& root) {
     const At max_edge = root.key("patches").key("max_edge");
     finite(scene.max_edge, max_edge);
     if (scene.max_edge < 0.0) max_edge.fail("must be > 0");
+    const At tolerance = root.key("links").key("tolerance");
+    finite(scene.links.tolerance, tolerance);
+    if (!(scene.links.tolerance > 0.0)) tolerance.fail("must be > 0");
+    if (scene.links.tolerance >= 1.0) tolerance.fail("must be < 1 (a form-factor error; 0.001 is a good start)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
 }
 

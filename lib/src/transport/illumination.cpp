@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 namespace tprf {
 namespace {
@@ -96,6 +97,25 @@ Pulse self_pulse(const PatchSet& patches, std::size_t i) {
     return p;
 }
 
+// Merges the pulses of one patch that share a bin of `time`, an order, a source and a propagation.
+void merge_by_bin(std::vector<Pulse>& pulses, const TimeAxis& time) {
+    if (pulses.size() < 2) return;
+    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    auto key = [&](const Pulse& p) {
+        return std::make_tuple(std::floor((p.path - start) * inv_bin), p.order, p.propagates, p.point_source);
+    };
+    std::stable_sort(pulses.begin(), pulses.end(), [&](const Pulse& a, const Pulse& b) { return key(a) < key(b); });
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < pulses.size(); ++k) {
+        if (kept > 0 && key(pulses[kept - 1]) == key(pulses[k]))
+            pulses[kept - 1].energy += pulses[k].energy;
+        else
+            pulses[kept++] = pulses[k];
+    }
+    pulses.resize(kept);
+    pulses.shrink_to_fit();
+}
+
 Illumination to_csr(std::vector<std::vector<Pulse>>& per_patch) {
     const std::size_t n = per_patch.size();
     Illumination e;
@@ -125,6 +145,7 @@ Illumination illuminate(const LightSources& sources, const PatchSet& patches, co
             else
                 light_from_point(patches, vis, i, source, std::int32_t(s), grid, out);
         }
+        if (options.merge_bins) merge_by_bin(out, *options.merge_bins);
     });
     return to_csr(per_patch);
 }

@@ -6,6 +6,7 @@
 #include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "patch_pairs.h"
 
 
 #include <algorithm>
@@ -55,12 +56,6 @@ bool any_in_front(const PatchSet& patches, std::size_t a, std::size_t b, double 
     for (std::size_t k = 0; k < patches.corners(b); ++k)
         if (n.dot(poly[k] - c) > tolerance) return true;
     return false;
-}
-
-std::vector<double> circumradii(const PatchSet& patches) {
-    std::vector<double> r(patches.size());
-    for (std::size_t i = 0; i < patches.size(); ++i) r[i] = circumradius(patches, i);
-    return r;
 }
 
 // For each patch i, the patches j > i closer than near_factor * (r_i + r_j), sorted: a FLANN radius
@@ -113,45 +108,91 @@ std::size_t Links::bytes() const {
            ff.size() * sizeof(float) + distance.size() * sizeof(float);
 }
 
+bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
+                const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
+                LinkStats& counts) {
+    if (!any_in_front(patches, i, j, 1e-9 * radius[i]) || !any_in_front(patches, j, i, 1e-9 * radius[j])) return false;
+    ++counts.pairs_tested;
+    // Integrate over the smaller patch, with the exact inner integral over the larger one.
+    const bool i_outer = patches.area[i] <= patches.area[j];
+    const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
+    double f_st;
+    const double far = options.far_factor * (radius[i] + radius[j]);
+    if (is_near) {
+        ++counts.near_pairs;
+        f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s], patches.polygon(t),
+                                   patches.corners(t), patches.normal[t], options.quadrature);
+    } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() < far * far) {
+        f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
+                                         patches.polygon(t), patches.corners(t), patches.normal[t]);
+    } else {
+        f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
+                                         patches.corners(t), patches.normal[t]);
+    }
+    if (!(f_st > 0.0)) return false;
+    const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
+    const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
+    if (v <= 0.0) return false;
+    out.ij = (i_outer ? f_st : f_ts) * v;
+    out.ji = (i_outer ? f_ts : f_st) * v;
+    return true;
+}
+
+bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
+               std::size_t j) {
+    const double limit = near_factor * (radius[i] + radius[j]);
+    return (patches.centroid[i] - patches.centroid[j]).squaredNorm() < limit * limit;
+}
+
+Links emitter_patch_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
+                          const std::vector<std::uint32_t>& emitting) {
+    const std::size_t n = patches.size();
+    const std::vector<double> radius = circumradii(patches);
+    std::vector<std::vector<std::pair<std::uint32_t, float>>> rows(n);
+    parallel_for(emitting.empty() ? 0 : n, {options.threads, 64, true}, [&](std::size_t i) {
+        LinkStats counts;
+        for (std::uint32_t e : emitting) {
+            if (e == i) continue;
+            const std::size_t a = std::min<std::size_t>(i, e), b = std::max<std::size_t>(i, e);
+            PairFormFactors f;
+            if (patch_pair(patches, vis, options, radius, a, b, near_pair(patches, radius, options.near_factor, a, b), f,
+                           counts))
+                rows[i].push_back({e, float(a == i ? f.ij : f.ji)});
+        }
+    });
+    Links out;
+    out.row.assign(n + 1, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (const auto& [e, ff] : rows[i]) {
+            out.source.push_back(e);
+            out.ff.push_back(ff);
+            out.distance.push_back(float((patches.centroid[i] - patches.centroid[e]).norm()));
+        }
+        out.row[i + 1] = out.source.size();
+    }
+    return out;
+}
+
+std::vector<double> circumradii(const PatchSet& patches) {
+    std::vector<double> r(patches.size());
+    for (std::size_t i = 0; i < patches.size(); ++i) r[i] = circumradius(patches, i);
+    return r;
+}
+
 namespace {
 
-// The links of patch i to every later patch j > i that faces it and is not fully occluded: F_ij by
-// the rule its distance calls for (adaptive for near pairs, Gauss for middle ones, the centroid rule
-// for far ones), integrated over the smaller patch, times the visible fraction.
+// The links of patch i to every later patch j > i that faces it and is not fully occluded (patch_pair).
 void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
               const std::vector<double>& radius, const std::vector<std::uint32_t>& near_i, std::size_t i,
               std::vector<PairLink>& row, LinkStats& counts) {
     const std::size_t n = patches.size();
-    const double far2 = options.far_factor * options.far_factor;
-    const double tol_i = 1e-9 * radius[i];
     std::size_t near_cursor = 0;
     for (std::size_t j = i + 1; j < n; ++j) {
         const bool is_near = near_cursor < near_i.size() && near_i[near_cursor] == j;
         if (is_near) ++near_cursor;
-        if (!any_in_front(patches, i, j, tol_i) || !any_in_front(patches, j, i, 1e-9 * radius[j])) continue;
-        ++counts.pairs_tested;
-        // Integrate over the smaller patch, with the exact inner integral over the larger one.
-        const bool i_outer = patches.area[i] <= patches.area[j];
-        const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
-        double f_st;
-        if (is_near) {
-            ++counts.near_pairs;
-            f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s], patches.polygon(t),
-                                       patches.corners(t), patches.normal[t], options.quadrature);
-        } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() <
-                   far2 * (radius[i] + radius[j]) * (radius[i] + radius[j])) {
-            f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
-                                             patches.polygon(t), patches.corners(t), patches.normal[t]);
-        } else {
-            f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
-                                             patches.corners(t), patches.normal[t]);
-        }
-        if (!(f_st > 0.0)) continue;
-        const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
-        const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
-        if (v <= 0.0) continue;
-        const double f_ij = (i_outer ? f_st : f_ts) * v;
-        row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f_ij)});
+        PairFormFactors f;
+        if (patch_pair(patches, vis, options, radius, i, j, is_near, f, counts))
+            row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f.ij)});
     }
     row.shrink_to_fit();
 }

@@ -3,7 +3,7 @@
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
 
 #include <omp.h>
@@ -85,11 +85,20 @@ bool scene_is_grey(const PatchSet& patches, const Illumination& illumination) {
     return true;
 }
 
+// Where node m's ring of recent radiosity lives in a layer's ring array: `length` bins (a power of
+// two, as long as the node's longest outgoing link needs), then a mirror of the first bins, so that
+// any window of a block plus one bin is contiguous.
+struct RingSlot {
+    std::uint64_t offset;  // floats
+    std::int32_t mask;     // length - 1
+    std::int32_t length;
+};
+
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
 void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end, float inv_bin,
-                 DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0, float* acc) {
+                 DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, float* acc) {
     // Locals, not the reference and the vectors: a store through `cursor` would make the compiler
     // reload every array pointer once per link.
     const std::uint32_t* __restrict source = links.source.data();
@@ -100,7 +109,8 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
     for (; k < end && source[k] < source_end; ++k) {
         const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
-        const float* __restrict h = ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * C;
+        const RingSlot& slot = slots[source[k]];
+        const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
         // Two separate accumulations: written as one sum, the compiler (no -ffast-math) must round
         // w0 h + w1 h first, which costs a multiply, an FMA and an add instead of two FMAs.
         for (int e = 0; e < C * BT; ++e) {
@@ -114,7 +124,7 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
 
 // The same for block lengths without a specialisation.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
-                     float inv_bin, DelayMode mode, const float* ring, std::size_t stride, int rmask, std::int64_t b0,
+                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0,
                      int C, int bt, float* __restrict acc) {
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
@@ -125,7 +135,7 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
         const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < bt) continue;
         const float* __restrict h =
-            ring + std::size_t(source[k]) * stride + std::size_t(int((b0 - t.lag - 1) & rmask)) * std::size_t(C);
+            ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);
         for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
             acc[e] += t.w0 * h[e + C];
             acc[e] += t.w1 * h[e];
@@ -135,12 +145,14 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
 }
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                              const float*, std::size_t, int, std::int64_t, float*);
+                              const float*, const RingSlot*, std::int64_t, float*);
 
 GatherKernel pick_kernel(int C, int bt) {
+    if (C == 1 && bt == 8) return gather_long<1, 8>;
     if (C == 1 && bt == 16) return gather_long<1, 16>;
     if (C == 1 && bt == 32) return gather_long<1, 32>;
     if (C == 1 && bt == 64) return gather_long<1, 64>;
+    if (C == 3 && bt == 8) return gather_long<3, 8>;
     if (C == 3 && bt == 16) return gather_long<3, 16>;
     if (C == 3 && bt == 32) return gather_long<3, 32>;
     return nullptr;
@@ -151,6 +163,8 @@ GatherKernel pick_kernel(int C, int bt) {
 // in a core's L2 while every receiver of the tile reads them (sizes measured, bench/RESULTS.md).
 constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
+// Links per receiver below which the sources are not tiled.
+constexpr std::size_t kDenseRow = 256;
 
 int next_pow2(int v) {
     int r = 1;
@@ -161,7 +175,17 @@ int next_pow2(int v) {
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
 struct SolvePlan {
-    std::size_t n = 0;              // patches
+    std::size_t n = 0;              // patches (the leaves: they emit, reflect and are output)
+    std::size_t m = 0;              // nodes: patches, then clusters (rings, gathers)
+    const ClusterTree* tree = nullptr;
+    bool clusters = false;          // push and pull run (a link set with clusters)
+    // With clusters: the subtrees that threads take whole (their patches and clusters) and the
+    // clusters above them, in preorder.
+    std::vector<std::uint32_t> top, subtrees;
+    // Sources per tile of the long pass: kSourceTile for dense rows; one tile for sparse ones
+    // (hierarchical links), whose rows would otherwise be walked once per empty tile.
+    std::size_t source_tile = kSourceTile;
+    std::uint64_t expanded_links = 0;  // links with a cluster end shorter than a block (see split_links)
     int threads = 1;
     int bt = 0;                     // block length, bins (a power of two)
     int C = 3;                      // channels marched (1 for a grey scene)
@@ -175,47 +199,115 @@ struct SolvePlan {
     std::vector<ShortLink> short_links;
     std::vector<SameBinLink> same_links;
     int max_lag = 0;
-    // Ring: the window [t - lag - 1, t] of every read must fit, plus one block; mirrored so that any
-    // window of bt + 1 bins is contiguous.
-    int ring = 0, mirror = 0, rmask = 0;
-    std::size_t stride = 0;         // floats per patch and layer
+    // Rings: the window [t - lag - 1, t] of every read from a node must fit, plus one block; mirrored
+    // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
+    // link needs: most patches of a hierarchical set send only to near ones (or not at all).
+    std::vector<int> send_lag;      // per node: its longest outgoing link's lag, bins
+    std::vector<RingSlot> slots;    // per node
+    std::size_t ring_floats = 0;    // per layer
+    int ring = 0, mirror = 0;       // longest ring; mirror length
     std::int64_t T = 0, b_begin = 0, blocks = 0;
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel = nullptr;  // the long-link kernel for (C, bt), or null for the generic one
 
-    std::size_t block_values() const { return n * std::size_t(bt) * std::size_t(C); }
+    std::size_t block_values() const { return m * std::size_t(bt) * std::size_t(C); }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
     std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
 };
 
 // Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
 // bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin).
+// The links that have to be applied bin by bin (lag < bt), as lists by receiver patch.
+struct BinLinks {
+    std::vector<std::vector<ShortLink>> shorts;
+    std::vector<std::vector<SameBinLink>> same;
+};
+
+// Adds a link of lag < bt between patches (the same-bin system takes a lag-0 link's w0 tap).
+void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, const Taps& t, float scale) {
+    if (t.lag == 0) {
+        out.same[receiver].push_back({source, t.w0 * scale});
+        out.shorts[receiver].push_back({source, 0, 0.0f, t.w1 * scale});
+    } else {
+        out.shorts[receiver].push_back({source, t.lag, t.w0 * scale, t.w1 * scale});
+    }
+}
+
+// Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
+// bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin). The bin-by-bin passes
+// touch patches only: a link shorter than a block with a cluster at either end (which the
+// hierarchical build avoids when it knows the bin) is applied as the links between their patches,
+// the receiver's each taking the whole link (push), the source's each its share of the area (pull).
 void split_links(const Links& links, SolvePlan& plan) {
-    plan.short_row.assign(plan.n + 1, 0);
-    plan.same_row.assign(plan.n + 1, 0);
-    for (std::size_t i = 0; i < plan.n; ++i) {
+    const ClusterTree& tree = *plan.tree;
+    BinLinks bins{std::vector<std::vector<ShortLink>>(plan.n), std::vector<std::vector<SameBinLink>>(plan.n)};
+    plan.send_lag.assign(plan.m, 0);
+    for (std::size_t i = 0; i < plan.m; ++i) {
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
             const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             plan.max_lag = std::max(plan.max_lag, t.lag);
+            const std::uint32_t s = links.source[k];
+            plan.send_lag[s] = std::max(plan.send_lag[s], t.lag);
             if (t.lag >= plan.bt) continue;
-            if (t.lag == 0) {
-                plan.same_links.push_back({links.source[k], t.w0});
-                plan.short_links.push_back({links.source[k], 0, 0.0f, t.w1});
-            } else {
-                plan.short_links.push_back({links.source[k], t.lag, t.w0, t.w1});
+            if (i < plan.n && s < plan.n) {
+                add_bin_link(bins, i, s, t, 1.0f);
+                continue;
             }
+            ++plan.expanded_links;
+            for (std::uint32_t r = tree.first[i]; r < tree.last[i]; ++r)
+                for (std::uint32_t q = tree.first[s]; q < tree.last[s]; ++q) {
+                    const std::uint32_t leaf = tree.leaf_order[q];
+                    add_bin_link(bins, tree.leaf_order[r], leaf, t, float(tree.area[leaf] / tree.area[s]));
+                }
         }
+    }
+    plan.short_row.assign(plan.n + 1, 0);
+    plan.same_row.assign(plan.n + 1, 0);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
+        plan.same_links.insert(plan.same_links.end(), bins.same[i].begin(), bins.same[i].end());
+        std::vector<ShortLink>().swap(bins.shorts[i]);
+        std::vector<SameBinLink>().swap(bins.same[i]);
         plan.short_row[i + 1] = plan.short_links.size();
         plan.same_row[i + 1] = plan.same_links.size();
     }
 }
 
-SolvePlan make_plan(const PatchSet& patches, const Links& links, const Illumination& illumination,
+// The subtrees that threads take whole during push and pull: the highest nodes with at most
+// `cut` patches below, so that there are several per thread; the clusters above them, in preorder.
+void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
+    const std::size_t cut = std::max<std::size_t>(32, t.leaves / (16 * std::size_t(std::max(plan.threads, 1))));
+    std::vector<std::uint32_t> stack{t.root()};
+    while (!stack.empty()) {
+        const std::uint32_t c = stack.back();
+        stack.pop_back();
+        if (t.last[c] - t.first[c] <= cut || t.is_leaf(c)) {
+            plan.subtrees.push_back(c);
+            continue;
+        }
+        plan.top.push_back(c);
+        const auto [a, b] = t.children[c - t.leaves];
+        stack.push_back(b);
+        stack.push_back(a);
+    }
+    std::sort(plan.top.begin(), plan.top.end());  // preorder ids: parents first
+}
+
+SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illumination& illumination,
                     const TimeAxis& time, const SolverOptions& options) {
+    const Links& links = set.links;
     SolvePlan plan;
     plan.n = patches.size();
+    plan.m = set.nodes();
+    plan.tree = &set.tree;
+    plan.clusters = set.tree.clusters() > 0;
     plan.threads = thread_count(options.threads);
+    if (plan.clusters) cut_subtrees(set.tree, plan);
+    if (links.size() < kDenseRow * plan.m) plan.source_tile = std::max<std::size_t>(plan.m, 1);
     plan.bt = next_pow2(std::clamp(options.block_bins, 1, 4096));
+    // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
+    if (plan.clusters && set.block_bins > 0)
+        while (plan.bt > 1 && plan.bt > set.block_bins) plan.bt /= 2;
     plan.C = scene_is_grey(patches, illumination) ? 1 : 3;
     plan.delay = options.delay;
     plan.start_m = time.start_m();
@@ -224,10 +316,15 @@ SolvePlan make_plan(const PatchSet& patches, const Links& links, const Illuminat
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
     split_links(links, plan);
-    plan.ring = next_pow2(plan.max_lag + plan.bt + 2);
     plan.mirror = plan.bt + 1;
-    plan.rmask = plan.ring - 1;
-    plan.stride = std::size_t(plan.ring + plan.mirror) * std::size_t(plan.C);
+    plan.slots.resize(plan.m);
+    for (std::size_t k = 0; k < plan.m; ++k) {
+        const int length = next_pow2(plan.send_lag[k] + plan.bt + 2);
+        plan.slots[k] = {plan.ring_floats, length - 1, length};
+        plan.ring_floats += std::size_t(length + plan.mirror) * std::size_t(plan.C);
+        plan.ring = std::max(plan.ring, length);
+    }
+    std::vector<int>().swap(plan.send_lag);
     // Light sent before the window opens still travels: march from the earliest pulse, block-aligned.
     std::int64_t first_pulse_bin = 0;
     for (const Pulse& p : illumination.pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
@@ -246,11 +343,11 @@ class March {
 public:
     March(const PatchSet& patches, const Links& links, const Illumination& illumination, const SolvePlan& plan)
         : m_patches(patches), m_links(links), m_illumination(illumination), m_plan(plan),
-          m_rings(std::size_t(plan.L), std::vector<float>(plan.n * plan.stride, 0.0f)),
+          m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.block_values())),
           m_emit(std::size_t(plan.L), std::vector<float>(plan.block_values())),
-          m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
-          m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
+          m_base(std::size_t(plan.L) * plan.m * std::size_t(plan.C)),
+          m_iterate(std::size_t(plan.L) * plan.m * std::size_t(plan.C)),
           m_out_total(plan.n * std::size_t(plan.bt) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * 3) {}
 
@@ -259,23 +356,34 @@ public:
     // Step 1 (in a region): per receiver, the block's emission and every long link as one contiguous
     // multiply-add over the block, reading history that is already final.
     void long_pass(std::int64_t b0);
+    // Step 1b (in a region, clusters only): every cluster's long-link sums added into its children's.
+    void push_block();
     // Step 2 (in a region): bin by bin, short links, then the same-bin system by Jacobi iteration.
     void short_pass(std::int64_t b0);
+    // Step 2b (in a region, clusters only): every cluster's radiosity over the block from its children's.
+    void pull_block(std::int64_t b0);
     // Step 3: the block's bins inside the window, handed to the sink.
     void emit_block(std::int64_t b0, const BlockSink& sink);
     int worst_jacobi_iterations() const { return m_worst_iterations.load(); }
 
 private:
     float* ring_at(int layer, std::size_t patch, std::int64_t bin) {
-        return m_rings[std::size_t(layer)].data() + patch * m_plan.stride +
-               std::size_t(int(bin & m_plan.rmask)) * std::size_t(m_plan.C);
+        const RingSlot& slot = m_plan.slots[patch];
+        return m_rings[std::size_t(layer)].data() + slot.offset + std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.C);
     }
     void store(int layer, std::size_t patch, std::int64_t bin, const float* v);
     // Layer that a pulse of order `order` enters besides the total (-1: none).
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
+    void gather_bin(std::size_t i, std::int64_t b0, int o, int l, float* g);
+    void settle_patch(std::size_t i, std::int64_t b0, int o, int l, const float* g);
     void short_links_of(std::size_t i, std::int64_t b0, int o);
+    void push_node(std::uint32_t i);
+    void pull_node(std::uint32_t c, std::int64_t b0);
+    template <class NodeFn>
+    void over_tree(bool down, NodeFn visit);
+    void same_bin_gather(std::size_t i, int l, std::int64_t bin, float* g);
     bool jacobi_sweep(std::int64_t bin);
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
@@ -284,10 +392,10 @@ private:
     const Links& m_links;
     const Illumination& m_illumination;
     const SolvePlan& m_plan;
-    std::vector<std::vector<float>> m_rings;    // per layer: N x (ring + mirror) x C
-    std::vector<std::vector<float>> m_acc;      // per layer: N x bt x C, long links' sums
-    std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C, the block's emission
-    std::vector<float> m_base, m_iterate;       // L x N x C: one bin before / during the Jacobi sweeps
+    std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
+    std::vector<std::vector<float>> m_acc;      // per layer: M x bt x C, long links' sums
+    std::vector<std::vector<float>> m_emit;     // per layer: M x bt x C, the block's emission
+    std::vector<float> m_base, m_iterate;       // L x M x C: one bin before / during the Jacobi sweeps
     std::vector<float> m_out_total, m_out_terms;
     float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
     std::atomic<int> m_worst_iterations{0};
@@ -298,18 +406,20 @@ std::size_t March::working_bytes() const {
     std::size_t working = 0;
     for (const auto& r : m_rings) working += r.size() * sizeof(float);
     working += 2 * std::size_t(p.L) * p.block_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
-               (m_out_total.size() + m_out_terms.size()) * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
-               p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t);
+               (m_out_total.size() + m_out_terms.size()) * sizeof(float) +
+               p.short_links.size() * sizeof(ShortLink) + p.same_links.size() * sizeof(SameBinLink) +
+               2 * (p.n + 1) * sizeof(std::uint64_t) + p.slots.size() * sizeof(RingSlot);
     return working;
 }
 
 void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v) {
     const int C = m_plan.C;
-    const int pos = int(bin & m_plan.rmask);
-    float* r = m_rings[std::size_t(layer)].data() + patch * m_plan.stride;
+    const RingSlot& slot = m_plan.slots[patch];
+    const int pos = int(bin & slot.mask);
+    float* r = m_rings[std::size_t(layer)].data() + slot.offset;
     for (int c = 0; c < C; ++c) r[std::size_t(pos * C + c)] = v[c];
     if (pos < m_plan.mirror)
-        for (int c = 0; c < C; ++c) r[std::size_t((pos + m_plan.ring) * C + c)] = v[c];
+        for (int c = 0; c < C; ++c) r[std::size_t((pos + slot.length) * C + c)] = v[c];
 }
 
 void March::load_emission(std::size_t i, std::int64_t b0) {
@@ -318,6 +428,7 @@ void March::load_emission(std::size_t i, std::int64_t b0) {
         std::fill_n(m_acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
         std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
     }
+    if (i >= m_plan.n) return;  // clusters emit nothing of their own
     for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
         const Pulse& p = m_illumination.pulses[k];
         const std::int64_t b = m_plan.pulse_bin(p);
@@ -340,58 +451,150 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
         if (src < 0) continue;
         const float* ring_src = m_rings[std::size_t(src)].data();
         for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = m_links.row[i];
-        for (std::size_t s0 = 0; s0 < p.n; s0 += kSourceTile) {
-            const std::uint32_t s1 = std::uint32_t(std::min(p.n, s0 + kSourceTile));
+        for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
+            const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
             for (std::size_t i = i0; i < i1; ++i) {
                 float* a = m_acc[std::size_t(l)].data() + i * std::size_t(p.bt * p.C);
                 if (p.kernel)
-                    p.kernel(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src, p.stride,
-                             p.rmask, b0, a);
+                    p.kernel(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src,
+                             p.slots.data(), b0, a);
                 else
                     gather_long_any(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src,
-                                    p.stride, p.rmask, b0, p.C, p.bt, a);
+                                    p.slots.data(), b0, p.C, p.bt, a);
             }
         }
     }
 }
 
 void March::long_pass(std::int64_t b0) {
-    const std::size_t tiles = (m_plan.n + kReceiverTile - 1) / kReceiverTile;
+    const std::size_t tiles = (m_plan.m + kReceiverTile - 1) / kReceiverTile;
 #pragma omp for schedule(dynamic, 1)
     for (std::size_t tile = 0; tile < tiles; ++tile) {
-        const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.n, i0 + kReceiverTile);
+        const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.m, i0 + kReceiverTile);
         for (std::size_t i = i0; i < i1; ++i) load_emission(i, b0);
         gather_tile(i0, i1, b0);
     }
 }
 
-// Receiver i at bin b0 + o: the long links' sum plus its short links, the emission, stored in the ring.
-void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
+// Node i's light gathered at bin b0 + o in layer l: the long links' sum plus its short links.
+void March::gather_bin(std::size_t i, std::int64_t b0, int o, int l, float* g) {
     const SolvePlan& p = m_plan;
     const int C = p.C;
+    const int src = p.layers.source[std::size_t(l)];
+    for (int c = 0; c < C; ++c) g[c] = 0.0f;
+    if (src < 0) return;
     const std::int64_t bin = b0 + o;
-    for (int l = 0; l < p.L; ++l) {
-        const int src = p.layers.source[std::size_t(l)];
-        float g[3] = {0, 0, 0};
-        const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
-        if (src >= 0) {
-            for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
-            for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
-                const ShortLink& s = p.short_links[k];
-                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
-                if (s.lag > 0) {
-                    const float* h0 = ring_at(src, s.source, bin - s.lag);
-                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
-                } else {
-                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
-                }
-            }
+    const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+    for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
+    for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
+        const ShortLink& s = p.short_links[k];
+        const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
+        if (s.lag > 0) {
+            const float* h0 = ring_at(src, s.source, bin - s.lag);
+            for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
+        } else {
+            for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
         }
-        float b[3];
-        for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
-        float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
-        for (int c = 0; c < C; ++c) keep[c] = b[c];
-        store(l, i, bin, b);
+    }
+}
+
+// Patch i at bin b0 + o in layer l, from the light g it gathered: emission plus albedo times g,
+// kept as the Jacobi base and stored in the ring.
+void March::settle_patch(std::size_t i, std::int64_t b0, int o, int l, const float* g) {
+    const SolvePlan& p = m_plan;
+    const int C = p.C;
+    const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+    float b[3];
+    for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
+    float* keep = m_base.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
+    for (int c = 0; c < C; ++c) keep[c] = b[c];
+    store(l, i, b0 + o, b);
+}
+
+// Flat links: patch i at bin b0 + o, every layer.
+void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
+    float g[3];
+    for (int l = 0; l < m_plan.L; ++l) {
+        gather_bin(i, b0, o, l, g);
+        settle_patch(i, b0, o, l, g);
+    }
+}
+
+// Node i's long-link sums over the block plus its parent's (after the parent's own push).
+void March::push_node(std::uint32_t i) {
+    const std::uint32_t up = m_plan.tree->parent[i];
+    if (up == kNoNode) return;
+    const std::size_t len = std::size_t(m_plan.bt * m_plan.C);
+    for (int l = 0; l < m_plan.L; ++l) {
+        float* own = m_acc[std::size_t(l)].data() + std::size_t(i) * len;
+        const float* from = m_acc[std::size_t(l)].data() + std::size_t(up) * len;
+        for (std::size_t e = 0; e < len; ++e) own[e] += from[e];
+    }
+}
+
+// Cluster c's radiosity over the block's bins: the area-weighted mean of its children's.
+void March::pull_node(std::uint32_t c, std::int64_t b0) {
+    const ClusterTree& t = *m_plan.tree;
+    const auto [a, b] = t.children[c - t.leaves];
+    const float wa = float(t.area[a] / t.area[c]), wb = float(t.area[b] / t.area[c]);
+    for (int l = 0; l < m_plan.L; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
+            const float* va = ring_at(l, a, bin);
+            const float* vb = ring_at(l, b, bin);
+            float v[3];
+            for (int ch = 0; ch < m_plan.C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
+            store(l, c, bin, v);
+        }
+}
+
+// (In a region.) Visits every node of the tree, parents before children (`down`) or children before
+// parents: the clusters above the subtrees on one thread, each subtree (whose clusters are numbered
+// in preorder) on any thread, its patches after its clusters going down and before them going up.
+template <class NodeFn>
+void March::over_tree(bool down, NodeFn visit) {
+    const SolvePlan& p = m_plan;
+    const ClusterTree& t = *p.tree;
+    if (down) {
+#pragma omp single
+        for (std::uint32_t c : p.top) visit(c);
+    }
+#pragma omp for schedule(dynamic, 1)
+    for (std::size_t s = 0; s < p.subtrees.size(); ++s) {
+        const std::uint32_t r = p.subtrees[s];
+        const std::uint32_t clusters = t.is_leaf(r) ? 0u : (t.last[r] - t.first[r]) - 1;
+        if (down) {
+            for (std::uint32_t c = r; c < r + clusters; ++c) visit(c);
+            for (std::uint32_t k = t.first[r]; k < t.last[r]; ++k) visit(t.leaf_order[k]);
+        } else {
+            for (std::uint32_t k = t.first[r]; k < t.last[r]; ++k) visit(t.leaf_order[k]);
+            for (std::uint32_t c = r + clusters; c-- > r;) visit(c);
+        }
+    }
+    if (!down) {
+#pragma omp single
+        for (std::size_t k = p.top.size(); k-- > 0;) visit(p.top[k]);
+    }
+}
+
+void March::push_block() {
+    over_tree(true, [&](std::uint32_t i) { push_node(i); });
+}
+
+void March::pull_block(std::int64_t b0) {
+    over_tree(false, [&](std::uint32_t i) {
+        if (!m_plan.tree->is_leaf(i)) pull_node(i, b0);
+    });
+}
+
+// Same-bin light gathered by node i in layer l from the current iterate.
+void March::same_bin_gather(std::size_t i, int l, std::int64_t bin, float* g) {
+    const SolvePlan& p = m_plan;
+    const int src = p.layers.source[std::size_t(l)];
+    for (int c = 0; c < p.C; ++c) g[c] = 0.0f;
+    if (src < 0) return;
+    for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
+        const float* h = ring_at(src, p.same_links[k].source, bin);
+        for (int c = 0; c < p.C; ++c) g[c] += p.same_links[k].w * h[c];
     }
 }
 
@@ -406,26 +609,24 @@ bool March::jacobi_sweep(std::int64_t bin) {
         m_largest = 0.0f;
     }
     float change = 0.0f, largest = 0.0f;
-#pragma omp for schedule(static) nowait
-    for (std::size_t i = 0; i < p.n; ++i) {
-        for (int l = 0; l < p.L; ++l) {
-            const int src = p.layers.source[std::size_t(l)];
-            const float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
-            float* next = m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
-            float g[3] = {0, 0, 0};
-            if (src >= 0)
-                for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
-                    const float* h = ring_at(src, p.same_links[k].source, bin);
-                    for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
-                }
-            const float* now = ring_at(l, i, bin);
-            for (int c = 0; c < C; ++c) {
-                next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
-                change = std::max(change, std::abs(next[c] - now[c]));
-                largest = std::max(largest, std::abs(next[c]));
-            }
+    // Patch i's next iterate from its same-bin gather g (pushed, with clusters).
+    auto next_of = [&](std::size_t i, int l, const float* g) {
+        const float* keep = m_base.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
+        float* next = m_iterate.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
+        const float* now = ring_at(l, i, bin);
+        for (int c = 0; c < C; ++c) {
+            next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
+            change = std::max(change, std::abs(next[c] - now[c]));
+            largest = std::max(largest, std::abs(next[c]));
         }
-    }
+    };
+#pragma omp for schedule(static) nowait
+    for (std::size_t i = 0; i < p.n; ++i)
+        for (int l = 0; l < p.L; ++l) {
+            float g[3];
+            same_bin_gather(i, l, bin, g);
+            next_of(i, l, g);
+        }
 #pragma omp critical(tprf_jacobi_reduction)
     {
         m_change = std::max(m_change, change);
@@ -437,7 +638,7 @@ bool March::jacobi_sweep(std::int64_t bin) {
     const bool converged = m_change <= 1e-7f * m_largest;
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < p.n; ++i)
-        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
+        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.m + i) * std::size_t(C));
     return converged;
 }
 
@@ -544,11 +745,13 @@ double lap(std::chrono::steady_clock::time_point& since) {
 
 }  // namespace
 
-SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& illumination,
+SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Illumination& illumination,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
-    TPRF_CHECK_EQ(links.receivers(), patches.size());
+    const Links& links = set.links;
+    TPRF_CHECK_EQ(set.patches(), patches.size());
+    TPRF_CHECK_EQ(links.receivers(), set.nodes());
     TPRF_CHECK_EQ(illumination.row.size(), patches.size() + 1);
-    const SolvePlan plan = make_plan(patches, links, illumination, time, options);
+    const SolvePlan plan = make_plan(patches, set, illumination, time, options);
     March march(patches, links, illumination, plan);
     SolveStats stats;
     stats.block_bins = plan.bt;
@@ -565,8 +768,10 @@ SolveStats solve_transient(const PatchSet& patches, const Links& links, const Il
 #pragma omp parallel num_threads(plan.threads)
         {
             march.long_pass(b0);
+            if (plan.clusters) march.push_block();
             if (omp_get_thread_num() == 0) long_seconds = lap(since);
             march.short_pass(b0);
+            if (plan.clusters) march.pull_block(b0);
         }
         stats.seconds_long += long_seconds;
         stats.seconds_short += lap(since);

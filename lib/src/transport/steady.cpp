@@ -2,7 +2,7 @@
 
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
-#include "tprf/transport/links.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
 
 #include <Eigen/IterativeLinearSolvers>
@@ -13,16 +13,39 @@
 namespace tprf {
 namespace {
 
-// y = diag(albedo_c) F x for one channel.
-Eigen::VectorXd gather(const PatchSet& patches, const Links& links, const Eigen::VectorXd& x, int c) {
+// Row sums of the links of node i applied to the node values v.
+double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i) {
+    double s = 0.0;
+    for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) s += double(links.ff[k]) * v[links.source[k]];
+    return s;
+}
+
+// y = diag(albedo_c) F x for one channel: with clusters, their values pulled from x, every node's
+// gather pushed down to the patches below it (link_set.h).
+Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen::VectorXd& x, int c) {
     const Eigen::Index n = Eigen::Index(patches.size());
+    const ClusterTree& t = set.tree;
     Eigen::VectorXd y(n);
+    if (t.clusters() == 0) {
 #pragma omp parallel for schedule(dynamic, 64)
+        for (Eigen::Index i = 0; i < n; ++i) y[i] = patches.albedo[std::size_t(i)][c] * row_sum(set.links, x, std::size_t(i));
+        return y;
+    }
+    const std::size_t m = t.nodes();
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(Eigen::Index(m)), g = Eigen::VectorXd::Zero(Eigen::Index(m));
+    v.head(n) = x;
+    for (std::size_t k = t.by_level.size(); k-- > 0;) {  // deepest first
+        const std::uint32_t cl = t.by_level[k];
+        const auto [a, b] = t.children[cl - t.leaves];
+        v[cl] = (t.area[a] * v[a] + t.area[b] * v[b]) / t.area[cl];
+    }
+#pragma omp parallel for schedule(dynamic, 64)
+    for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = row_sum(set.links, v, i);
+    for (std::uint32_t cl : t.by_level)  // the root first
+        if (t.parent[cl] != kNoNode) g[cl] += g[t.parent[cl]];
     for (Eigen::Index i = 0; i < n; ++i) {
-        double s = 0.0;
-        for (std::uint64_t k = links.row[std::size_t(i)]; k < links.row[std::size_t(i) + 1]; ++k)
-            s += double(links.ff[k]) * x[links.source[k]];
-        y[i] = patches.albedo[std::size_t(i)][c] * s;
+        const std::uint32_t up = t.parent[std::size_t(i)];
+        y[i] = patches.albedo[std::size_t(i)][c] * (g[i] + (up == kNoNode ? 0.0 : g[up]));
     }
     return y;
 }
@@ -48,7 +71,7 @@ public:
     using StorageIndex = int;
     enum { ColsAtCompileTime = Eigen::Dynamic, MaxColsAtCompileTime = Eigen::Dynamic, IsRowMajor = false };
 
-    SteadyOperator(const PatchSet& patches, const Links& links, int channel)
+    SteadyOperator(const PatchSet& patches, const LinkSet& links, int channel)
         : m_patches(patches), m_links(links), m_channel(channel) {}
 
     Eigen::Index rows() const { return Eigen::Index(m_patches.size()); }
@@ -64,7 +87,7 @@ public:
 
 private:
     const PatchSet& m_patches;
-    const Links& m_links;
+    const LinkSet& m_links;
     int m_channel;
 };
 
@@ -86,10 +109,11 @@ struct generic_product_impl<tprf::SteadyOperator, Rhs, SparseShape, DenseShape, 
 
 namespace tprf {
 
-std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Illumination& emission,
+std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, const Illumination& emission,
                               int max_bounces) {
     const std::size_t n = patches.size();
-    TPRF_CHECK_EQ(links.receivers(), n);
+    TPRF_CHECK_EQ(links.patches(), n);
+    TPRF_CHECK_EQ(links.links.receivers(), links.nodes());
     int max_order = 0;
     for (const Pulse& p : emission.pulses) max_order = std::max(max_order, int(p.order));
     // Time-integrated emission per order (a pulse's energy is its whole contribution).

@@ -59,4 +59,32 @@ double circumradius(const PatchSet& patches, std::size_t i);
 void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const Rgb& albedo,
                const Rgb& emission, std::uint32_t object);
 
+/// A patch that build_patches would make, seen from afar: a point on it and its front normal.
+struct PatchSample {
+    Vec3 point = Vec3::Zero();
+    Vec3 normal = Vec3::UnitZ();
+    std::uint32_t object = 0;          ///< index into Scene::objects
+};
+
+/// What build_patches would make, counted by the same rules without making it (the resource estimate,
+/// pipeline/info.h). Mesh files are loaded and triangulated to count their refined triangles; nothing
+/// of the size of the patch set is allocated.
+struct PatchCensus {
+    std::size_t patches = 0;           ///< N, both sides of two-sided objects counted
+    std::size_t corners = 0;           ///< corners of all patches (4 a quad, 3 a triangle)
+    std::size_t emissive = 0;          ///< patches that emit
+    std::size_t mesh_faces = 0;        ///< polygons read from mesh files
+    double max_edge = 0.0;             ///< the patch size build_patches would use, metres
+    double diagonal = 0.0;             ///< bounding-box diagonal of every object, metres
+    int dropped_degenerate = 0;        ///< mesh faces dropped, as build_patches counts them
+    std::vector<Eigen::AlignedBox3d> bounds;  ///< per object: its bounding box, metres
+    /// About `samples` patches drawn uniformly from all N (each object gets its share by its patch
+    /// count), at a uniform point of the patch (a rectangle's grid cell) or of its mesh triangle.
+    std::vector<PatchSample> samples;
+};
+
+/// Counts the patches of `scene` as build_patches would cut them, and draws `samples` of them
+/// (deterministically, from `seed`).
+PatchCensus count_patches(const Scene& scene, std::size_t samples = 0, std::uint64_t seed = 1);
+
 }  // namespace tprf

@@ -3,6 +3,7 @@
 
 #include "tprf/core/progress.h"
 #include "tprf/core/time_axis.h"
+#include "tprf/io/json_records.h"
 #include "tprf/scene/scene.h"
 
 #include <cstdint>
@@ -17,6 +18,10 @@ struct PipelineOptions {
     /// Draw figures (sensor_plot.png) with python/tprf_plots.py in a child process. Off: only their
     /// data is written (sensor_plot.json), for callers that must not fork or draw themselves.
     bool draw_plots = true;
+    /// A render whose estimated peak memory (estimate_resources) exceeds this many GB (1e9 bytes) is
+    /// refused before anything heavy is allocated (check_memory); 0: 80% of the memory available
+    /// (MemAvailable in /proc/meminfo).
+    double max_memory_gb = 0.0;
 };
 
 /// What `tprf info` prints: the scene's size without rendering it.
@@ -33,6 +38,52 @@ struct SceneSummary {
 
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
+
+/// What a render will cost, estimated from the scene alone before anything heavy runs: patches are
+/// counted by build_patches' rules (mesh files are loaded to count their triangles), links are
+/// modelled, nothing is built. Bytes are what each stage holds once it has run (the builders' scratch
+/// is counted in their own stage's peak only); seconds are for the phases of render.json, from
+/// throughputs measured on the project's 2-core machine (see info.cpp) and scaled by the thread count.
+struct ResourceEstimate {
+    std::size_t patches = 0;             ///< N (counted exactly)
+    double max_edge = 0.0;               ///< the patch size, metres
+    std::size_t nodes = 0;               ///< nodes the solver marches: N, or the 2N - 1 of a cluster tree
+    std::size_t links = 0;               ///< estimated links (flat: facing pairs, both directions)
+    double facing_fraction = 0.0;        ///< share of sampled patch pairs that face each other
+    int channels = 3;                    ///< 1 for a grey scene
+    int ring_bins = 0;                   ///< history per node and layer
+    int layers = 1;                      ///< solver layers (bounce orders kept apart)
+    double lit_pixels = 1.0;             ///< share of pixels that see an object (occlusion left out)
+    std::size_t samples = 0;             ///< camera samples that meet the scene (lit pixels x spp)
+
+    std::size_t base_bytes = 0;          ///< the process before any stage (code, libraries, threads)
+    std::size_t mesh_bytes = 0;          ///< mesh files while they are loaded (patch stage only)
+    std::size_t patch_bytes = 0;         ///< the patch set
+    std::size_t visibility_bytes = 0;    ///< Embree's BVH and its copy of the geometry
+    std::size_t link_bytes = 0;          ///< links (and cluster tree), kept to the end
+    std::size_t link_build_bytes = 0;    ///< the link builder's scratch (pair lists), at its end
+    std::size_t illumination_bytes = 0;  ///< pulses
+    std::size_t gather_bytes = 0;        ///< sensing points, neighbours and taps of the camera
+    std::size_t solver_bytes = 0;        ///< rings, block buffers, short-link lists, the films' blocks
+    std::size_t cube_bytes = 0;          ///< memory-mapped outputs filled by the solve (all resident at the end)
+    std::size_t write_bytes = 0;         ///< the steady state and images, and sensor outputs
+    std::size_t peak_bytes = 0;          ///< the largest sum of what is held at once
+    std::size_t link_stage_bytes = 0;    ///< the peak up to the end of the link stage (what `tprf info` builds)
+    std::string peak_stage;              ///< where the peak is: "patches", "links", "gather", "solve" or "write"
+
+    PhaseSeconds seconds;                ///< load, patches, links, solve, gather, write, total
+};
+
+/// Estimates the peak memory and the seconds of a render of `scene` (`patch_profiles`: with
+/// patch_transient.npy). Cheap: milliseconds, plus loading the scene's mesh files.
+ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& options, bool patch_profiles = false);
+
+/// The memory limit in bytes: options.max_memory_gb, or 80% of MemAvailable when that is 0.
+std::size_t memory_limit_bytes(const PipelineOptions& options);
+
+/// Throws tprf::Error (exit 2) when the estimated peak of a render of `scene` exceeds the limit,
+/// naming the estimate, the limit and the scene keys that shrink it. Allocates nothing heavy.
+void check_memory(const Scene& scene, const PipelineOptions& options, bool patch_profiles = false);
 
 /// Peak resident memory of this process so far, MB (VmHWM).
 double peak_rss_mb();

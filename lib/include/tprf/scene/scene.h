@@ -77,10 +77,22 @@ struct SolverSettings {
     bool bounces = false;               ///< also write the per-bounce terms
 };
 
+/// How light is exchanged between patches (SPEC.md v2, "Links and scale").
+enum class LinkMethod {
+    Flat,          ///< every facing, visible pair of patches: the reference
+    Hierarchical,  ///< links between clusters of patches wherever the error stays under `tolerance`
+};
+
+/// The optional `links` block.
+struct LinkSettings {
+    LinkMethod method = LinkMethod::Flat;  ///< flat until the hierarchical method is measured (docs/links.md)
+    double tolerance = 1e-3;               ///< > 0: largest accepted form-factor error of one cluster link
+};
+
 /// A scene. Whatever builds one (a parser, a test, a binding) calls validate() (scene/validate.h)
 /// before handing it to a later stage; each field's comment says what validate() requires, and every
 /// number must be finite. Messages name the scene file's JSON paths: `time`, `camera`, `lights[i]`,
-/// an object's json_path, `patches.max_edge`, `solver.max_bounces`, the sensor's json_path.
+/// an object's json_path, `patches.max_edge`, `links.tolerance`, `solver.max_bounces`, the sensor's json_path.
 struct Scene {
     std::filesystem::path file;         ///< the scene file (for messages and relative paths)
     TimeAxis time;
@@ -89,6 +101,7 @@ struct Scene {
     std::vector<Object> objects;
     double max_edge = 0.0;              ///< patches.max_edge, metres, > 0; 0 when absent (build_patches picks one)
     SolverSettings solver;
+    LinkSettings links;
     std::optional<SensorSettings> sensor;  ///< the optional `sensor` block (named "sensor" when its json_path is "")
 };
 

@@ -10,6 +10,7 @@
 /// over the paths |y - x| between stratified points y of the emitter and x of the receiver in
 /// proportion to the point-to-point kernel cos cos / r^2 (visibility included).
 
+#include "tprf/core/time_axis.h"
 #include "tprf/core/types.h"
 #include "tprf/transport/light_sources.h"
 
@@ -47,11 +48,17 @@ struct IlluminationOptions {
     int samples = 16;           ///< stratified points per patch for point sources
     int area_samples = 4;       ///< stratified points per patch on each side of an emitter's link
     int threads = 0;            ///< 0: all cores
+    /// When set, a patch's pulses that fall in one bin of this axis with the same order, source and
+    /// propagation are merged into one (at the first one's path): exact for every consumer, each of
+    /// which places a pulse by the bin that holds its path, and a patch then keeps a few pulses per
+    /// light instead of one per sample pair.
+    const TimeAxis* merge_bins = nullptr;
 };
 
 /// Computes the pulses that every source (point sources, laser spots, emissive patches) sends into
-/// the patch system. Shadow rays decide visibility from point sources.
-Illumination illuminate(const LightSources& sources, const PatchSet& patches, const Links& links,
+/// the patch system. Shadow rays decide visibility from point sources. `emitters`: patch-to-patch
+/// links by receiver whose sources emit (LinkSet::emitters; links from other sources are skipped).
+Illumination illuminate(const LightSources& sources, const PatchSet& patches, const Links& emitters,
                         const Visibility& visibility, const IlluminationOptions& options = {});
 
 }  // namespace tprf

@@ -18,7 +18,7 @@
 namespace tprf {
 
 struct PatchSet;
-struct Links;
+struct LinkSet;
 struct Illumination;
 
 /// Options of the transient solve.
@@ -63,7 +63,9 @@ struct SolveStats {
 };
 
 /// Marches over the scene's time axis and hands every block of final bins to `sink`.
-SolveStats solve_transient(const PatchSet& patches, const Links& links, const Illumination& illumination,
+/// The link set may hold clusters (LinkSet): their gathered light is pushed to their patches and their
+/// radiosity pulled from them at every bin.
+SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
 
 }  // namespace tprf

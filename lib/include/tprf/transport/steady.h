@@ -8,7 +8,7 @@
 namespace tprf {
 
 struct PatchSet;
-struct Links;
+struct LinkSet;
 struct Illumination;
 
 /// Solves (I - diag(albedo) F) B = E for every channel with BiCGSTAB (Eigen) to a relative residual
@@ -16,7 +16,7 @@ struct Illumination;
 /// propagate (the laser spot) are added afterwards. With max_bounces >= 0, sums the Neumann series
 /// up to that order instead. Returns N radiosities, W/m^2: by linearity, the sum over time of the
 /// transient radiosity when the window holds all the light.
-std::vector<Rgb> solve_steady(const PatchSet& patches, const Links& links, const Illumination& emission,
+std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, const Illumination& emission,
                               int max_bounces = -1);
 
 }  // namespace tprf

@@ -1,0 +1,74 @@
+#pragma once
+/// LinkSet: what the solver marches, whatever built it.
+///
+/// Nodes are the patches (0..N-1) and, for hierarchical links, the clusters of a ClusterTree
+/// (N..M-1). A cluster's radiosity is the area-weighted mean of its children's ("pull"). Receiver
+/// node m gathers G_m(t) = sum_k ff[k] B_source[k](t - distance[k] / c) over its links; a patch's
+/// radiosity is B_i(t) = E_i(t) + albedo_i sum_{a = i and every cluster above i} G_a(t) ("push": a
+/// cluster's received light reaches each of its patches). A link may appear several times with the
+/// same source and different distances: the pieces of its delay kernel (the spread of its path
+/// lengths), each placed between bins by the solver's linear split, so that both the total and the
+/// mean delay of every piece are exact.
+
+#include "tprf/core/progress.h"
+#include "tprf/geometry/cluster_tree.h"
+#include "tprf/scene/scene.h"
+#include "tprf/transport/links.h"
+
+namespace tprf {
+
+class Visibility;
+
+struct LinkSet {
+    ClusterTree tree;  ///< nodes; no clusters for flat links
+    Links links;       ///< CSR over tree.nodes() receivers, sources non-decreasing within a row
+    /// Patch-to-patch links whose source emits (area emitters), CSR over the N patches: the exact
+    /// first bounce of area light is computed from these (illuminate()), not from `links`.
+    Links emitters;
+    /// When > 0, every link with a cluster at either end is at least this many bins long: the solver
+    /// keeps its blocks this short, so that those links are applied a block at a time (push and pull
+    /// once per block); shorter ones would be applied patch by patch.
+    int block_bins = 0;
+
+    std::size_t patches() const { return tree.leaves; }
+    std::size_t nodes() const { return tree.nodes(); }
+    /// Bytes held by the tree and the links.
+    std::size_t bytes() const { return tree.bytes() + links.bytes() + emitters.bytes(); }
+};
+
+/// The flat method: every facing, visible pair of patches (compute_links), no clusters.
+LinkSet flat_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options = {},
+                      LinkStats* stats = nullptr);
+
+/// Options of the hierarchical method (on top of LinkOptions, which rule the patch-to-patch links).
+struct HierarchyOptions {
+    double tolerance = 1e-3;       ///< largest estimated form-factor error of a cluster link (links.tolerance)
+    double bin_width_m = 0.0;      ///< the time axis' bin, metres: a link's delay spread is weighed against it
+    int samples = 16;              ///< point pairs sampled per candidate cluster link
+    int kernel_pieces = 4;         ///< most pieces of a cluster link's delay kernel
+    int min_lag_bins = 8;          ///< cluster links are kept only between nodes at least this many bins
+                                   ///< apart (when bin_width_m > 0); nearer pairs are refined
+};
+
+/// What the hierarchical build counted.
+struct HierarchyStats {
+    std::uint64_t leaf_links = 0;     ///< patch-to-patch links (both directions)
+    std::uint64_t cluster_links = 0;  ///< links with a cluster at either end (both directions, pieces counted once)
+    std::uint64_t candidates = 0;     ///< node pairs the oracle judged
+    std::uint64_t rays = 0;           ///< visibility rays cast
+};
+
+/// The hierarchical method: a cluster tree and links between nodes at any level, refined until each
+/// link's estimated error is under `hierarchy.tolerance`; patch pairs keep compute_links' form factors.
+LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,
+                              const HierarchyOptions& hierarchy, HierarchyStats* stats = nullptr);
+
+/// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
+/// `bin_width_m`.
+LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
+                      double bin_width_m, const LinkOptions& options = {});
+
+/// The links of `links` whose source patch emits (flat link sets take their `emitters` from here).
+Links emitter_links(const PatchSet& patches, const Links& links);
+
+}  // namespace tprf

@@ -1,0 +1,175 @@
+#include "tprf/geometry/cluster_tree.h"
+
+#include "tprf/core/error.h"
+#include "tprf/geometry/patches.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace tprf {
+namespace {
+
+// Node m's bounds and cone from its own patch.
+void set_leaf(const PatchSet& patches, ClusterTree& t, std::uint32_t i) {
+    t.area[i] = patches.area[i];
+    t.centre[i] = patches.centroid[i];
+    t.radius[i] = circumradius(patches, i);
+    t.cone_axis[i] = patches.normal[i];
+    t.cone_cos[i] = 1.0;
+}
+
+// Angle of a cone, from its cosine (clamped).
+double cone_angle(double c) { return std::acos(std::clamp(c, -1.0, 1.0)); }
+
+// Cluster c's bounds and cone from its two children: the area-weighted centre, a sphere around both
+// children's spheres, and a cone about the area-weighted mean normal holding both children's cones.
+void merge(ClusterTree& t, std::uint32_t c) {
+    const auto [a, b] = t.children[c - t.leaves];
+    t.area[c] = t.area[a] + t.area[b];
+    t.centre[c] = (t.area[a] * t.centre[a] + t.area[b] * t.centre[b]) / t.area[c];
+    t.radius[c] = std::max((t.centre[a] - t.centre[c]).norm() + t.radius[a], (t.centre[b] - t.centre[c]).norm() + t.radius[b]);
+    const Vec3 sum = t.area[a] * t.cone_axis[a] + t.area[b] * t.cone_axis[b];
+    const double len = sum.norm();
+    if (!(len > 1e-9 * t.area[c])) {
+        t.cone_axis[c] = t.cone_axis[a];
+        t.cone_cos[c] = -1.0;
+        return;
+    }
+    t.cone_axis[c] = sum / len;
+    double widest = 0.0;
+    for (std::uint32_t k : {a, b}) {
+        const double between = cone_angle(t.cone_axis[c].dot(t.cone_axis[k]));
+        widest = std::max(widest, between + cone_angle(t.cone_cos[k]));
+    }
+    t.cone_cos[c] = widest >= M_PI ? -1.0 : std::cos(widest);
+}
+
+struct Range {
+    std::uint32_t first, last;  // into leaf_order
+    std::uint32_t parent;       // cluster id, or kNoNode
+    int slot;                   // which child of the parent
+};
+
+// Splits every range of more than one patch at the median centroid along the longest axis of its
+// centroids' box, assigning cluster ids in preorder (every parent before its children).
+void split_ranges(const PatchSet& patches, ClusterTree& t) {
+    const std::size_t n = t.leaves;
+    std::uint32_t next_cluster = std::uint32_t(n);
+    std::vector<Range> stack{{0, std::uint32_t(n), kNoNode, 0}};
+    while (!stack.empty()) {
+        const Range r = stack.back();
+        stack.pop_back();
+        std::uint32_t id;
+        if (r.last - r.first == 1) {
+            id = t.leaf_order[r.first];
+        } else {
+            id = next_cluster++;
+            Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+            for (std::uint32_t k = r.first; k < r.last; ++k) {
+                lo = lo.cwiseMin(patches.centroid[t.leaf_order[k]]);
+                hi = hi.cwiseMax(patches.centroid[t.leaf_order[k]]);
+            }
+            int axis = 0;
+            (hi - lo).maxCoeff(&axis);
+            const std::uint32_t mid = r.first + (r.last - r.first) / 2;
+            std::nth_element(t.leaf_order.begin() + r.first, t.leaf_order.begin() + mid, t.leaf_order.begin() + r.last,
+                             [&](std::uint32_t x, std::uint32_t y) {
+                                 const double cx = patches.centroid[x][axis], cy = patches.centroid[y][axis];
+                                 return cx < cy || (cx == cy && x < y);
+                             });
+            // Pushed second-child first, so that the first child is taken next (preorder).
+            stack.push_back({mid, r.last, id, 1});
+            stack.push_back({r.first, mid, id, 0});
+        }
+        t.first[id] = r.first;
+        t.last[id] = r.last;
+        t.parent[id] = r.parent;
+        if (r.parent != kNoNode) t.children[r.parent - n][std::size_t(r.slot)] = id;
+    }
+}
+
+void order_levels(ClusterTree& t) {
+    t.by_level.clear();
+    t.level_first.assign(1, 0);
+    if (t.clusters() == 0) return;
+    t.by_level.push_back(t.root());
+    std::size_t begin = 0;
+    while (begin < t.by_level.size()) {
+        const std::size_t end = t.by_level.size();
+        t.level_first.push_back(std::uint32_t(end));
+        for (std::size_t k = begin; k < end; ++k)
+            for (std::uint32_t child : t.children[t.by_level[k] - t.leaves])
+                if (!t.is_leaf(child)) t.by_level.push_back(child);
+        begin = end;
+    }
+}
+
+void allocate(ClusterTree& t, std::size_t n, std::size_t m) {
+    t.leaves = n;
+    t.parent.assign(m, kNoNode);
+    t.area.assign(m, 0.0);
+    t.centre.assign(m, Vec3::Zero());
+    t.radius.assign(m, 0.0);
+    t.cone_axis.assign(m, Vec3::UnitZ());
+    t.cone_cos.assign(m, 1.0);
+    t.children.assign(m - n, {kNoNode, kNoNode});
+    t.leaf_order.resize(n);
+    std::iota(t.leaf_order.begin(), t.leaf_order.end(), 0u);
+    t.first.assign(m, 0);
+    t.last.assign(m, 0);
+}
+
+// Cluster c's radius from its patches' corners: the sphere about the area centroid that holds them
+// (merge()'s bound from the children's spheres is up to 2.4 times looser).
+void tighten(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
+    double r2 = 0.0;
+    for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k) {
+        const std::uint32_t i = t.leaf_order[k];
+        const Vec3* poly = patches.polygon(i);
+        for (std::size_t q = 0; q < patches.corners(i); ++q) r2 = std::max(r2, (poly[q] - t.centre[c]).squaredNorm());
+    }
+    t.radius[c] = std::sqrt(r2);
+}
+
+void finish(const PatchSet& patches, ClusterTree& t) {
+    for (std::uint32_t i = 0; i < t.leaves; ++i) set_leaf(patches, t, i);
+    // Preorder ids: every child has a larger id than its parent, so a reverse sweep is bottom-up.
+    for (std::size_t c = t.nodes(); c-- > t.leaves;) merge(t, std::uint32_t(c));
+    for (std::size_t c = t.leaves; c < t.nodes(); ++c) tighten(patches, t, std::uint32_t(c));
+    t.area_prefix.assign(t.leaves + 1, 0.0);
+    for (std::size_t k = 0; k < t.leaves; ++k) t.area_prefix[k + 1] = t.area_prefix[k] + t.area[t.leaf_order[k]];
+    order_levels(t);
+}
+
+}  // namespace
+
+std::size_t ClusterTree::bytes() const {
+    return parent.size() * (sizeof(std::uint32_t) * 3 + sizeof(double) * 3 + sizeof(Vec3) * 2) +
+           children.size() * sizeof(children[0]) + leaf_order.size() * sizeof(std::uint32_t) +
+           area_prefix.size() * sizeof(double) + (by_level.size() + level_first.size()) * sizeof(std::uint32_t);
+}
+
+ClusterTree leaves_only(const PatchSet& patches) {
+    ClusterTree t;
+    allocate(t, patches.size(), patches.size());
+    for (std::uint32_t i = 0; i < t.leaves; ++i) {
+        t.first[i] = i;
+        t.last[i] = i + 1;
+    }
+    finish(patches, t);
+    return t;
+}
+
+ClusterTree build_cluster_tree(const PatchSet& patches) {
+    const std::size_t n = patches.size();
+    TPRF_CHECK_LT(n, std::size_t{0x7FFFFFFFu});
+    ClusterTree t;
+    if (n == 0) return t;
+    allocate(t, n, 2 * n - 1);
+    split_ranges(patches, t);
+    finish(patches, t);
+    return t;
+}
+
+}  // namespace tprf

@@ -1,0 +1,432 @@
+// Hierarchical links: the refinement of Hanrahan, Salzman and Aupperle (1991) over a cluster tree
+// (Smits, Arvo and Greenberg 1994; Sillion 1995), with a delay kernel on every cluster link.
+//
+// Every unordered pair of patches is covered exactly once: by the link between the two nodes that
+// the refinement of their lowest common cluster stopped at. A candidate pair of nodes (R, S) is
+// judged from point pairs sampled uniformly by area on both: the point-to-point kernel
+// k = cos_x cos_y / (pi r^2) gives F_RS = A_S E[k] and F_SR = A_R E[k], and its spread over the
+// samples bounds how far the form factor seen from any point of one node differs from the link's
+// (what pushing a cluster's light to all its patches, and pulling a cluster's radiosity as their
+// mean, gets wrong). The link is kept when that bound is under the tolerance on both ends; else the
+// larger node is split. Pairs of patches get compute_links' form factors (patch_pair).
+
+#include "tprf/transport/link_set.h"
+
+#include "patch_pairs.h"
+#include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+
+namespace tprf {
+namespace {
+
+// One direction of one link (or of one piece of a link's delay kernel), until the CSR is assembled.
+struct LinkRecord {
+    std::uint32_t receiver;
+    std::uint32_t source;
+    float ff;
+    float distance;
+};
+
+// The refinement's counters, per job.
+struct Counts {
+    std::uint64_t leaf_links = 0, cluster_links = 0, candidates = 0;
+    LinkStats pair_stats;
+};
+
+// Deterministic jitter (threads must not change the answer): a 64-bit mix of the inputs.
+double mix01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+    std::uint64_t h = (a + 0x9E3779B97F4A7C15ull) * 0xBF58476D1CE4E5B9ull ^ (b + 0x94D049BB133111EBull) * 0xC2B2AE3D27D4EB4Full ^ c;
+    h ^= h >> 31;
+    h *= 0xD6E8FEB86659FD93ull;
+    h ^= h >> 32;
+    h *= 0x9E3779B97F4A7C15ull;
+    h ^= h >> 29;
+    return double(h >> 11) * 0x1.0p-53;
+}
+
+constexpr int kMaxSamples = 64;
+// Share of the tolerance below which a transfer may be dropped unmeasured.
+constexpr double kNegligible = 1e-3;
+// Share of the tolerance that a link may carry when some of its patches face away from the other
+// node, or a shadow edge crosses it: its error then falls on those patches in one direction.
+constexpr double kFacingShare = 0.1;
+constexpr int kMaxPieces = 8;
+
+// A point of node m, sample k of `count`: stratified by area over the node's patches, uniform within
+// the patch it falls on.
+struct SamplePoint {
+    Vec3 x;
+    Vec3 n;
+};
+
+// Point pairs sampled between two nodes, with the kernel at each (before visibility).
+struct PairSamples {
+    SamplePoint x[kMaxSamples], y[kMaxSamples];
+    double k[kMaxSamples], path[kMaxSamples];
+    double k_min = 0.0, k_max = 0.0, k_sum = 0.0;
+};
+
+class Builder {
+public:
+    Builder(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, const HierarchyOptions& h,
+            const ClusterTree& tree)
+        : m_patches(patches), m_vis(vis), m_options(options), m_h(h), m_tree(tree), m_radius(circumradii(patches)),
+          m_samples(std::clamp(h.samples, 4, kMaxSamples)), m_pieces(std::clamp(h.kernel_pieces, 1, kMaxPieces)) {}
+
+    // Every pair of patches below cluster c (none below a patch).
+    void refine_self(std::uint32_t c, std::vector<LinkRecord>& out, Counts& counts) const {
+        if (m_tree.is_leaf(c)) return;
+        const auto [a, b] = m_tree.children[c - m_tree.leaves];
+        refine_self(a, out, counts);
+        refine_self(b, out, counts);
+        refine(a, b, out, counts);
+    }
+
+    // Every pair of one patch below r and one below s.
+    void refine(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+        if (!may_face(r, s) || !may_face(s, r)) return;
+        ++counts.candidates;
+        if (m_tree.is_leaf(r) && m_tree.is_leaf(s)) {
+            patch_link(r, s, out, counts);
+            return;
+        }
+        if (judge(r, s, out, counts)) return;
+        // Split the larger node (a patch cannot be split).
+        const bool split_r = !m_tree.is_leaf(r) && (m_tree.is_leaf(s) || m_tree.radius[r] >= m_tree.radius[s]);
+        const std::uint32_t big = split_r ? r : s, other = split_r ? s : r;
+        for (std::uint32_t child : m_tree.children[big - m_tree.leaves]) refine(child, other, out, counts);
+    }
+
+    // Pairs judged one at a time on the calling thread to cut the work into jobs: true when (r, s) is
+    // settled (a link or nothing), false when its children pairs must be judged.
+    bool settle_top(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+        if (!may_face(r, s) || !may_face(s, r)) return true;
+        ++counts.candidates;
+        return judge(r, s, out, counts);
+    }
+
+    std::size_t leaves_below(std::uint32_t m) const { return m_tree.last[m] - m_tree.first[m]; }
+
+private:
+    // False when no patch of `from` can face any point of `to`: every direction from `from`'s sphere
+    // to `to`'s sphere lies more than 90 degrees off every normal of `from`'s cone.
+    bool may_face(std::uint32_t from, std::uint32_t to) const {
+        if (m_tree.cone_cos[from] <= -1.0) return true;
+        if (m_tree.is_leaf(from) && m_tree.is_leaf(to)) return true;  // patch_pair decides exactly
+        const Vec3 d = m_tree.centre[to] - m_tree.centre[from];
+        const double dist = d.norm(), reach = m_tree.radius[from] + m_tree.radius[to];
+        if (dist <= reach) return true;
+        const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
+        const double cone = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0));
+        return off_axis < M_PI / 2 + cone + std::asin(reach / dist) + 1e-9;
+    }
+
+    // True when every patch of `from` faces every point of `to`: the cone of `from`'s normals and the
+    // directions from its sphere to `to`'s sphere stay within 90 degrees of each other.
+    bool all_face(std::uint32_t from, std::uint32_t to) const {
+        const Vec3 d = m_tree.centre[to] - m_tree.centre[from];
+        const double dist = d.norm(), reach = m_tree.radius[from] + m_tree.radius[to];
+        if (dist <= reach || m_tree.cone_cos[from] <= -1.0) return false;
+        const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
+        const double cone = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0));
+        return off_axis + cone + std::asin(reach / dist) < M_PI / 2;
+    }
+
+    SamplePoint sample(std::uint32_t m, int k, std::uint64_t salt) const {
+        const std::uint32_t lo = m_tree.first[m], hi = m_tree.last[m];
+        const double a0 = m_tree.area_prefix[lo], a1 = m_tree.area_prefix[hi];
+        const double target = a0 + (a1 - a0) * (k + mix01(m, salt, 3 * std::uint64_t(k))) / m_samples;
+        auto it = std::upper_bound(m_tree.area_prefix.begin() + lo + 1, m_tree.area_prefix.begin() + hi, target);
+        const std::size_t at = std::size_t(it - m_tree.area_prefix.begin()) - 1;
+        const std::uint32_t patch = m_tree.leaf_order[std::min<std::size_t>(at, hi - 1)];
+        const Vec3 x = patch_point(m_patches, patch, mix01(m, salt, 3 * std::uint64_t(k) + 1),
+                                   mix01(m, salt, 3 * std::uint64_t(k) + 2));
+        return {x, m_patches.normal[patch]};
+    }
+
+    void emit(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, float distance, std::vector<LinkRecord>& out) const {
+        out.push_back({r, s, float(f_rs), distance});
+        out.push_back({s, r, float(f_sr), distance});
+    }
+
+    void patch_link(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+        const std::uint32_t i = std::min(r, s), j = std::max(r, s);
+        PairFormFactors f;
+        const bool is_near = near_pair(m_patches, m_radius, m_options.near_factor, i, j);
+        if (!patch_pair(m_patches, m_vis, m_options, m_radius, i, j, is_near, f, counts.pair_stats)) return;
+        emit(i, j, f.ij, f.ji, float((m_patches.centroid[i] - m_patches.centroid[j]).norm()), out);
+        ++counts.leaf_links;
+    }
+
+    // The oracle. True when (r, s) is settled: kept as a link with its delay kernel, or dropped as
+    // carrying less than the tolerance; false when it must be refined.
+    bool judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const;
+    void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const;
+    void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
+                     int count, std::vector<LinkRecord>& out) const;
+
+    const PatchSet& m_patches;
+    const Visibility& m_vis;
+    const LinkOptions& m_options;
+    const HierarchyOptions& m_h;
+    const ClusterTree& m_tree;
+    std::vector<double> m_radius;
+    int m_samples;
+    int m_pieces;
+};
+
+// Point pairs of (r, s) and the kernel at each, unoccluded.
+void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const {
+    // Stratum q of r meets a random stratum of s (a fresh permutation per pair): a fixed pairing would
+    // weigh some pairs of strata in every estimate and none of the others, a bias that does not
+    // average out over the links of a scene.
+    int partner[kMaxSamples];
+    for (int q = 0; q < m_samples; ++q) partner[q] = q;
+    for (int q = m_samples - 1; q > 0; --q)
+        std::swap(partner[q], partner[int(mix01(salt, 0x2545F491u, std::uint64_t(q)) * (q + 1))]);
+    out.k_min = INFINITY;
+    out.k_max = 0.0;
+    out.k_sum = 0.0;
+    for (int q = 0; q < m_samples; ++q) {
+        out.x[q] = sample(r, q, salt);
+        out.y[q] = sample(s, partner[q], salt ^ 0x5bd1e995u);
+        const Vec3 d = out.y[q].x - out.x[q].x;
+        const double r2 = d.squaredNorm();
+        out.path[q] = std::sqrt(r2);
+        out.k[q] = std::max(0.0, out.x[q].n.dot(d)) * std::max(0.0, -out.y[q].n.dot(d)) / (M_PI * r2 * r2);
+        out.k_min = std::min(out.k_min, out.k[q]);
+        out.k_max = std::max(out.k_max, out.k[q]);
+        out.k_sum += out.k[q];
+    }
+}
+
+bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+    const double dist = (m_tree.centre[r] - m_tree.centre[s]).norm();
+    const double gap = dist - m_tree.radius[r] - m_tree.radius[s];
+    if (!(gap > 0.0)) return false;  // overlapping bounds: the kernel is unbounded there
+    if (m_h.bin_width_m > 0.0 && gap < m_h.min_lag_bins * m_h.bin_width_m) return false;
+    const double a_r = m_tree.area[r], a_s = m_tree.area[s], a_big = std::max(a_r, a_s);
+    const std::uint64_t salt = std::uint64_t(std::min(r, s)) << 32 | std::max(r, s);
+    PairSamples judged;
+    draw(r, s, salt, judged);
+    if (judged.k_max == 0.0) {
+        // No sample faces the other node, yet their cones and bounds allow it. Dropping the pair
+        // would lose whatever part does face, always in the same direction (an enclosure would leak):
+        // refine it unless even the largest kernel the bounds allow carries a negligible share of the
+        // tolerance.
+        return a_big / (M_PI * gap * gap) <= kNegligible * m_h.tolerance;
+    }
+    // A member that faces away from the other node gets the link's light all the same (push) or
+    // sends with the others (pull): unless the cones show that none does, the kernel's range goes down
+    // to zero, whether or not a sample fell on such a member.
+    // Such a link may only carry a small share of the tolerance: over the hundreds of links that reach
+    // one patch those errors add up in one direction (light on a face turned away, in a shadow).
+    const bool facing = all_face(r, s) && all_face(s, r) && judged.k_min > 0.0;
+    if (!facing && a_big * judged.k_max > kFacingShare * m_h.tolerance) return false;
+    if (a_big * (judged.k_max - judged.k_min) > m_h.tolerance) return false;
+    // Accepted on geometry. The form factor comes from fresh samples: the ones that judged the pair
+    // were accepted because they varied little, which makes them more likely to have missed where the
+    // kernel peaks, so their mean is biased low (an enclosure lost 0.2% of its light per bounce).
+    PairSamples p;
+    draw(r, s, salt ^ 0x9E3779B97F4A7C15ull, p);
+    // Visibility, by rays between the fresh pairs.
+    const double lift = m_vis.epsilon();
+    double visible_sum = 0.0;
+    int blocked = 0, cast = 0;
+    for (int q = 0; q < m_samples; ++q) {
+        if (p.k[q] <= 0.0) continue;
+        ++cast;
+        ++counts.pair_stats.rays;
+        if (m_vis.occluded(p.x[q].x + lift * p.x[q].n, p.y[q].x + lift * p.y[q].n)) {
+            ++blocked;
+            p.k[q] = 0.0;
+        } else {
+            visible_sum += p.k[q];
+        }
+    }
+    if (blocked > 0) {
+        // A shadow edge crosses the pair: points of either node may see anything from none to all of
+        // the other, and the link would light the shadowed ones as much as the others (or, dropped
+        // when no ray passes, leave the lit ones dark). Refined unless all of it is a small share of
+        // the tolerance.
+        if (a_big * judged.k_sum / m_samples > kFacingShare * m_h.tolerance) return false;
+        if (blocked == cast) return true;
+    }
+    if (cast == 0) return true;
+    emit_kernel(r, s, a_s * visible_sum / m_samples, a_r * visible_sum / m_samples, p.path, p.k, m_samples, out);
+    ++counts.cluster_links;
+    return true;
+}
+
+// The link's delay kernel from the sampled paths, weighted by their kernel values: one piece when the
+// paths span less than a bin, else up to m_pieces pieces of about equal weight, each at its weighted
+// mean path (so that the total and the mean delay are the samples' exactly).
+void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path,
+                          const double* weight, int count, std::vector<LinkRecord>& out) const {
+    int order[kMaxSamples];
+    int used = 0;
+    double total = 0.0, lo = INFINITY, hi = 0.0;
+    for (int q = 0; q < count; ++q)
+        if (weight[q] > 0.0) {
+            order[used++] = q;
+            total += weight[q];
+            lo = std::min(lo, path[q]);
+            hi = std::max(hi, path[q]);
+        }
+    const int pieces = (m_h.bin_width_m > 0.0 && hi - lo > m_h.bin_width_m) ? std::min(m_pieces, used) : 1;
+    std::sort(order, order + used, [&](int a, int b) { return path[a] < path[b]; });
+    double piece_w[kMaxPieces] = {}, piece_p[kMaxPieces] = {}, before = 0.0;
+    for (int u = 0; u < used; ++u) {
+        const int q = order[u];
+        const int g = std::min(pieces - 1, int((before + 0.5 * weight[q]) / total * pieces));
+        piece_w[g] += weight[q];
+        piece_p[g] += weight[q] * path[q];
+        before += weight[q];
+    }
+    for (int g = 0; g < pieces; ++g) {
+        if (!(piece_w[g] > 0.0)) continue;
+        const double share = piece_w[g] / total;
+        emit(r, s, f_rs * share, f_sr * share, float(piece_p[g] / piece_w[g]), out);
+    }
+}
+
+// The CSR by receiver, sources non-decreasing within a row (then by distance).
+Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, int threads) {
+    Links links;
+    links.row.assign(nodes + 1, 0);
+    for (const auto& part : parts)
+        for (const LinkRecord& l : part) ++links.row[l.receiver + 1];
+    for (std::size_t m = 0; m < nodes; ++m) links.row[m + 1] += links.row[m];
+    const std::size_t total = links.row[nodes];
+    links.source.resize(total);
+    links.ff.resize(total);
+    links.distance.resize(total);
+    std::vector<std::uint64_t> cursor(links.row.begin(), links.row.end() - 1);
+    for (auto& part : parts) {
+        for (const LinkRecord& l : part) {
+            const std::uint64_t at = cursor[l.receiver]++;
+            links.source[at] = l.source;
+            links.ff[at] = l.ff;
+            links.distance[at] = l.distance;
+        }
+        std::vector<LinkRecord>().swap(part);
+    }
+    parallel_for(nodes, {threads, 256, true}, [&](std::size_t m) {
+        const std::uint64_t a = links.row[m], b = links.row[m + 1];
+        std::vector<std::uint64_t> idx(b - a);
+        for (std::uint64_t k = a; k < b; ++k) idx[k - a] = k;
+        std::sort(idx.begin(), idx.end(), [&](std::uint64_t p, std::uint64_t q) {
+            return links.source[p] != links.source[q] ? links.source[p] < links.source[q]
+                                                      : links.distance[p] < links.distance[q];
+        });
+        std::vector<std::uint32_t> src(idx.size());
+        std::vector<float> ff(idx.size()), dist(idx.size());
+        for (std::size_t k = 0; k < idx.size(); ++k) {
+            src[k] = links.source[idx[k]];
+            ff[k] = links.ff[idx[k]];
+            dist[k] = links.distance[idx[k]];
+        }
+        std::copy(src.begin(), src.end(), links.source.begin() + std::ptrdiff_t(a));
+        std::copy(ff.begin(), ff.end(), links.ff.begin() + std::ptrdiff_t(a));
+        std::copy(dist.begin(), dist.end(), links.distance.begin() + std::ptrdiff_t(a));
+    });
+    return links;
+}
+
+// A unit of parallel work: every pair below one cluster (b == kNoNode) or between two nodes.
+struct Job {
+    std::uint32_t a, b;
+};
+
+// Cuts the refinement into jobs of at most about `cut` patches a side; the pairs above the cut are
+// judged here, their links going to `top`.
+std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std::size_t cut,
+                           std::vector<LinkRecord>& top, Counts& counts) {
+    std::vector<Job> jobs;
+    std::vector<Job> pending;  // pairs still to judge (b != kNoNode) or clusters to open (b == kNoNode)
+    if (tree.nodes() > 0) pending.push_back({tree.root(), kNoNode});
+    while (!pending.empty()) {
+        const Job j = pending.back();
+        pending.pop_back();
+        if (j.b == kNoNode) {
+            if (tree.is_leaf(j.a)) continue;
+            if (builder.leaves_below(j.a) <= cut) {
+                jobs.push_back(j);
+                continue;
+            }
+            const auto [c0, c1] = tree.children[j.a - tree.leaves];
+            pending.push_back({c0, kNoNode});
+            pending.push_back({c1, kNoNode});
+            pending.push_back({c0, c1});
+            continue;
+        }
+        if (builder.leaves_below(j.a) + builder.leaves_below(j.b) <= 2 * cut) {
+            jobs.push_back(j);
+            continue;
+        }
+        if (builder.settle_top(j.a, j.b, top, counts)) continue;
+        const bool split_a = !tree.is_leaf(j.a) && (tree.is_leaf(j.b) || tree.radius[j.a] >= tree.radius[j.b]);
+        const std::uint32_t big = split_a ? j.a : j.b, other = split_a ? j.b : j.a;
+        for (std::uint32_t child : tree.children[big - tree.leaves]) pending.push_back({child, other});
+    }
+    return jobs;
+}
+
+}  // namespace
+
+LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,
+                              const HierarchyOptions& hierarchy, HierarchyStats* stats) {
+    TPRF_CHECK(hierarchy.tolerance > 0.0);
+    const int threads = thread_count(options.threads);
+    LinkSet set;
+    set.tree = build_cluster_tree(patches);
+    const Builder builder(patches, visibility, options, hierarchy, set.tree);
+    const std::size_t cut = std::max<std::size_t>(256, patches.size() / 64);
+    std::vector<std::vector<LinkRecord>> parts(1);
+    Counts top_counts;
+    const std::vector<Job> jobs = make_jobs(builder, set.tree, cut, parts[0], top_counts);
+    parts.resize(jobs.size() + 1);
+    std::vector<Counts> counts(jobs.size());
+    std::atomic<std::size_t> done{0};
+    std::mutex progress_mutex;
+    parallel_for(jobs.size(), {threads, 1, true}, [&](std::size_t j) {
+        if (jobs[j].b == kNoNode)
+            builder.refine_self(jobs[j].a, parts[j + 1], counts[j]);
+        else
+            builder.refine(jobs[j].a, jobs[j].b, parts[j + 1], counts[j]);
+        parts[j + 1].shrink_to_fit();
+        const std::size_t finished = ++done;
+        if (options.progress) {
+            std::lock_guard<std::mutex> lock(progress_mutex);
+            options.progress("links", 0.9 * double(finished) / double(jobs.size()));
+        }
+    });
+    counts.push_back(top_counts);
+    set.links = assemble(set.tree.nodes(), parts, threads);
+    if (hierarchy.bin_width_m > 0.0) set.block_bins = std::max(1, hierarchy.min_lag_bins);
+    // Area emitters light the scene by patch-to-patch links (illuminate()): exact first bounces.
+    std::vector<std::uint32_t> emitting;
+    for (std::size_t i = 0; i < patches.size(); ++i)
+        if ((patches.emission[i] > 0.0).any()) emitting.push_back(std::uint32_t(i));
+    set.emitters = emitter_patch_links(patches, visibility, options, emitting);
+    if (options.progress) options.progress("links", 1.0);
+    if (stats) {
+        *stats = {};
+        for (const Counts& c : counts) {
+            stats->leaf_links += 2 * c.leaf_links;
+            stats->cluster_links += 2 * c.cluster_links;
+            stats->candidates += c.candidates;
+            stats->rays += c.pair_stats.rays;
+        }
+    }
+    return set;
+}
+
+}  // namespace tprf

@@ -1,0 +1,39 @@
+#pragma once
+// Private to the transport stage: the patch-to-patch form factor that flat links use for every pair
+// and hierarchical links for the pairs they refine down to single patches.
+
+#include "tprf/transport/links.h"
+
+#include <vector>
+
+namespace tprf {
+
+struct PairFormFactors {
+    double ij = 0.0;  ///< F_ij, visibility included
+    double ji = 0.0;  ///< F_ji = F_ij A_i / A_j
+};
+
+/// Form factors of patches i and j when they face each other and some stratified ray between them is
+/// free: the rule their distance calls for (adaptive when `is_near`, Gauss for middle distances, the
+/// centroid rule beyond options.far_factor), times the visible fraction. False: no link.
+bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
+                const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
+                LinkStats& counts);
+
+/// True when i and j are closer than near_factor (r_i + r_j), the pairs integrated adaptively.
+bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
+               std::size_t j);
+
+/// Circumradius of every patch.
+std::vector<double> circumradii(const PatchSet& patches);
+
+}  // namespace tprf
+
+namespace tprf {
+
+/// Patch-to-patch links from each patch in `emitting` (sorted) to every patch that it faces and sees:
+/// a CSR over all patches, as emitter_links() would cut it out of the flat links.
+Links emitter_patch_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
+                          const std::vector<std::uint32_t>& emitting);
+
+}  // namespace tprf

@@ -1,0 +1,210 @@
+// The resource estimate (SPEC.md v2, "Links and scale"): `tprf info` prints it, and `--max-memory`
+// refuses a render whose estimate exceeds the limit, with exit status 2, before anything is allocated.
+#include "test_process.h"
+#include "test_scenes.h"
+#include "tprf/core/error.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/pipeline/info.h"
+#include "tprf/scene/parse_json.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+using tprf::test::Outcome;
+
+fs::path sample_scene(const std::string& name) { return fs::path(TPRF_SOURCE_DIR) / "meshes" / name; }
+
+class Estimate : public ::testing::Test {
+protected:
+    void SetUp() override {
+        m_dir = fs::temp_directory_path() / ("tprf_estimate_" + std::to_string(std::random_device{}()));
+        fs::create_directories(m_dir);
+    }
+    void TearDown() override { fs::remove_all(m_dir); }
+    fs::path m_dir;
+};
+
+// A floor and a back wall under a point light, cut at `max_edge`.
+std::string corner_scene(double max_edge, int bins = 200) {
+    return R"({"time": {"bins": )" + std::to_string(bins) + R"(, "bin_width": 0.01},
+      "camera": {"position": [0.5, -1.1, 0.9], "look_at": [0.5, 0.55, 0.25], "up": [0, 0, 1], "fov": 45,
+                 "width": 64, "height": 48, "spp": 4},
+      "lights": [{"type": "point", "position": [0.3, 0.45, 0.35], "intensity": 1.0}],
+      "objects": [{"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0]},
+                  {"type": "rectangle", "origin": [0, 1, 0], "u": [1, 0, 0], "v": [0, 0, 1]}],
+      "patches": {"max_edge": )" + std::to_string(max_edge) + "}}";
+}
+
+TEST(PatchCensus, CountsWhatBuildPatchesBuilds) {
+    for (const char* name : {"corner.json", "cornell-box.json", "mesh-on-floor.json", "plates.json"}) {
+        const tprf::Scene scene = tprf::load_scene(sample_scene(name));
+        tprf::PatchStats stats;
+        const tprf::PatchSet patches = tprf::build_patches(scene, {}, &stats);
+        const tprf::PatchCensus census = tprf::count_patches(scene, 256);
+        EXPECT_EQ(census.patches, patches.size()) << name;
+        EXPECT_EQ(census.corners, patches.vertices.size()) << name;
+        EXPECT_EQ(census.max_edge, stats.max_edge) << name;
+        EXPECT_EQ(census.dropped_degenerate, stats.dropped_degenerate) << name;
+        std::size_t emissive = 0;
+        for (const tprf::Rgb& e : patches.emission) emissive += (e > 0.0).any();
+        EXPECT_EQ(census.emissive, emissive) << name;
+        EXPECT_EQ(census.samples.size(), 256u) << name;
+    }
+}
+
+TEST(PatchCensus, SamplesLieOnTheirObjectsWithTheirSide) {
+    tprf::Scene scene;
+    scene.time = tprf::test::time_axis(10, 0.1);
+    scene.objects.push_back(tprf::test::rectangle({0, 0, 0}, {1, 0, 0}, {0, 1, 0}));
+    scene.objects.push_back(tprf::test::rectangle({0, 0, 1}, {0, 2, 0}, {2, 0, 0}));
+    scene.objects[1].two_sided = true;
+    scene.max_edge = 0.25;
+    const tprf::PatchCensus census = tprf::count_patches(scene, 300);
+    EXPECT_EQ(census.patches, 16u + 2 * 64u);
+    ASSERT_EQ(census.samples.size(), 300u);
+    int back = 0;
+    for (const tprf::PatchSample& s : census.samples) {
+        EXPECT_NEAR(s.point.z(), s.object == 0 ? 0.0 : 1.0, 1e-12);
+        if (s.object == 0) {
+            EXPECT_EQ(s.normal, tprf::Vec3(0, 0, 1));
+        }
+        back += s.object == 1 && s.normal.z() > 0;
+    }
+    // 300 x 128 / 144 draws on the two-sided square, about half of them on its back (its front faces -z).
+    EXPECT_GT(back, 90);
+    EXPECT_LT(back, 177);
+}
+
+TEST(ResourceEstimate, FollowsTheScene) {
+    tprf::Scene scene = tprf::load_scene(sample_scene("corner.json"));
+    const tprf::ResourceEstimate e = tprf::estimate_resources(scene, {});
+    // Two perpendicular squares: every floor patch faces every wall patch, so half of all ordered pairs.
+    EXPECT_EQ(e.patches, 2312u);
+    EXPECT_NEAR(double(e.links), 2672672.0, 0.05 * 2672672.0);
+    EXPECT_EQ(e.channels, 1);  // grey albedo, grey light
+    EXPECT_EQ(e.ring_bins, 512);
+    EXPECT_GT(e.peak_bytes, e.link_bytes + e.cube_bytes);
+    EXPECT_GT(e.seconds.total, 0.0);
+
+    // More bins: a larger cube; per-bounce cubes: five of them; patch profiles: N x T x 3 floats more.
+    scene.time.bins *= 2;
+    const tprf::ResourceEstimate longer = tprf::estimate_resources(scene, {});
+    EXPECT_NEAR(double(longer.cube_bytes), 2.0 * double(e.cube_bytes), 1.0);
+    scene.solver.bounces = true;
+    const tprf::ResourceEstimate bounces = tprf::estimate_resources(scene, {});
+    EXPECT_NEAR(double(bounces.cube_bytes), 6.0 * double(longer.cube_bytes), 6.0);
+    EXPECT_EQ(bounces.layers, 5);
+    const tprf::ResourceEstimate profiles = tprf::estimate_resources(scene, {}, true);
+    EXPECT_NEAR(double(profiles.cube_bytes - bounces.cube_bytes), 2312.0 * scene.time.bins * 12, 2.0);
+
+    // Hierarchical links grow like N log N: far fewer than the flat ones at a million patches.
+    scene.max_edge = 0.002;
+    const tprf::ResourceEstimate flat = tprf::estimate_resources(scene, {});
+    scene.links.method = tprf::LinkMethod::Hierarchical;
+    const tprf::ResourceEstimate hierarchical = tprf::estimate_resources(scene, {});
+    EXPECT_EQ(hierarchical.patches, 500000u);
+    EXPECT_LT(double(hierarchical.links), 1e-2 * double(flat.links));
+    EXPECT_LT(hierarchical.peak_bytes, flat.peak_bytes);
+}
+
+// The estimate against what a render measures (render.json's peak_rss_mb), in a process of its own.
+TEST_F(Estimate, IsWithinAFactorTwoOfTheMeasuredPeak) {
+    const struct {
+        std::string name;
+        fs::path file;
+    } scenes[] = {{"corner at 0.04", m_dir / "corner.json"}, {"meshes/corner.json", sample_scene("corner.json")}};
+    std::ofstream(m_dir / "corner.json") << corner_scene(0.04);
+    for (const auto& s : scenes) {
+        const fs::path out = m_dir / "out";
+        const Outcome r = tprf::test::run_tprf("render " + s.file.string() + " -o " + out.string() + " --threads 2");
+        ASSERT_EQ(r.status, 0) << r.err;
+        const auto record = nlohmann::json::parse(std::ifstream(out / "render.json"));
+        const double measured = record.at("peak_rss_mb").get<double>();
+        tprf::PipelineOptions options;
+        options.threads = 2;
+        const double estimated = double(tprf::estimate_resources(tprf::load_scene(s.file), options).peak_bytes) / 1e6;
+        EXPECT_GT(estimated, measured / 2) << s.name << ": estimated " << estimated << " MB, measured " << measured;
+        EXPECT_LT(estimated, measured * 2) << s.name << ": estimated " << estimated << " MB, measured " << measured;
+        fs::remove_all(out);
+    }
+}
+
+TEST_F(Estimate, TooLargeARenderExitsTwoBeforeAllocatingAndNamesTheKeys) {
+    // 0.2 mm patches: 5000 x 5000 per square, 50 million patches, about 1.25e15 flat links.
+    std::ofstream(m_dir / "huge.json") << corner_scene(0.0002);
+    const auto start = std::chrono::steady_clock::now();
+    const Outcome r = tprf::test::run_tprf("render " + (m_dir / "huge.json").string() + " -o " +
+                                           (m_dir / "out").string() + " --max-memory 1");
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_EQ(r.status, 2) << r.err;
+    EXPECT_LT(seconds, 10.0) << "the refusal must come before the work";
+    EXPECT_FALSE(fs::exists(m_dir / "out")) << "nothing is written for a refused render";
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    for (const char* key : {"huge.json", "estimated peak memory", "limit of 1 GB", "--max-memory", "patches.max_edge",
+                            "time.bins", "camera.width", "camera.height", "links.method", "\"hierarchical\"",
+                            "links.tolerance"})
+        EXPECT_NE(r.err.find(key), std::string::npos) << key << " not in: " << r.err;
+}
+
+TEST_F(Estimate, InfoDoesNotBuildLinksOverTheLimit) {
+    std::ofstream(m_dir / "huge.json") << corner_scene(0.0002);
+    const fs::path out = m_dir / "info.txt";
+    const Outcome r = tprf::test::shell(std::string(TPRF_BINARY) + " info " + (m_dir / "huge.json").string() +
+                                        " --max-memory 1 -q >" + out.string());
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::string text = tprf::test::read_bytes(out);
+    EXPECT_NE(text.find("OVER the render limit of 1000 MB"), std::string::npos) << text;
+    EXPECT_NE(text.find("patches  50000000 (counted"), std::string::npos) << text;
+    EXPECT_NE(text.find("links    not built"), std::string::npos) << text;
+}
+
+TEST_F(Estimate, ALimitAboveTheEstimateRenders) {
+    std::ofstream(m_dir / "small.json") << corner_scene(0.1, 50);
+    const Outcome r = tprf::test::run_tprf("render " + (m_dir / "small.json").string() + " -o " +
+                                           (m_dir / "out").string() + " --max-memory 4");
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / "transient.npy"));
+    for (const char* bad : {"0", "-1", "lots"})
+        EXPECT_EQ(tprf::test::run_tprf("render " + (m_dir / "small.json").string() + " -o " + (m_dir / "bad").string() +
+                                       " --max-memory " + bad)
+                      .status,
+                  2)
+            << bad;
+}
+
+TEST(CheckMemory, ThrowsInputErrorOverTheLimitOnly) {
+    const tprf::Scene scene = tprf::load_scene(sample_scene("corner.json"));
+    tprf::PipelineOptions options;
+    options.max_memory_gb = 0.01;  // 10 MB: less than the cube alone
+    EXPECT_THROW(tprf::check_memory(scene, options), tprf::Error);
+    options.max_memory_gb = 1000;
+    EXPECT_NO_THROW(tprf::check_memory(scene, options));
+    options.max_memory_gb = 0;  // the default: 80% of MemAvailable
+    EXPECT_GT(tprf::memory_limit_bytes(options), 0u);
+}
+
+TEST_F(Estimate, InfoPrintsTheEstimateBeforeTheMeasuredLinks) {
+    std::ofstream(m_dir / "small.json") << corner_scene(0.1, 50);
+    const fs::path out = m_dir / "info.txt";
+    const Outcome r = tprf::test::shell(std::string(TPRF_BINARY) + " info " + (m_dir / "small.json").string() +
+                                        " -q >" + out.string());
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::string text = tprf::test::read_bytes(out);
+    const std::size_t estimate = text.find("estimate"), links = text.find("\nlinks ");
+    ASSERT_NE(estimate, std::string::npos) << text;
+    ASSERT_NE(links, std::string::npos) << text;
+    EXPECT_LT(estimate, links) << text;
+    for (const char* what : {"peak memory", "estimate seconds: patches", "links", "gather", "solve", "write", "total"})
+        EXPECT_NE(text.find(what), std::string::npos) << what << " not in: " << text;
+}
+
+}  // namespace

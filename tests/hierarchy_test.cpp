@@ -1,0 +1,825 @@
+// Hierarchical links (issue 12): the cluster tree's invariants, exactly-once coverage of patch pairs,
+// reciprocity, energy conservation (furnace), causality with delay kernels, accuracy against the flat
+// method and thread-count determinism.
+
+#include "tprf/transport/link_set.h"
+
+#include "tprf/geometry/cluster_tree.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/solver.h"
+#include "tprf/transport/steady.h"
+
+#include "test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+namespace tprf {
+namespace {
+
+// The numbers that the bounds below were set from, printed when TPRF_TEST_MEASURE is set (the
+// hierarchy is being tuned: rerun with it to see where a change moved them).
+#define MEASURED(...)                                                                    \
+    do {                                                                                 \
+        if (std::getenv("TPRF_TEST_MEASURE")) std::printf("[measured] " __VA_ARGS__);    \
+    } while (false)
+
+struct Prepared {
+    PatchSet patches;
+    std::unique_ptr<Visibility> vis;
+    LightSources sources;
+};
+
+Prepared prepare(const Scene& scene) {
+    Prepared p;
+    p.patches = build_patches(scene);
+    p.vis = std::make_unique<Visibility>(p.patches);
+    p.sources = light_sources(scene, p.patches, *p.vis);
+    return p;
+}
+
+LinkSet hierarchical(const Prepared& p, double tolerance, int threads = 0, double bin_width_m = 0.0,
+                     HierarchyStats* stats = nullptr) {
+    LinkOptions options;
+    options.threads = threads;
+    HierarchyOptions h;
+    h.tolerance = tolerance;
+    h.bin_width_m = bin_width_m;
+    return hierarchical_link_set(p.patches, *p.vis, options, h, stats);
+}
+
+Illumination lit(const Prepared& p, const LinkSet& set) { return illuminate(p.sources, p.patches, set.emitters, *p.vis); }
+
+// One node pair's link: the pieces of its delay kernel summed.
+struct NodePair {
+    std::uint32_t receiver, source;
+    double ff = 0.0;
+    int pieces = 0;
+    double d_min = INFINITY, d_max = 0.0;
+};
+
+// The node pairs of a link set (rows hold sources in non-decreasing order, so a pair's pieces are
+// consecutive).
+std::vector<NodePair> node_pairs(const LinkSet& set) {
+    std::vector<NodePair> out;
+    const Links& l = set.links;
+    for (std::size_t m = 0; m < set.nodes(); ++m) {
+        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k) {
+            if (k > l.row[m]) {
+                EXPECT_LE(l.source[k - 1], l.source[k]) << "row " << m;
+            }
+            if (out.empty() || out.back().receiver != m || out.back().source != l.source[k])
+                out.push_back({std::uint32_t(m), l.source[k]});
+            NodePair& np = out.back();
+            np.ff += double(l.ff[k]);
+            ++np.pieces;
+            np.d_min = std::min(np.d_min, double(l.distance[k]));
+            np.d_max = std::max(np.d_max, double(l.distance[k]));
+        }
+    }
+    return out;
+}
+
+// The ancestors-or-self of patch i, itself first.
+std::vector<std::uint32_t> path_up(const ClusterTree& t, std::uint32_t i) {
+    std::vector<std::uint32_t> up;
+    for (std::uint32_t m = i; m != kNoNode; m = t.parent[m]) up.push_back(m);
+    return up;
+}
+
+// Each patch's total form factor through the hierarchy: the links received by it and every cluster
+// above it (what the push hands it), which conserves energy when it is 1 in a closed scene.
+std::vector<double> row_sums(const LinkSet& set) {
+    const Links& l = set.links;
+    std::vector<double> node(set.nodes(), 0.0);
+    for (std::size_t m = 0; m < set.nodes(); ++m)
+        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k) node[m] += double(l.ff[k]);
+    std::vector<double> out(set.patches(), 0.0);
+    for (std::uint32_t i = 0; i < set.patches(); ++i)
+        for (std::uint32_t m : path_up(set.tree, i)) out[i] += node[m];
+    return out;
+}
+
+std::size_t cluster_link_count(const LinkSet& set) {
+    std::size_t count = 0;
+    const std::size_t n = set.patches();
+    for (std::size_t m = 0; m < set.nodes(); ++m)
+        for (std::uint64_t k = set.links.row[m]; k < set.links.row[m + 1]; ++k) count += m >= n || set.links.source[k] >= n;
+    return count;
+}
+
+// Transient profiles, N x T (channel 0) and, with bounce terms, the per-order terms K x N x T.
+struct Profiles {
+    std::size_t n = 0;
+    int bins = 0;
+    std::vector<float> total, terms;
+    int term_count = 0;
+    double at(std::size_t i, int t) const { return total[i * std::size_t(bins) + std::size_t(t)]; }
+    double term(int k, std::size_t i, int t) const {
+        return terms[(std::size_t(k) * n + i) * std::size_t(bins) + std::size_t(t)];
+    }
+};
+
+Profiles solve(const Prepared& p, const LinkSet& set, const Illumination& e, const TimeAxis& time,
+               const SolverOptions& options = {}) {
+    Profiles out;
+    out.n = p.patches.size();
+    out.bins = time.bins;
+    out.total.assign(out.n * std::size_t(time.bins), 0.0f);
+    solve_transient(p.patches, set, e, time, options, [&](const SolveBlock& b) {
+        out.term_count = b.terms;
+        if (b.terms > 0 && out.terms.empty()) out.terms.assign(std::size_t(b.terms) * out.total.size(), 0.0f);
+        for (std::size_t i = 0; i < b.patches; ++i)
+            for (int t = 0; t < b.bins; ++t) {
+                const std::size_t src = (i * std::size_t(b.bins) + std::size_t(t)) * 3;
+                const std::size_t dst = i * std::size_t(time.bins) + std::size_t(b.first_bin + t);
+                out.total[dst] = b.radiosity[src];
+                for (int k = 0; k < b.terms; ++k)
+                    out.terms[std::size_t(k) * out.total.size() + dst] =
+                        b.per_order[std::size_t(k) * b.patches * std::size_t(b.bins) * 3 + src];
+            }
+    });
+    return out;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 1. The tree.
+
+void check_tree(const PatchSet& patches, const ClusterTree& t) {
+    const std::size_t n = patches.size();
+    ASSERT_EQ(t.leaves, n);
+    ASSERT_EQ(t.nodes(), 2 * n - 1);
+    ASSERT_EQ(t.clusters(), n - 1);
+    ASSERT_EQ(t.area.size(), t.nodes());
+    ASSERT_EQ(t.children.size(), n - 1);
+    ASSERT_EQ(t.leaf_order.size(), n);
+    ASSERT_EQ(t.area_prefix.size(), n + 1);
+    ASSERT_EQ(t.root(), n);
+    EXPECT_EQ(t.parent[t.root()], kNoNode);
+    // leaf_order is a permutation, and each patch's range is its own slot.
+    std::vector<int> seen(n, 0);
+    for (std::uint32_t i : t.leaf_order) ++seen[i];
+    for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(seen[i], 1) << "patch " << i;
+    for (std::uint32_t i = 0; i < n; ++i) {
+        EXPECT_EQ(t.last[i], t.first[i] + 1) << "patch " << i;
+        EXPECT_EQ(t.leaf_order[t.first[i]], i) << "patch " << i;
+        EXPECT_NE(t.parent[i], kNoNode) << "patch " << i;
+        EXPECT_EQ(t.area[i], patches.area[i]);
+        EXPECT_EQ(t.cone_cos[i], 1.0);
+    }
+    double loosest = 1.0;  // largest radius / (tight bounding radius about the centre)
+    for (std::uint32_t c = std::uint32_t(n); c < t.nodes(); ++c) {
+        const auto [a, b] = t.children[c - n];
+        ASSERT_LT(a, t.nodes());
+        ASSERT_LT(b, t.nodes());
+        EXPECT_EQ(t.parent[a], c);
+        EXPECT_EQ(t.parent[b], c);
+        // Contiguous ranges: [first, last) of c is the first child's followed by the second's.
+        EXPECT_EQ(t.first[a], t.first[c]) << "cluster " << c;
+        EXPECT_EQ(t.last[a], t.first[b]) << "cluster " << c;
+        EXPECT_EQ(t.last[b], t.last[c]) << "cluster " << c;
+        EXPECT_LT(t.first[a], t.last[a]);
+        EXPECT_LT(t.first[b], t.last[b]);
+        EXPECT_NEAR(t.area[c], t.area[a] + t.area[b], 1e-12 * t.area[c]) << "cluster " << c;
+        EXPECT_NEAR(t.area[c], t.area_prefix[t.last[c]] - t.area_prefix[t.first[c]], 1e-9 * t.area[c]);
+        // Preorder: the clusters below c are numbered c + 1 .. c + leaves_below - 2, the first child's
+        // subtree first.
+        const std::uint32_t below = t.last[c] - t.first[c];
+        if (!t.is_leaf(a)) {
+            EXPECT_EQ(a, c + 1) << "cluster " << c;
+        }
+        if (!t.is_leaf(b)) {
+            EXPECT_EQ(b, c + (t.last[a] - t.first[a])) << "cluster " << c;
+        }
+        // Members: centroid within the sphere, corners too (the sphere includes corners), normal
+        // within the cone; the centre is the members' area centroid.
+        Vec3 centroid = Vec3::Zero();
+        double tight = 0.0;
+        for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k) {
+            const std::uint32_t i = t.leaf_order[k];
+            centroid += patches.area[i] * patches.centroid[i];
+            EXPECT_LE((patches.centroid[i] - t.centre[c]).norm(), t.radius[c] + 1e-9) << "cluster " << c;
+            for (std::size_t q = 0; q < patches.corners(i); ++q) {
+                const double r = (patches.polygon(i)[q] - t.centre[c]).norm();
+                tight = std::max(tight, r);
+                EXPECT_LE(r, t.radius[c] + 1e-9) << "cluster " << c << " patch " << i;
+            }
+            EXPECT_GE(patches.normal[i].dot(t.cone_axis[c]), t.cone_cos[c] - 1e-9) << "cluster " << c << " patch " << i;
+        }
+        EXPECT_LT((centroid / t.area[c] - t.centre[c]).norm(), 1e-9) << "cluster " << c;
+        EXPECT_NEAR(t.cone_axis[c].norm(), 1.0, 1e-9);
+        loosest = std::max(loosest, t.radius[c] / tight);
+        // Every cluster's subtree: the ancestors of each cluster d below c lie in c's id range.
+        for (std::uint32_t d = c; d < c + below - 1; ++d) {
+            std::uint32_t up = d;
+            while (up != kNoNode && up != c) up = t.parent[up];
+            EXPECT_EQ(up, c) << "cluster " << d << " is numbered inside " << c << "'s subtree but is not below it";
+        }
+    }
+    // Cluster spheres are built from the patches' corners, so they are the tightest sphere about the
+    // same centre (measured: 1.000 on the cube and the Cornell box; merged from the children's spheres
+    // they were up to 2.36 times looser). The bound allows for rounding only.
+    MEASURED("tree over %zu patches: depth %d, loosest sphere %.3f x the tight one\n", n, t.depth(), loosest);
+    EXPECT_LT(loosest, 1.0 + 1e-9);
+    // by_level: every cluster once, level by level, parents on the level before their children.
+    ASSERT_EQ(t.by_level.size(), n - 1);
+    ASSERT_GE(t.level_first.size(), 2u);
+    EXPECT_EQ(t.level_first.front(), 0u);
+    EXPECT_EQ(t.level_first.back(), n - 1);
+    std::vector<int> level(t.nodes(), -1);
+    for (std::size_t d = 0; d + 1 < t.level_first.size(); ++d) {
+        EXPECT_LT(t.level_first[d], t.level_first[d + 1]) << "empty level " << d;
+        for (std::uint32_t k = t.level_first[d]; k < t.level_first[d + 1]; ++k) {
+            const std::uint32_t c = t.by_level[k];
+            ASSERT_GE(c, n);
+            EXPECT_EQ(level[c], -1) << "cluster " << c << " listed twice";
+            level[c] = int(d);
+            if (d == 0) {
+                EXPECT_EQ(c, t.root());
+            } else {
+                EXPECT_EQ(level[t.parent[c]], int(d) - 1) << "cluster " << c;
+            }
+        }
+    }
+    for (std::size_t c = n; c < t.nodes(); ++c) EXPECT_GE(level[c], 0) << "cluster " << c << " missing from by_level";
+}
+
+TEST(ClusterTree, InvariantsHoldOnAClosedCube) {
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0);
+    const PatchSet patches = build_patches(scene);
+    ASSERT_EQ(patches.size(), 600u);
+    const ClusterTree t = build_cluster_tree(patches);
+    check_tree(patches, t);
+    // A cluster of one wall's squares has every normal equal: its cone is a single direction (386 of
+    // the 599 clusters lie on one wall).
+    std::size_t flat_clusters = 0;
+    for (std::uint32_t c = 600; c < t.nodes(); ++c) {
+        bool one_wall = true;
+        for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k)
+            one_wall &= patches.object[t.leaf_order[k]] == patches.object[t.leaf_order[t.first[c]]];
+        if (!one_wall) continue;
+        ++flat_clusters;
+        EXPECT_GE(t.cone_cos[c], 1.0 - 1e-9) << "cluster " << c;
+    }
+    EXPECT_GT(flat_clusters, 300u);
+}
+
+TEST(ClusterTree, InvariantsHoldOnTheCornellBoxMeshes) {
+    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
+    scene.max_edge = 0.1;
+    const PatchSet patches = build_patches(scene);
+    check_tree(patches, build_cluster_tree(patches));
+    // One patch: a tree of its own, no clusters.
+    PatchSet one;
+    const Vec3 c[3] = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)};
+    add_patch(one, c, 3, Rgb::Constant(0.5), Rgb::Zero(), 0);
+    const ClusterTree t = build_cluster_tree(one);
+    EXPECT_EQ(t.nodes(), 1u);
+    EXPECT_EQ(t.root(), 0u);
+    EXPECT_EQ(t.parent[0], kNoNode);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 2. Coverage and reciprocity.
+
+// Two 1.2 m plates facing each other 1 m apart with a 0.4 m square between them (facing down, so that
+// it both shadows and exchanges light with the bottom plate).
+Scene plates_with_occluder(double max_edge) {
+    Scene scene;
+    scene.max_edge = max_edge;
+    scene.objects.push_back(test::rectangle(Vec3(0, 0, 0), 1.2 * Vec3::UnitX(), 1.2 * Vec3::UnitY()));
+    scene.objects.push_back(test::rectangle(Vec3(0, 0, 1), 1.2 * Vec3::UnitY(), 1.2 * Vec3::UnitX()));
+    scene.objects.push_back(test::rectangle(Vec3(0.4, 0.4, 0.5), 0.4 * Vec3::UnitY(), 0.4 * Vec3::UnitX()));
+    return scene;
+}
+
+void check_coverage(const Prepared& p, const LinkSet& h, double tolerance, bool occluded, const char* name) {
+    const std::size_t n = p.patches.size();
+    const ClusterTree& t = h.tree;
+    const std::vector<NodePair> pairs = node_pairs(h);
+    // Cluster links exist (else the test would check flat links only).
+    std::size_t cluster_pairs = 0;
+    for (const NodePair& np : pairs) cluster_pairs += np.receiver >= n || np.source >= n;
+    EXPECT_GT(cluster_pairs, pairs.size() / 10) << name;
+    // Every ordered patch pair (i, j) covered by node pairs (R, S) with R above-or-at i and S above-or-at j:
+    // at most once, never a patch with itself.
+    std::vector<std::uint8_t> covered(n * n, 0);
+    for (const NodePair& np : pairs)
+        for (std::uint32_t a = t.first[np.receiver]; a < t.last[np.receiver]; ++a)
+            for (std::uint32_t b = t.first[np.source]; b < t.last[np.source]; ++b) {
+                std::uint8_t& c = covered[std::size_t(t.leaf_order[a]) * n + t.leaf_order[b]];
+                if (c < 255) ++c;
+            }
+    std::size_t twice = 0, self = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        self += covered[i * n + i] != 0;
+        for (std::size_t j = 0; j < n; ++j) twice += covered[i * n + j] > 1;
+    }
+    EXPECT_EQ(self, 0u) << name;
+    EXPECT_EQ(twice, 0u) << name;
+    // Every pair the flat method links is covered; hierarchical patch-to-patch links are flat links.
+    const Links flat = compute_links(p.patches, *p.vis);
+    std::vector<float> flat_ff(n * n, 0.0f);
+    std::size_t missed = 0;
+    double missed_flux = 0.0, flux = 0.0;
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::uint64_t k = flat.row[i]; k < flat.row[i + 1]; ++k) {
+            const std::size_t j = flat.source[k];
+            flat_ff[i * n + j] = flat.ff[k];
+            flux += p.patches.area[i] * flat.ff[k];
+            if (covered[i * n + j] == 0) {
+                ++missed;
+                missed_flux += p.patches.area[i] * flat.ff[k];
+            }
+        }
+    double worst_missed_row = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        double row = 0.0;
+        for (std::size_t j = 0; j < n; ++j)
+            if (covered[i * n + j] == 0) row += flat_ff[i * n + j];
+        worst_missed_row = std::max(worst_missed_row, row);
+    }
+    MEASURED("%s: %zu node pairs, %zu with a cluster; %zu of %zu flat links uncovered (%.3g of the flux, worst patch %.3g)\n",
+             name, pairs.size(), cluster_pairs, missed, flat.size(), missed_flux / flux, worst_missed_row);
+    if (!occluded) {
+        EXPECT_EQ(missed, 0u) << name;
+    } else {
+        // The oracle drops a node pair when all its sampled rays are blocked and the pair would carry
+        // less than a tenth of the tolerance unoccluded, although a few of its patch pairs may see
+        // each other through gaps that the flat method's rays between every patch pair find.
+        // Measured with the occluder (tolerance 0.05): 78 of 35712 flat links, 6.1e-4 of the flux, at
+        // most 0.0022 of a patch's row; the bounds are about twice that, and scale with the tolerance.
+        EXPECT_LT(missed_flux / flux, 0.025 * tolerance) << name;
+        EXPECT_LT(worst_missed_row, 0.1 * tolerance) << name;
+    }
+    double worst_leaf = 0.0;
+    for (const NodePair& np : pairs) {
+        if (np.receiver >= n || np.source >= n) continue;
+        EXPECT_EQ(np.pieces, 1);
+        const float f = flat_ff[std::size_t(np.receiver) * n + np.source];
+        EXPECT_GT(f, 0.0f) << name << ": patch link " << np.receiver << " <- " << np.source << " is not a flat link";
+        if (f > 0.0f) worst_leaf = std::max(worst_leaf, std::abs(np.ff / double(f) - 1.0));
+    }
+    // Both compute F_ij in double and store it as float; F_ji = F_ij A_i / A_j is rounded once more in
+    // the flat CSR: two float roundings at most.
+    MEASURED("%s: patch-to-patch links differ from the flat ones by %.3g at most\n", name, worst_leaf);
+    EXPECT_LT(worst_leaf, 2.5e-7) << name;
+    // Reciprocity and symmetry: (R, S) is linked when (S, R) is, A_R F_RS = A_S F_SR, same delays.
+    std::vector<std::size_t> order(pairs.size());
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+    auto key = [&](const NodePair& np) { return std::pair(np.receiver, np.source); };
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key(pairs[a]) < key(pairs[b]); });
+    double worst_reciprocity = 0.0, worst_spread = 0.0;
+    for (const NodePair& np : pairs) {
+        const auto it = std::lower_bound(order.begin(), order.end(), std::pair(np.source, np.receiver),
+                                         [&](std::size_t a, const std::pair<std::uint32_t, std::uint32_t>& k) { return key(pairs[a]) < k; });
+        ASSERT_TRUE(it != order.end() && key(pairs[*it]) == std::pair(np.source, np.receiver))
+            << name << ": " << np.receiver << " <- " << np.source << " has no reverse";
+        const NodePair& back = pairs[*it];
+        const double ab = t.area[np.receiver] * np.ff, ba = t.area[np.source] * back.ff;
+        worst_reciprocity = std::max(worst_reciprocity, std::abs(ab - ba) / ab);
+        EXPECT_EQ(np.pieces, back.pieces);
+        EXPECT_EQ(np.d_min, back.d_min);
+        EXPECT_EQ(np.d_max, back.d_max);
+        // Every piece's delay is a path between the two nodes' bounding spheres.
+        const double dist = (t.centre[np.receiver] - t.centre[np.source]).norm();
+        const double reach = t.radius[np.receiver] + t.radius[np.source];
+        EXPECT_GE(np.d_min, dist - reach - 1e-6) << name;
+        EXPECT_LE(np.d_max, dist + reach + 1e-6) << name;
+        EXPECT_LE(np.pieces, 4);
+        worst_spread = std::max(worst_spread, np.d_max - np.d_min);
+    }
+    MEASURED("%s: worst reciprocity %.3g, widest kernel %.3f m\n", name, worst_reciprocity, worst_spread);
+    EXPECT_LT(worst_reciprocity, 1e-5) << name;
+}
+
+TEST(Hierarchy, EveryPatchPairIsCoveredExactlyOnceAndReciprocally) {
+    {
+        Scene scene;
+        scene.max_edge = 0.125;
+        test::add_closed_cube(scene, 1.0);
+        const Prepared p = prepare(scene);
+        ASSERT_EQ(p.patches.size(), 384u);
+        check_coverage(p, hierarchical(p, 0.05, 0, 0.01), 0.05, false, "cube");
+    }
+    {
+        const Prepared p = prepare(plates_with_occluder(0.1));
+        ASSERT_EQ(p.patches.size(), 304u);
+        check_coverage(p, hierarchical(p, 0.05, 0, 0.01), 0.05, true, "plates");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 3. Energy.
+
+TEST(Hierarchy, FurnaceTotalRadiosityIsEmissionOverOneMinusAlbedo) {
+    // A closed cube of albedo a lit by a point light: all the power E that the light puts into the
+    // patches (after their albedo) bounces on until absorbed, so sum_i A_i B_i = E / (1 - a), within
+    // 0.1% (issue 12), at the default tolerance (0.001, SPEC's). A point light makes the total weigh
+    // the few patches near it, so this needs each patch's row sum right, not only their mean.
+    // Measured (600 patches): flat 2.8e-5 (a = 0.5) and 1.0e-4 (a = 0.8); hierarchical at 0.001:
+    // -0.027% and -0.028%. At tolerance 0.01 the hierarchy is -0.19% and -0.21% off: the tolerance
+    // is a per-link form-factor bound, and a patch receives through up to ~260 cluster links. The
+    // march with push and pull agrees with the steady solve to 3.7e-7.
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{Vec3(0.3, 0.4, 0.6), Rgb::Constant(1.0)});
+    Prepared p = prepare(scene);
+    const std::size_t n = p.patches.size();
+    const double tolerance = LinkSettings{}.tolerance;
+    const LinkSet h = hierarchical(p, tolerance, 0, 0.05), f = flat_link_set(p.patches, *p.vis);
+    ASSERT_GT(cluster_link_count(h), 0u);
+    for (double a : {0.5, 0.8}) {
+        for (Rgb& albedo : p.patches.albedo) albedo = Rgb::Constant(a);
+        const Illumination e = lit(p, h);
+        // E: the power that the point light puts into the patches (order-1 pulses, albedo applied).
+        double injected = 0.0;
+        for (std::size_t i = 0; i < n; ++i)
+            for (std::uint64_t k = e.row[i]; k < e.row[i + 1]; ++k) injected += p.patches.area[i] * e.pulses[k].energy[0];
+        const double expected = injected / (1 - a);
+        auto total = [&](const std::vector<Rgb>& b) {
+            double sum = 0.0;
+            for (std::size_t i = 0; i < n; ++i) sum += p.patches.area[i] * b[i][0];
+            return sum;
+        };
+        const double steady_h = total(solve_steady(p.patches, h, e)), steady_f = total(solve_steady(p.patches, f, e));
+        MEASURED("a=%.1f: E %.6f (4 pi I a = %.6f): steady hierarchical %.3g, flat %.3g relative to E/(1-a)\n", a, injected,
+                 4 * M_PI * a, steady_h / expected - 1, steady_f / expected - 1);
+        EXPECT_NEAR(steady_f, expected, 1e-3 * expected) << "albedo " << a;
+        EXPECT_NEAR(steady_h, expected, 1e-3 * expected) << "albedo " << a;
+        if (a != 0.5) continue;
+        // The march with push and pull, summed over a window that holds the light: 0.5^k after k
+        // bounces of a mean chord of 2/3 m leaves 6e-8 of it after 16 m.
+        const Profiles pr = solve(p, h, e, test::time_axis(320, 0.05));
+        double transient_h = 0.0;
+        for (std::size_t i = 0; i < n; ++i)
+            for (int t = 0; t < pr.bins; ++t) transient_h += p.patches.area[i] * pr.at(i, t);
+        MEASURED("a=%.1f: transient hierarchical %.3g relative to its steady state\n", a, transient_h / steady_h - 1);
+        EXPECT_NEAR(transient_h, steady_h, 1e-5 * steady_h) << "albedo " << a;
+        EXPECT_NEAR(transient_h, expected, 1e-3 * expected) << "albedo " << a;
+    }
+}
+
+TEST(Hierarchy, EveryPatchSendsAllItsLightInAClosedCube) {
+    // The form factors through the hierarchy (a patch's links and those of every cluster above it) sum
+    // to 1 in a closed cube, as the flat ones do (measured: 1.15e-4 at worst). A cluster link hands
+    // every patch below its receiver the same form factor, which the oracle accepts when it is within
+    // the tolerance of what each point of the receiver sees: a patch that receives through K cluster
+    // links sums K errors of up to the tolerance each. Independent, uniform in +-tolerance, they add
+    // to tolerance sqrt(K / 3) rms, and the largest of 600 patches to about 3.2 times that: the bound
+    // is 2 tolerance sqrt(K). Measured (tolerance 0.01): up to K = 262, worst 0.062, worst
+    // |dev| / (tolerance sqrt(K)) 0.525; mean |dev| 0.021.
+    // The area-weighted mean, sum_i A_i (row_i - 1) / sum_i A_i, has no such excuse: it is the energy
+    // the link set creates or destroys per bounce in a uniformly lit enclosure, whose furnace total is
+    // off by a / (1 - a) times it; 2.5e-4 keeps a = 0.8 within 0.1%. Measured: -2.1e-4 (-2.1e-3
+    // before the oracle took its estimate from fresh samples, -3.6e-4 before it refined pairs with
+    // members facing away).
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0);
+    const Prepared p = prepare(scene);
+    const std::size_t n = p.patches.size();
+    const double tolerance = 0.01;
+    const LinkSet h = hierarchical(p, tolerance, 0, 0.05), f = flat_link_set(p.patches, *p.vis);
+    const std::vector<double> rows_h = row_sums(h), rows_f = row_sums(f);
+    const std::vector<NodePair> pairs = node_pairs(h);
+    std::vector<int> cluster_pairs(h.nodes(), 0);
+    for (const NodePair& np : pairs) cluster_pairs[np.receiver] += np.receiver >= n || np.source >= n;
+    double worst_h = 0.0, worst_f = 0.0, mean_h = 0.0, mean_abs_h = 0.0, worst_ratio = 0.0;
+    int most = 0;
+    for (std::uint32_t i = 0; i < n; ++i) {
+        int k = 0;
+        for (std::uint32_t m : path_up(h.tree, i)) k += cluster_pairs[m];
+        most = std::max(most, k);
+        const double dev = rows_h[i] - 1;
+        worst_h = std::max(worst_h, std::abs(dev));
+        worst_f = std::max(worst_f, std::abs(rows_f[i] - 1));
+        mean_h += p.patches.area[i] * dev / 6.0;
+        mean_abs_h += p.patches.area[i] * std::abs(dev) / 6.0;
+        worst_ratio = std::max(worst_ratio, std::abs(dev) / (std::sqrt(double(k)) * tolerance));
+        EXPECT_LE(std::abs(dev), std::abs(rows_f[i] - 1) + 2 * tolerance * std::sqrt(double(k))) << "patch " << i;
+    }
+    MEASURED("cube rows: flat worst %.3g; hierarchical worst %.3g, mean |dev| %.3g, mean dev %.3g; up to %d cluster links "
+             "per patch, worst dev / (sqrt(links) x tolerance) %.3g\n",
+             worst_f, worst_h, mean_abs_h, mean_h, most, worst_ratio);
+    EXPECT_LT(worst_f, 2e-4);
+    EXPECT_LT(std::abs(mean_h), 2.5e-4);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 4. Causality.
+
+// Two 2.4 m plates facing each other 1 m apart (bottom z = 0 facing up, top z = 1 facing down), a
+// point light midway.
+Scene facing_plates(double max_edge) {
+    Scene scene;
+    scene.max_edge = max_edge;
+    scene.objects.push_back(test::rectangle(Vec3(-1.2, -1.2, 0), 2.4 * Vec3::UnitX(), 2.4 * Vec3::UnitY()));
+    scene.objects.push_back(test::rectangle(Vec3(-1.2, -1.2, 1), 2.4 * Vec3::UnitY(), 2.4 * Vec3::UnitX()));
+    scene.lights.push_back(PointLight{Vec3(0, 0, 0.5), Rgb::Constant(1.0)});
+    return scene;
+}
+
+// First bin of every patch's light of order 2 and more (-1: none), from the solver's per-order terms.
+std::vector<int> indirect_onsets(const Profiles& pr) {
+    std::vector<int> onset(pr.n, -1);
+    for (std::size_t i = 0; i < pr.n; ++i)
+        for (int t = 0; t < pr.bins && onset[i] < 0; ++t)
+            if (pr.term(2, i, t) != 0.0) onset[i] = t;
+    return onset;
+}
+
+// The onsets that the link set allows: light of patch j's direct pulse sits in the bin of its path;
+// a node holds light from the earliest of its patches; a link piece of delay d moves light from bin b
+// of its source to bins b + floor(d / w) and one later (the solver's linear split, in float as the
+// solver computes it), and a receiver's light reaches every patch below it (push) in the same bin.
+// Iterated to the fixed point (shortest paths over the links).
+std::vector<int> predicted_onsets(const LinkSet& set, const Illumination& e, double w) {
+    const std::size_t n = set.patches();
+    const ClusterTree& t = set.tree;
+    constexpr int kNever = 1 << 30;
+    std::vector<int> direct(n, kNever), indirect(n, kNever);
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::uint64_t k = e.row[i]; k < e.row[i + 1]; ++k)
+            direct[i] = std::min(direct[i], int(std::floor(e.pulses[k].path / w)));
+    const float inv_bin = float(1.0 / w);
+    for (bool changed = true; changed;) {
+        changed = false;
+        std::vector<int> node(t.nodes(), kNever);  // earliest light held by each node
+        for (std::size_t i = 0; i < n; ++i) node[i] = std::min(direct[i], indirect[i]);
+        for (std::size_t c = t.nodes(); c-- > n;)
+            for (std::uint32_t child : t.children[c - n]) node[c] = std::min(node[c], node[child]);
+        std::vector<int> gathered(t.nodes(), kNever);
+        for (std::size_t m = 0; m < t.nodes(); ++m)
+            for (std::uint64_t k = set.links.row[m]; k < set.links.row[m + 1]; ++k)
+                if (node[set.links.source[k]] < kNever)
+                    gathered[m] = std::min(gathered[m], node[set.links.source[k]] + int(set.links.distance[k] * inv_bin));
+        for (std::uint32_t i = 0; i < n; ++i) {
+            int best = kNever;
+            for (std::uint32_t m : path_up(t, i)) best = std::min(best, gathered[m]);
+            if (best < indirect[i]) {
+                indirect[i] = best;
+                changed = true;
+            }
+        }
+    }
+    for (int& v : indirect)
+        if (v == kNever) v = -1;
+    return indirect;
+}
+
+TEST(Hierarchy, NoIndirectLightArrivesBeforeItsShortestPathAllows) {
+    const Prepared p = prepare(facing_plates(0.15));
+    const std::size_t n = p.patches.size();
+    ASSERT_EQ(n, 512u);
+    const double w = 0.01;
+    const TimeAxis time = test::time_axis(400, w);
+    const LinkSet h = hierarchical(p, 0.01, 0, w), f = flat_link_set(p.patches, *p.vis);
+    const Illumination e = lit(p, h);
+    SolverOptions options;
+    options.bounce_terms = 3;  // orders 0, 1 and 2+
+    const Profiles ph = solve(p, h, e, time, options), pf = solve(p, f, e, time, options);
+    // The geometric bound: a second bounce reaches y on one plate from the light L via a point of the
+    // other plate, so its path is at least |L' - y| with L' the light mirrored in the other plate
+    // (0, 0, 1.5) or (0, 0, -0.5), here at least 1.5 m; third and later bounces are longer still.
+    auto geometric = [&](std::size_t i) {
+        const Vec3 mirror = p.patches.normal[i].z() > 0 ? Vec3(0, 0, 1.5) : Vec3(0, 0, -0.5);
+        Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+        for (std::size_t q = 0; q < p.patches.corners(i); ++q) {
+            lo = lo.cwiseMin(p.patches.polygon(i)[q]);
+            hi = hi.cwiseMax(p.patches.polygon(i)[q]);
+        }
+        return (mirror.cwiseMax(lo).cwiseMin(hi) - mirror).norm();  // nearest point of the patch's box
+    };
+    // What each link set may do: a link R <- S moves light by its pieces' delays, each at least the
+    // shortest path between points of R and S; R's light reaches every patch below R. So a patch i
+    // can see light as early as G_i - 2 (r_R + r_S) (moving the end points anywhere within the two
+    // bounding spheres), one bin earlier for the linear split. Flat links: centroid delays,
+    // G_i - (r_i + r_j) - w.
+    auto allowance = [&](const LinkSet& set, std::uint32_t i) {
+        double worst = 0.0;
+        for (std::uint32_t m : path_up(set.tree, i))
+            for (std::uint64_t k = set.links.row[m]; k < set.links.row[m + 1]; ++k) {
+                const std::uint32_t s = set.links.source[k];
+                const double r = set.tree.radius[m] + set.tree.radius[s];
+                worst = std::max(worst, (m < n && s < n) ? r : 2 * r);
+            }
+        return worst + w;
+    };
+    double largest_cluster = 0.0;
+    for (std::size_t m = n; m < h.nodes(); ++m)
+        if (h.links.row[m + 1] > h.links.row[m]) largest_cluster = std::max(largest_cluster, 2 * h.tree.radius[m]);
+    double energies[2] = {0.0, 0.0}, early_shares[2] = {0.0, 0.0};
+    int which = 0;
+    for (const auto& [set, pr, name] : {std::tuple(&h, &ph, "hierarchical"), std::tuple(&f, &pf, "flat")}) {
+        const std::vector<int> onset = indirect_onsets(*pr), predicted = predicted_onsets(*set, e, w);
+        double earliest = INFINITY, worst_early = -INFINITY, worst_allowed = 0.0, energy = 0.0, early = 0.0;
+        std::size_t exact = 0;
+        for (std::uint32_t i = 0; i < n; ++i) {
+            ASSERT_GE(onset[i], 0) << name << " patch " << i;
+            // The solver does what its links say: nothing before the predicted bin (measured: every
+            // patch's first light is exactly in it).
+            EXPECT_GE(onset[i], predicted[i]) << name << " patch " << i;
+            exact += onset[i] == predicted[i];
+            // And the links are causal up to their clusters' extent.
+            const double end = (onset[i] + 1) * w, g = geometric(i);
+            EXPECT_GE(end, g - allowance(*set, i)) << name << " patch " << i;
+            earliest = std::min(earliest, end);
+            worst_early = std::max(worst_early, g - end);
+            worst_allowed = std::max(worst_allowed, allowance(*set, i));
+            for (int t = 0; t < pr->bins; ++t) {
+                energy += p.patches.area[i] * pr->term(2, i, t);
+                if ((t + 1) * w <= g) early += p.patches.area[i] * pr->term(2, i, t);  // wholly before G_i
+            }
+        }
+        energies[which] = energy;
+        early_shares[which++] = early / energy;
+        MEASURED("%s: %zu of %zu onsets exactly as predicted; earliest indirect light ends %.3f m; worst early %.3f m "
+                 "(allowance up to %.3f); largest linked cluster %.3f m; indirect energy %.6f, %.3g of it in bins "
+                 "that end before the geometric bound\n",
+                 name, exact, n, earliest, worst_early, worst_allowed, largest_cluster, energy, early / energy);
+        // At minimum: no indirect light at all before the earliest second bounce (1.5 m) less the
+        // diameter of the largest linked cluster and a bin.
+        EXPECT_GE(earliest, 1.5 - largest_cluster - w) << name;
+    }
+    // Flat links never put light in a bin that ends before the geometric bound. Cluster links do: a
+    // receiver's kernel pieces reach all its patches, so a patch on the far side of the receiver gets
+    // the near side's delays (measured: 2.2% of the indirect energy lies in bins that end before the
+    // patch's geometric bound, up to 0.27 m = 27 bins early at one patch).
+    EXPECT_EQ(early_shares[1], 0.0);
+    EXPECT_LT(early_shares[0], 0.05);
+    // The indirect energy against the flat method's (measured: 1.1% low).
+    EXPECT_NEAR(energies[0], energies[1], 0.025 * energies[1]);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 5. Accuracy against the flat method.
+
+TEST(Hierarchy, CornellBoxMatchesTheFlatMethod) {
+    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
+    scene.max_edge = 0.1;
+    const Prepared p = prepare(scene);
+    const std::size_t n = p.patches.size();
+    const double w = 0.01;
+    const TimeAxis time = test::time_axis(512, w);
+    HierarchyStats stats;
+    const LinkSet h = hierarchical(p, 0.01, 0, w, &stats), f = flat_link_set(p.patches, *p.vis);
+    ASSERT_GT(stats.cluster_links, 0u);
+    const Illumination eh = lit(p, h), ef = lit(p, f);
+    const std::vector<Rgb> bh = solve_steady(p.patches, h, eh), bf = solve_steady(p.patches, f, ef);
+    double diff = 0.0, ref = 0.0, worst_patch = 0.0;
+    for (std::size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) {
+            diff += p.patches.area[i] * std::abs(bh[i][c] - bf[i][c]);
+            ref += p.patches.area[i] * std::abs(bf[i][c]);
+            if (bf[i][c] > 0) worst_patch = std::max(worst_patch, std::abs(bh[i][c] / bf[i][c] - 1));
+        }
+    const Profiles th = solve(p, h, eh, time), tf = solve(p, f, ef, time);
+    // Profiles rebinned by 4: per patch (area-weighted L1 over patches and bins), and the scene's sum.
+    const int coarse = time.bins / 4;
+    double pdiff = 0.0, pref = 0.0;
+    std::vector<double> sum_h(std::size_t(coarse), 0.0), sum_f(std::size_t(coarse), 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+        for (int t4 = 0; t4 < coarse; ++t4) {
+            double a = 0.0, b = 0.0;
+            for (int t = 4 * t4; t < 4 * t4 + 4; ++t) {
+                a += th.at(i, t);
+                b += tf.at(i, t);
+            }
+            pdiff += p.patches.area[i] * std::abs(a - b);
+            pref += p.patches.area[i] * std::abs(b);
+            sum_h[std::size_t(t4)] += p.patches.area[i] * a;
+            sum_f[std::size_t(t4)] += p.patches.area[i] * b;
+        }
+    double sdiff = 0.0, sref = 0.0;
+    for (int t4 = 0; t4 < coarse; ++t4) {
+        sdiff += std::abs(sum_h[std::size_t(t4)] - sum_f[std::size_t(t4)]);
+        sref += std::abs(sum_f[std::size_t(t4)]);
+    }
+    MEASURED("cornell: %zu patches, links %zu (flat %zu, cluster %llu): steady L1 %.4g (worst patch %.3g); profiles L1 %.4g, "
+             "summed profile L1 %.4g\n",
+             n, h.links.size(), f.links.size(), (unsigned long long)stats.cluster_links, diff / ref, worst_patch, pdiff / pref,
+             sdiff / sref);
+    // Measured (tolerance 0.01, 1196 patches): steady 0.43%, per-patch profiles 1.06%, the summed
+    // profile 0.059%; the worst patch is 1.88 times its flat radiosity (before the oracle refined pairs
+    // with members facing away or crossed by a shadow edge: 1.8%, 3.1%, 0.7% and 445 times, at a
+    // hidden patch; see HiddenPatchesAndSurfacesBehindAPatchSendItNothing).
+    EXPECT_LT(diff / ref, 0.01);
+    EXPECT_LT(pdiff / pref, 0.025);
+    EXPECT_LT(sdiff / sref, 0.0015);
+}
+
+// The form factor from patch j to patch i that the link set applies: every node pair (R, S) above
+// or at (i, j) hands i its F_RS (push), of which j's share is A_j / A_S (pull). N x N, receiver-major.
+std::vector<double> effective_form_factors(const LinkSet& set) {
+    const std::size_t n = set.patches();
+    const ClusterTree& t = set.tree;
+    std::vector<double> out(n * n, 0.0);
+    for (const NodePair& np : node_pairs(set))
+        for (std::uint32_t a = t.first[np.receiver]; a < t.last[np.receiver]; ++a)
+            for (std::uint32_t b = t.first[np.source]; b < t.last[np.source]; ++b) {
+                const std::uint32_t j = t.leaf_order[b];
+                out[std::size_t(t.leaf_order[a]) * n + j] += np.ff * t.area[j] / t.area[np.source];
+            }
+    return out;
+}
+
+TEST(Hierarchy, HiddenPatchesAndSurfacesBehindAPatchSendItNothing) {
+    // The Cornell box's light hangs 1 mm under the ceiling: the four ceiling squares behind it see
+    // nothing (flat: their form factors sum to at most 0.004, the rays that slip through the 1 mm
+    // gap). And no patch can receive light from a surface that lies wholly behind its own plane.
+    // A cluster link may hand such a patch the form factor of its receiver as a whole (that is what a
+    // cluster link is), within the tolerance per link; over all the links it receives through, the
+    // total must stay near the tolerance too, or the shadow fills with light.
+    // Measured (tolerance 0.01): 16 hidden patches (the 4 behind the light and 12 floor squares under
+    // the blocks), whose rows through the hierarchy reach 0.0099 (flat: at most 0.01); the worst form
+    // factor from an object wholly behind a patch is 0.0079. Before the oracle refined pairs crossed
+    // by a shadow edge or with members facing away unless they carry under a tenth of the tolerance,
+    // those were 0.447 (the ceiling behind the light showed 16% of the scene's mean radiosity) and
+    // 0.144 (a face of the tall block lit by the green wall behind it).
+    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
+    scene.max_edge = 0.1;
+    const Prepared p = prepare(scene);
+    const std::size_t n = p.patches.size();
+    const double tolerance = 0.01;
+    const LinkSet h = hierarchical(p, tolerance, 0, 0.01), f = flat_link_set(p.patches, *p.vis);
+    const std::vector<double> fh = effective_form_factors(h);
+    const std::vector<double> rows_h = row_sums(h), rows_f = row_sums(f);
+    std::size_t hidden = 0;
+    double worst_hidden = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (rows_f[i] > 0.01) continue;
+        ++hidden;
+        worst_hidden = std::max(worst_hidden, rows_h[i]);
+        EXPECT_LE(rows_h[i], rows_f[i] + tolerance) << "patch " << i << " at " << p.patches.centroid[i].transpose();
+    }
+    EXPECT_GE(hidden, 4u);
+    // Objects wholly behind patch i's plane: what i receives from them through the hierarchy.
+    const std::size_t objects = scene.objects.size();
+    double worst_behind = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        std::vector<bool> behind(objects, true);
+        for (std::size_t j = 0; j < n; ++j)
+            for (std::size_t q = 0; q < p.patches.corners(j); ++q)
+                if (p.patches.normal[i].dot(p.patches.polygon(j)[q] - p.patches.centroid[i]) > 1e-9)
+                    behind[p.patches.object[j]] = false;
+        std::vector<double> from(objects, 0.0);
+        for (std::size_t j = 0; j < n; ++j) from[p.patches.object[j]] += fh[i * n + j];
+        for (std::size_t o = 0; o < objects; ++o) {
+            if (!behind[o] || o == p.patches.object[i]) continue;
+            worst_behind = std::max(worst_behind, from[o]);
+            EXPECT_LE(from[o], tolerance) << "patch " << i << " at " << p.patches.centroid[i].transpose() << " from object " << o;
+        }
+    }
+    MEASURED("hidden: %zu patches, worst row %.3g; worst form factor from an object behind a patch %.3g\n", hidden,
+             worst_hidden, worst_behind);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 6. Determinism.
+
+TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
+    // More than 512 patches, so that the pairs above the jobs' cut are judged on the calling thread and
+    // the jobs run on both threads; a closed cube (patch-to-patch links along its edges, cluster links
+    // across) and plates with an occluder (rays blocked).
+    Scene cube;
+    cube.max_edge = 0.1;
+    test::add_closed_cube(cube, 1.0);
+    for (const Scene& scene : {cube, plates_with_occluder(0.05)}) {
+        const Prepared p = prepare(scene);
+        ASSERT_GT(p.patches.size(), 512u);
+        HierarchyStats sa, sb;
+        const LinkSet a = hierarchical(p, 0.005, 1, 0.01, &sa), b = hierarchical(p, 0.005, 2, 0.01, &sb);
+        MEASURED("determinism: %zu patches, %zu links (%llu patch-to-patch, %llu with a cluster)\n", p.patches.size(),
+                 a.links.size(), (unsigned long long)sa.leaf_links, (unsigned long long)sa.cluster_links);
+        EXPECT_GT(sa.cluster_links, 0u);
+        EXPECT_EQ(a.tree.leaf_order, b.tree.leaf_order);
+        EXPECT_EQ(a.tree.parent, b.tree.parent);
+        EXPECT_EQ(a.tree.radius, b.tree.radius);
+        EXPECT_EQ(a.links.row, b.links.row);
+        EXPECT_EQ(a.links.source, b.links.source);
+        EXPECT_EQ(a.links.ff, b.links.ff);
+        EXPECT_EQ(a.links.distance, b.links.distance);
+        EXPECT_EQ(a.block_bins, b.block_bins);
+        EXPECT_EQ(sa.leaf_links, sb.leaf_links);
+        EXPECT_EQ(sa.cluster_links, sb.cluster_links);
+        EXPECT_EQ(sa.candidates, sb.candidates);
+        EXPECT_EQ(sa.rays, sb.rays);
+    }
+}
+
+}  // namespace
+}  // namespace tprf
