@@ -106,8 +106,14 @@ int run_info(const std::string& scene_file, int threads, double max_memory_gb, b
         std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
                      s.dropped_degenerate);
     std::printf("patches  %zu (max_edge %.6g m)\n", s.patches, s.max_edge);
-    std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
-                static_cast<unsigned long long>(s.pairs_tested));
+    if (scene.links.method == tprf::LinkMethod::Flat)
+        std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
+                    static_cast<unsigned long long>(s.pairs_tested));
+    else
+        std::printf("links    %zu (%.1f MB; %zu clusters; %llu patch-to-patch, %llu with a cluster in %llu node pairs "
+                    "judged)\n",
+                    s.links, double(s.link_bytes) / 1e6, s.clusters, static_cast<unsigned long long>(s.patch_links),
+                    static_cast<unsigned long long>(s.cluster_links), static_cast<unsigned long long>(s.candidates));
     std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
     std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
     return 0;

@@ -118,6 +118,11 @@ TEST(ResourceEstimate, FollowsTheScene) {
 
 // The estimate against what a render measures (render.json's peak_rss_mb), in a process of its own.
 TEST_F(Estimate, IsWithinAFactorTwoOfTheMeasuredPeak) {
+#if defined(__SANITIZE_ADDRESS__)
+    // AddressSanitizer's shadow memory and quarantine double a process's resident memory (measured:
+    // 93.6 MB against 34.7 estimated for the small corner): the estimate models a normal build.
+    GTEST_SKIP() << "resident memory under AddressSanitizer is not what the estimate models";
+#endif
     const struct {
         std::string name;
         fs::path file;

@@ -40,17 +40,6 @@ struct Counts {
     LinkStats pair_stats;
 };
 
-// Deterministic jitter (threads must not change the answer): a 64-bit mix of the inputs.
-double mix01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-    std::uint64_t h = (a + 0x9E3779B97F4A7C15ull) * 0xBF58476D1CE4E5B9ull ^ (b + 0x94D049BB133111EBull) * 0xC2B2AE3D27D4EB4Full ^ c;
-    h ^= h >> 31;
-    h *= 0xD6E8FEB86659FD93ull;
-    h ^= h >> 32;
-    h *= 0x9E3779B97F4A7C15ull;
-    h ^= h >> 29;
-    return double(h >> 11) * 0x1.0p-53;
-}
-
 constexpr int kMaxSamples = 64;
 // Share of the tolerance below which a transfer may be dropped unmeasured.
 constexpr double kNegligible = 1e-3;
@@ -139,15 +128,15 @@ private:
         return off_axis + cone + std::asin(reach / dist) < M_PI / 2;
     }
 
-    SamplePoint sample(std::uint32_t m, int k, std::uint64_t salt) const {
+    SamplePoint sample(std::uint32_t m, int k, int count, std::uint64_t salt) const {
         const std::uint32_t lo = m_tree.first[m], hi = m_tree.last[m];
         const double a0 = m_tree.area_prefix[lo], a1 = m_tree.area_prefix[hi];
-        const double target = a0 + (a1 - a0) * (k + mix01(m, salt, 3 * std::uint64_t(k))) / m_samples;
+        const double target = a0 + (a1 - a0) * (k + hash01(m, salt, 3 * std::uint64_t(k))) / count;
         auto it = std::upper_bound(m_tree.area_prefix.begin() + lo + 1, m_tree.area_prefix.begin() + hi, target);
         const std::size_t at = std::size_t(it - m_tree.area_prefix.begin()) - 1;
         const std::uint32_t patch = m_tree.leaf_order[std::min<std::size_t>(at, hi - 1)];
-        const Vec3 x = patch_point(m_patches, patch, mix01(m, salt, 3 * std::uint64_t(k) + 1),
-                                   mix01(m, salt, 3 * std::uint64_t(k) + 2));
+        const Vec3 x = patch_point(m_patches, patch, hash01(m, salt, 3 * std::uint64_t(k) + 1),
+                                   hash01(m, salt, 3 * std::uint64_t(k) + 2));
         return {x, m_patches.normal[patch]};
     }
 
@@ -168,7 +157,7 @@ private:
     // The oracle. True when (r, s) is settled: kept as a link with its delay kernel, or dropped as
     // carrying less than the tolerance; false when it must be refined.
     bool judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const;
-    void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const;
+    void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
     void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
                      int count, std::vector<LinkRecord>& out) const;
 
@@ -183,20 +172,20 @@ private:
 };
 
 // Point pairs of (r, s) and the kernel at each, unoccluded.
-void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const {
+void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const {
     // Stratum q of r meets a random stratum of s (a fresh permutation per pair): a fixed pairing would
     // weigh some pairs of strata in every estimate and none of the others, a bias that does not
     // average out over the links of a scene.
     int partner[kMaxSamples];
-    for (int q = 0; q < m_samples; ++q) partner[q] = q;
-    for (int q = m_samples - 1; q > 0; --q)
-        std::swap(partner[q], partner[int(mix01(salt, 0x2545F491u, std::uint64_t(q)) * (q + 1))]);
+    for (int q = 0; q < count; ++q) partner[q] = q;
+    for (int q = count - 1; q > 0; --q)
+        std::swap(partner[q], partner[int(hash01(salt, 0x2545F491u, std::uint64_t(q)) * (q + 1))]);
     out.k_min = INFINITY;
     out.k_max = 0.0;
     out.k_sum = 0.0;
-    for (int q = 0; q < m_samples; ++q) {
-        out.x[q] = sample(r, q, salt);
-        out.y[q] = sample(s, partner[q], salt ^ 0x5bd1e995u);
+    for (int q = 0; q < count; ++q) {
+        out.x[q] = sample(r, q, count, salt);
+        out.y[q] = sample(s, partner[q], count, salt ^ 0x5bd1e995u);
         const Vec3 d = out.y[q].x - out.x[q].x;
         const double r2 = d.squaredNorm();
         out.path[q] = std::sqrt(r2);
@@ -215,7 +204,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& o
     const double a_r = m_tree.area[r], a_s = m_tree.area[s], a_big = std::max(a_r, a_s);
     const std::uint64_t salt = std::uint64_t(std::min(r, s)) << 32 | std::max(r, s);
     PairSamples judged;
-    draw(r, s, salt, judged);
+    draw(r, s, salt, m_samples, judged);
     if (judged.k_max == 0.0) {
         // No sample faces the other node, yet their cones and bounds allow it. Dropping the pair
         // would lose whatever part does face, always in the same direction (an enclosure would leak):
@@ -234,13 +223,18 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& o
     // Accepted on geometry. The form factor comes from fresh samples: the ones that judged the pair
     // were accepted because they varied little, which makes them more likely to have missed where the
     // kernel peaks, so their mean is biased low (an enclosure lost 0.2% of its light per bounce).
+    // A shadow that covers a small part of either node is found by its rays only when enough of them
+    // are cast: more for links that carry more (each patch in such a shadow would get all of it).
+    const double carried = a_big * judged.k_sum / m_samples;
+    const int count = std::clamp(int(std::ceil(m_samples * std::sqrt(carried / (kFacingShare * m_h.tolerance)))),
+                                 m_samples, kMaxSamples);
     PairSamples p;
-    draw(r, s, salt ^ 0x9E3779B97F4A7C15ull, p);
+    draw(r, s, salt ^ 0x9E3779B97F4A7C15ull, count, p);
     // Visibility, by rays between the fresh pairs.
     const double lift = m_vis.epsilon();
     double visible_sum = 0.0;
     int blocked = 0, cast = 0;
-    for (int q = 0; q < m_samples; ++q) {
+    for (int q = 0; q < count; ++q) {
         if (p.k[q] <= 0.0) continue;
         ++cast;
         ++counts.pair_stats.rays;
@@ -256,17 +250,17 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& o
         // the other, and the link would light the shadowed ones as much as the others (or, dropped
         // when no ray passes, leave the lit ones dark). Refined unless all of it is a small share of
         // the tolerance.
-        if (a_big * judged.k_sum / m_samples > kFacingShare * m_h.tolerance) return false;
+        if (carried > kFacingShare * m_h.tolerance) return false;
         if (blocked == cast) return true;
     }
     if (cast == 0) return true;
-    emit_kernel(r, s, a_s * visible_sum / m_samples, a_r * visible_sum / m_samples, p.path, p.k, m_samples, out);
+    emit_kernel(r, s, a_s * visible_sum / count, a_r * visible_sum / count, p.path, p.k, count, out);
     ++counts.cluster_links;
     return true;
 }
 
-// The link's delay kernel from the sampled paths, weighted by their kernel values: one piece when the
-// paths span less than a bin, else up to m_pieces pieces of about equal weight, each at its weighted
+// The link's delay kernel from the sampled paths, weighted by their kernel values: one piece per two
+// bins that the paths span, at most m_pieces, of about equal weight, each at its weighted
 // mean path (so that the total and the mean delay are the samples' exactly).
 void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path,
                           const double* weight, int count, std::vector<LinkRecord>& out) const {
@@ -280,7 +274,9 @@ void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double 
             lo = std::min(lo, path[q]);
             hi = std::max(hi, path[q]);
         }
-    const int pieces = (m_h.bin_width_m > 0.0 && hi - lo > m_h.bin_width_m) ? std::min(m_pieces, used) : 1;
+    // A piece's linear split already spreads it over two bins: one piece per two bins of spread.
+    const int wanted = m_h.bin_width_m > 0.0 ? int((hi - lo) / (2.0 * m_h.bin_width_m)) : 0;
+    const int pieces = std::clamp(wanted, 1, std::min(m_pieces, used));
     std::sort(order, order + used, [&](int a, int b) { return path[a] < path[b]; });
     double piece_w[kMaxPieces] = {}, piece_p[kMaxPieces] = {}, before = 0.0;
     for (int u = 0; u < used; ++u) {

@@ -31,12 +31,12 @@ LinkSet flat_link_set(const PatchSet& patches, const Visibility& visibility, con
 }
 
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options) {
+                      double bin_width_m, const LinkOptions& options, HierarchyStats* stats) {
     if (settings.method == LinkMethod::Flat) return flat_link_set(patches, visibility, options);
     HierarchyOptions hierarchy;
     hierarchy.tolerance = settings.tolerance;
     hierarchy.bin_width_m = bin_width_m;
-    return hierarchical_link_set(patches, visibility, options, hierarchy);
+    return hierarchical_link_set(patches, visibility, options, hierarchy, stats);
 }
 
 }  // namespace tprf

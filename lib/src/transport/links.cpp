@@ -27,17 +27,6 @@ struct PairLink {
     float ff_ij;          // i -> j
 };
 
-// Deterministic per-pair jitter (threads must not change the answer): a 64-bit mix of the inputs.
-double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-    std::uint64_t h = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^ c;
-    h ^= h >> 33;
-    h *= 0xff51afd7ed558ccdull;
-    h ^= h >> 33;
-    h *= 0xc4ceb9fe1a85ec53ull;
-    h ^= h >> 33;
-    return double(h >> 11) * 0x1.0p-53;
-}
-
 // Strata of a 4 x 4 grid, ordered so that the first four cover the four quadrants: when those
 // agree the pair is decided early.
 constexpr std::array<int, 16> kStrataA = {0, 10, 8, 2, 5, 15, 13, 7, 1, 11, 9, 3, 4, 14, 12, 6};
@@ -136,6 +125,16 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
     out.ij = (i_outer ? f_st : f_ts) * v;
     out.ji = (i_outer ? f_ts : f_st) * v;
     return true;
+}
+
+double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+    std::uint64_t h = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^ c;
+    h ^= h >> 33;
+    h *= 0xff51afd7ed558ccdull;
+    h ^= h >> 33;
+    h *= 0xc4ceb9fe1a85ec53ull;
+    h ^= h >> 33;
+    return double(h >> 11) * 0x1.0p-53;
 }
 
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,

@@ -20,6 +20,9 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
                 const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
                 LinkStats& counts);
 
+/// Deterministic jitter in [0, 1) from three integers (threads must not change the answer).
+double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c);
+
 /// True when i and j are closer than near_factor (r_i + r_j), the pairs integrated adaptively.
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
                std::size_t j);

@@ -31,7 +31,11 @@ struct SceneSummary {
     double max_edge = 0.0;          ///< patch size used, metres
     std::size_t links = 0;
     std::size_t link_bytes = 0;
-    std::uint64_t pairs_tested = 0; ///< unordered pairs facing each other
+    std::uint64_t pairs_tested = 0; ///< unordered pairs facing each other (flat)
+    std::size_t clusters = 0;       ///< clusters of the tree (hierarchical)
+    std::uint64_t cluster_links = 0;///< links with a cluster at either end, pieces counted once (hierarchical)
+    std::uint64_t patch_links = 0;  ///< patch-to-patch links (hierarchical)
+    std::uint64_t candidates = 0;   ///< node pairs the oracle judged (hierarchical)
     double seconds_patches = 0.0;
     double seconds_links = 0.0;
 };

@@ -64,9 +64,9 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
                               const HierarchyOptions& hierarchy, HierarchyStats* stats = nullptr);
 
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
-/// `bin_width_m`.
+/// `bin_width_m` (and then its counts in `stats`, when given).
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options = {});
+                      double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr);
 
 /// The links of `links` whose source patch emits (flat link sets take their `emitters` from here).
 Links emitter_links(const PatchSet& patches, const Links& links);
