@@ -51,12 +51,65 @@ struct Range {
     int slot;                   // which child of the parent
 };
 
-// Splits every range of more than one patch at the median centroid along the longest axis of its
-// centroids' box, assigning cluster ids in preorder (every parent before its children).
+// What a group of patches costs as a node: the square of its centroids' extent, times a factor that
+// grows with the spread of its normals (a node whose patches face different ways must be refined
+// wherever a link would reach some of them from behind). After the orientation heuristic of
+// many-light hierarchies (Conty Estevez and Kulla 2018).
+double group_cost(const PatchSet& patches, const std::uint32_t* ids, std::size_t count) {
+    Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY), mean = Vec3::Zero();
+    for (std::size_t k = 0; k < count; ++k) {
+        lo = lo.cwiseMin(patches.centroid[ids[k]]);
+        hi = hi.cwiseMax(patches.centroid[ids[k]]);
+        mean += patches.area[ids[k]] * patches.normal[ids[k]];
+    }
+    const double len = mean.norm();
+    double widest = 1.0;  // smallest cosine to the mean normal
+    for (std::size_t k = 0; k < count && len > 0.0; ++k) widest = std::min(widest, patches.normal[ids[k]].dot(mean) / len);
+    const double angle = len > 0.0 ? std::acos(std::clamp(widest, -1.0, 1.0)) : M_PI;
+    return (hi - lo).squaredNorm() * (1.0 + 2.0 * angle / M_PI);
+}
+
+// Reorders ids[0, count) so that the first half holds the smaller keys (median split), ties by id.
+template <class Key>
+void median_split(std::uint32_t* ids, std::size_t count, Key key) {
+    std::nth_element(ids, ids + count / 2, ids + count, [&](std::uint32_t x, std::uint32_t y) {
+        const double kx = key(x), ky = key(y);
+        return kx < ky || (kx == ky && x < y);
+    });
+}
+
+// Splits ids[0, count) in two halves: at the median centroid along the longest axis of their box, or
+// at the median normal component along the axis where the normals differ most, whichever gives the
+// cheaper pair of groups (group_cost).
+void split_group(const PatchSet& patches, std::uint32_t* ids, std::size_t count, std::vector<std::uint32_t>& scratch) {
+    Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+    Vec3 nlo = Vec3::Constant(INFINITY), nhi = Vec3::Constant(-INFINITY);
+    for (std::size_t k = 0; k < count; ++k) {
+        lo = lo.cwiseMin(patches.centroid[ids[k]]);
+        hi = hi.cwiseMax(patches.centroid[ids[k]]);
+        nlo = nlo.cwiseMin(patches.normal[ids[k]]);
+        nhi = nhi.cwiseMax(patches.normal[ids[k]]);
+    }
+    int axis = 0, naxis = 0;
+    (hi - lo).maxCoeff(&axis);
+    const double normal_range = (nhi - nlo).maxCoeff(&naxis);
+    median_split(ids, count, [&](std::uint32_t i) { return patches.centroid[i][axis]; });
+    if (normal_range < 1e-6) return;  // one orientation: the spatial split it is
+    const std::size_t mid = count / 2;
+    const double spatial = group_cost(patches, ids, mid) + group_cost(patches, ids + mid, count - mid);
+    scratch.assign(ids, ids + count);
+    median_split(scratch.data(), count, [&](std::uint32_t i) { return patches.normal[i][naxis]; });
+    const double oriented = group_cost(patches, scratch.data(), mid) + group_cost(patches, scratch.data() + mid, count - mid);
+    if (oriented < spatial) std::copy(scratch.begin(), scratch.end(), ids);
+}
+
+// Splits every range of more than one patch in two (split_group), assigning cluster ids in preorder
+// (every parent before its children).
 void split_ranges(const PatchSet& patches, ClusterTree& t) {
     const std::size_t n = t.leaves;
     std::uint32_t next_cluster = std::uint32_t(n);
     std::vector<Range> stack{{0, std::uint32_t(n), kNoNode, 0}};
+    std::vector<std::uint32_t> scratch;
     while (!stack.empty()) {
         const Range r = stack.back();
         stack.pop_back();
@@ -65,19 +118,8 @@ void split_ranges(const PatchSet& patches, ClusterTree& t) {
             id = t.leaf_order[r.first];
         } else {
             id = next_cluster++;
-            Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
-            for (std::uint32_t k = r.first; k < r.last; ++k) {
-                lo = lo.cwiseMin(patches.centroid[t.leaf_order[k]]);
-                hi = hi.cwiseMax(patches.centroid[t.leaf_order[k]]);
-            }
-            int axis = 0;
-            (hi - lo).maxCoeff(&axis);
+            split_group(patches, t.leaf_order.data() + r.first, r.last - r.first, scratch);
             const std::uint32_t mid = r.first + (r.last - r.first) / 2;
-            std::nth_element(t.leaf_order.begin() + r.first, t.leaf_order.begin() + mid, t.leaf_order.begin() + r.last,
-                             [&](std::uint32_t x, std::uint32_t y) {
-                                 const double cx = patches.centroid[x][axis], cy = patches.centroid[y][axis];
-                                 return cx < cy || (cx == cy && x < y);
-                             });
             // Pushed second-child first, so that the first child is taken next (preorder).
             stack.push_back({mid, r.last, id, 1});
             stack.push_back({r.first, mid, id, 0});
