@@ -377,9 +377,21 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
 
 }  // namespace
 
+// The shortest cluster link, in bins: hierarchy.min_lag_bins, or when 0, four median patch sizes
+// (twice the median circumradius) in bins, between 1 and 8.
+int min_lag(const PatchSet& patches, const HierarchyOptions& hierarchy) {
+    if (hierarchy.min_lag_bins > 0 || !(hierarchy.bin_width_m > 0.0) || patches.size() == 0) return hierarchy.min_lag_bins;
+    std::vector<double> radius = circumradii(patches);
+    std::nth_element(radius.begin(), radius.begin() + std::ptrdiff_t(radius.size() / 2), radius.end());
+    const double size = 2.0 * radius[radius.size() / 2];
+    return int(std::clamp(std::floor(4.0 * size / hierarchy.bin_width_m), 1.0, 8.0));
+}
+
 LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,
-                              const HierarchyOptions& hierarchy, HierarchyStats* stats) {
-    TPRF_CHECK(hierarchy.tolerance > 0.0);
+                              const HierarchyOptions& asked, HierarchyStats* stats) {
+    TPRF_CHECK(asked.tolerance > 0.0);
+    HierarchyOptions hierarchy = asked;
+    hierarchy.min_lag_bins = min_lag(patches, asked);
     const int threads = thread_count(options.threads);
     LinkSet set;
     set.tree = build_cluster_tree(patches);
@@ -406,7 +418,7 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
     });
     counts.push_back(top_counts);
     set.links = assemble(set.tree.nodes(), parts, threads);
-    if (hierarchy.bin_width_m > 0.0) set.block_bins = std::max(1, hierarchy.min_lag_bins);
+    if (hierarchy.bin_width_m > 0.0) set.block_bins = hierarchy.min_lag_bins;
     // Area emitters light the scene by patch-to-patch links (illuminate()): exact first bounces.
     std::vector<std::uint32_t> emitting;
     for (std::size_t i = 0; i < patches.size(); ++i)

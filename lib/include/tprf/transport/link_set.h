@@ -46,8 +46,11 @@ struct HierarchyOptions {
     double bin_width_m = 0.0;      ///< the time axis' bin, metres: a link's delay spread is weighed against it
     int samples = 16;              ///< point pairs sampled per candidate cluster link
     int kernel_pieces = 4;         ///< most pieces of a cluster link's delay kernel
-    int min_lag_bins = 8;          ///< cluster links are kept only between nodes at least this many bins
-                                   ///< apart (when bin_width_m > 0); nearer pairs are refined
+    /// Cluster links are kept only between nodes at least this many bins apart (when bin_width_m > 0);
+    /// nearer pairs are refined, and the solver's blocks are this long. 0: four typical patch sizes
+    /// in bins, between 1 and 8 (coarse bins on fine meshes would otherwise leave every pair within
+    /// 8 bins as patch-to-patch links).
+    int min_lag_bins = 0;
 };
 
 /// What the hierarchical build counted.
