@@ -148,6 +148,13 @@ using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::
                               const float*, const RingSlot*, std::int64_t, float*);
 
 GatherKernel pick_kernel(int C, int bt) {
+    // Hierarchical sets on fine meshes march in blocks of 1 to 8 bins (LinkSet::block_bins).
+    if (C == 1 && bt == 1) return gather_long<1, 1>;
+    if (C == 1 && bt == 2) return gather_long<1, 2>;
+    if (C == 1 && bt == 4) return gather_long<1, 4>;
+    if (C == 3 && bt == 1) return gather_long<3, 1>;
+    if (C == 3 && bt == 2) return gather_long<3, 2>;
+    if (C == 3 && bt == 4) return gather_long<3, 4>;
     if (C == 1 && bt == 8) return gather_long<1, 8>;
     if (C == 1 && bt == 16) return gather_long<1, 16>;
     if (C == 1 && bt == 32) return gather_long<1, 32>;
