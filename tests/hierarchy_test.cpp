@@ -745,13 +745,13 @@ TEST(Hierarchy, HiddenPatchesAndSurfacesBehindAPatchSendItNothing) {
     // cluster link is), within the tolerance per link; over all the links it receives through, the
     // total must stay near the tolerance too, or the shadow fills with light.
     // Measured (tolerance 0.01): 16 hidden patches (the 4 behind the light and 12 floor squares under
-    // the blocks), whose rows through the hierarchy reach 0.0094 (flat: at most 0.01; 0.0155 when every
-    // link cast 16 rays, so that a shadow over a small part of a node went unseen: links now cast
-    // more rays the more they carry); the worst form factor from an object wholly behind a patch is
-    // 0.0076. Before the oracle refined pairs crossed
-    // by a shadow edge or with members facing away unless they carry under a tenth of the tolerance,
-    // those were 0.447 (the ceiling behind the light showed 16% of the scene's mean radiosity) and
-    // 0.144 (a face of the tall block lit by the green wall behind it).
+    // the blocks), whose rows through the hierarchy reach 0.0094 (flat: at most 0.01; 0.0155 when
+    // every link cast 16 rays, so that a shadow over a small part of a node went unseen: links now
+    // cast more rays the more they carry); the worst form factor from an object wholly behind a patch
+    // is 0.0076. Before the oracle refined pairs crossed by a shadow edge or with members facing away
+    // unless they carry under a tenth of the tolerance, those were 0.447 (the ceiling behind the
+    // light showed 16% of the scene's mean radiosity) and 0.144 (a face of the tall block lit by the
+    // green wall behind it).
     Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
     scene.max_edge = 0.1;
     const Prepared p = prepare(scene);
