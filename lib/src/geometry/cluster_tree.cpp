@@ -22,13 +22,12 @@ void set_leaf(const PatchSet& patches, ClusterTree& t, std::uint32_t i) {
 // Angle of a cone, from its cosine (clamped).
 double cone_angle(double c) { return std::acos(std::clamp(c, -1.0, 1.0)); }
 
-// Cluster c's bounds and cone from its two children: the area-weighted centre, a sphere around both
-// children's spheres, and a cone about the area-weighted mean normal holding both children's cones.
+// Cluster c's area, centre and cone from its two children: the area-weighted centre and a cone about
+// the area-weighted mean normal holding both children's cones (its sphere: tighten()).
 void merge(ClusterTree& t, std::uint32_t c) {
     const auto [a, b] = t.children[c - t.leaves];
     t.area[c] = t.area[a] + t.area[b];
     t.centre[c] = (t.area[a] * t.centre[a] + t.area[b] * t.centre[b]) / t.area[c];
-    t.radius[c] = std::max((t.centre[a] - t.centre[c]).norm() + t.radius[a], (t.centre[b] - t.centre[c]).norm() + t.radius[b]);
     const Vec3 sum = t.area[a] * t.cone_axis[a] + t.area[b] * t.cone_axis[b];
     const double len = sum.norm();
     if (!(len > 1e-9 * t.area[c])) {
@@ -131,22 +130,6 @@ void split_ranges(const PatchSet& patches, ClusterTree& t) {
     }
 }
 
-void order_levels(ClusterTree& t) {
-    t.by_level.clear();
-    t.level_first.assign(1, 0);
-    if (t.clusters() == 0) return;
-    t.by_level.push_back(t.root());
-    std::size_t begin = 0;
-    while (begin < t.by_level.size()) {
-        const std::size_t end = t.by_level.size();
-        t.level_first.push_back(std::uint32_t(end));
-        for (std::size_t k = begin; k < end; ++k)
-            for (std::uint32_t child : t.children[t.by_level[k] - t.leaves])
-                if (!t.is_leaf(child)) t.by_level.push_back(child);
-        begin = end;
-    }
-}
-
 void allocate(ClusterTree& t, std::size_t n, std::size_t m) {
     t.leaves = n;
     t.parent.assign(m, kNoNode);
@@ -163,7 +146,7 @@ void allocate(ClusterTree& t, std::size_t n, std::size_t m) {
 }
 
 // Cluster c's radius from its patches' corners: the sphere about the area centroid that holds them
-// (merge()'s bound from the children's spheres is up to 2.4 times looser).
+// (a sphere around the children's spheres would be up to 2.4 times looser).
 void tighten(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
     double r2 = 0.0;
     for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k) {
@@ -181,7 +164,6 @@ void finish(const PatchSet& patches, ClusterTree& t) {
     for (std::size_t c = t.leaves; c < t.nodes(); ++c) tighten(patches, t, std::uint32_t(c));
     t.area_prefix.assign(t.leaves + 1, 0.0);
     for (std::size_t k = 0; k < t.leaves; ++k) t.area_prefix[k + 1] = t.area_prefix[k] + t.area[t.leaf_order[k]];
-    order_levels(t);
 }
 
 }  // namespace
@@ -189,7 +171,7 @@ void finish(const PatchSet& patches, ClusterTree& t) {
 std::size_t ClusterTree::bytes() const {
     return parent.size() * (sizeof(std::uint32_t) * 3 + sizeof(double) * 3 + sizeof(Vec3) * 2) +
            children.size() * sizeof(children[0]) + leaf_order.size() * sizeof(std::uint32_t) +
-           area_prefix.size() * sizeof(double) + (by_level.size() + level_first.size()) * sizeof(std::uint32_t);
+           area_prefix.size() * sizeof(double);
 }
 
 ClusterTree leaves_only(const PatchSet& patches) {

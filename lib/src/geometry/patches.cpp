@@ -56,12 +56,80 @@ double longest_edge(const Triangle& t) {
     return std::max({(t[1] - t[0]).norm(), (t[2] - t[1]).norm(), (t[0] - t[2]).norm()});
 }
 
-// One object's geometry before subdivision: a rectangle, or a mesh already triangulated.
+// One object's geometry before subdivision: a rectangle, or a mesh already triangulated, with the
+// patches each side will have.
 struct Source {
     const Object* object = nullptr;
     std::vector<Triangle> triangles;  // empty for a rectangle
+    std::vector<std::size_t> running; // patches per side of triangles 0..t
     std::size_t patch_count = 0;      // per side
+
+    std::size_t sides() const { return object->two_sided ? 2 : 1; }
+    std::size_t corners() const { return std::holds_alternative<RectangleShape>(object->shape) ? 4 : 3; }
 };
+
+// Object `object` cut into patches of at most `max_edge`, counted (the mesh is triangulated, not cut).
+Source cut(const Object& object, const PolygonMesh& mesh, double max_edge) {
+    Source s;
+    s.object = &object;
+    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+        const Grid g = rectangle_grid(*r, max_edge);
+        s.patch_count = g.nu * g.nv;
+        return s;
+    }
+    triangulate(mesh, s.triangles);
+    s.running.reserve(s.triangles.size());
+    for (const Triangle& t : s.triangles) {
+        const std::size_t n = pieces(longest_edge(t), max_edge);
+        s.patch_count += n * n;
+        s.running.push_back(s.patch_count);
+    }
+    return s;
+}
+
+// Every object's mesh (loaded through OpenMesh; none for a rectangle) and bounding box.
+struct LoadedObjects {
+    std::vector<PolygonMesh> meshes;
+    std::vector<Eigen::AlignedBox3d> bounds;
+    int dropped_degenerate = 0;
+};
+
+LoadedObjects load_objects(const Scene& scene) {
+    LoadedObjects out;
+    out.meshes.resize(scene.objects.size());
+    out.bounds.resize(scene.objects.size());
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const Object& object = scene.objects[k];
+        const std::string path = "objects[" + std::to_string(k) + "]";
+        Eigen::AlignedBox3d& box = out.bounds[k];
+        if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+            if (!(r->u.cross(r->v).norm() > 0.0)) fail_input(scene.file, path, "rectangle has no area");
+            for (const Vec3& p : {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->u + r->v),
+                                  Vec3(r->origin + r->v)})
+                box.extend(p);
+        } else {
+            const auto& m = std::get<MeshShape>(object.shape);
+            out.meshes[k] = load_mesh(m.file, m.transform, scene.file, path + ".file");
+            out.dropped_degenerate += out.meshes[k].dropped_degenerate;
+            for (const Vec3& p : out.meshes[k].vertices) box.extend(p);
+        }
+    }
+    return out;
+}
+
+// The bounding box of every object.
+Eigen::AlignedBox3d scene_box(const LoadedObjects& loaded) {
+    Eigen::AlignedBox3d box;
+    for (const Eigen::AlignedBox3d& b : loaded.bounds) box.extend(b);
+    return box;
+}
+
+// The patch size: the scene's, or its bounding-box diagonal / 16.
+double patch_size(const Scene& scene, const Eigen::AlignedBox3d& box) {
+    const double max_edge = scene.max_edge > 0.0 ? scene.max_edge : box.diagonal().norm() / 16.0;
+    TPRF_CHECK_LT(0.0, max_edge);
+    return max_edge;
+}
 
 void emit(PatchSet& patches, const Vec3* corners, std::size_t count, const Object& object,
           std::uint32_t id) {
@@ -164,51 +232,23 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     st = PatchStats{};
 
     // Meshes are loaded first: the default patch size depends on the bounding box of every object.
-    std::vector<PolygonMesh> meshes(scene.objects.size());
-    Eigen::AlignedBox3d box;
-    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
-        const Object& object = scene.objects[k];
-        const std::string path = "objects[" + std::to_string(k) + "]";
-        if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
-            if (!(r->u.cross(r->v).norm() > 0.0)) fail_input(scene.file, path, "rectangle has no area");
-            for (const Vec3& p : {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->u + r->v),
-                                  Vec3(r->origin + r->v)})
-                box.extend(p);
-        } else {
-            const auto& m = std::get<MeshShape>(object.shape);
-            meshes[k] = load_mesh(m.file, m.transform, scene.file, path + ".file");
-            st.dropped_degenerate += meshes[k].dropped_degenerate;
-            for (const Vec3& p : meshes[k].vertices) box.extend(p);
-        }
-    }
-
+    LoadedObjects loaded = load_objects(scene);
+    st.dropped_degenerate = loaded.dropped_degenerate;
     PatchSet patches;
     patches.first.push_back(0);
     if (scene.objects.empty()) return patches;
-    st.max_edge = scene.max_edge > 0.0 ? scene.max_edge : box.diagonal().norm() / 16.0;
-    TPRF_CHECK_LT(0.0, st.max_edge);
+    st.max_edge = patch_size(scene, scene_box(loaded));
 
     // Counting before emitting lets every array be allocated once.
-    std::vector<Source> sources(scene.objects.size());
+    std::vector<Source> sources;
     std::size_t total = 0;
     std::size_t corner_total = 0;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
-        Source& s = sources[k];
-        s.object = &scene.objects[k];
-        if (const auto* r = std::get_if<RectangleShape>(&s.object->shape)) {
-            const Grid g = rectangle_grid(*r, st.max_edge);
-            s.patch_count = g.nu * g.nv;
-            corner_total += 4 * s.patch_count * (s.object->two_sided ? 2 : 1);
-        } else {
-            triangulate(meshes[k], s.triangles);
-            meshes[k] = PolygonMesh{};
-            for (const Triangle& t : s.triangles) {
-                const std::size_t n = pieces(longest_edge(t), st.max_edge);
-                s.patch_count += n * n;
-            }
-            corner_total += 3 * s.patch_count * (s.object->two_sided ? 2 : 1);
-        }
-        total += s.patch_count * (s.object->two_sided ? 2 : 1);
+        sources.push_back(cut(scene.objects[k], loaded.meshes[k], st.max_edge));
+        loaded.meshes[k] = PolygonMesh{};
+        const Source& s = sources.back();
+        total += s.patch_count * s.sides();
+        corner_total += s.corners() * s.patch_count * s.sides();
     }
     patches.vertices.reserve(corner_total);
     patches.first.reserve(total + 1);
@@ -240,37 +280,11 @@ namespace {
 // A uniform double in [0, 1) from one 64-bit draw.
 double unit(SplitMix64& random) { return double(random.next() >> 11) * 0x1.0p-53; }
 
-// One object as the census sees it: its triangles (none for a rectangle) with the running count of
-// their patches, and its patches per side.
-struct CensusObject {
-    std::vector<Triangle> triangles;
-    std::vector<std::size_t> running;  // patches per side of triangles 0..t
-    std::size_t per_side = 0;
-};
-
-CensusObject census_object(const Object& object, const PolygonMesh& mesh, double max_edge) {
-    CensusObject c;
-    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
-        const Grid g = rectangle_grid(*r, max_edge);
-        c.per_side = g.nu * g.nv;
-        return c;
-    }
-    triangulate(mesh, c.triangles);
-    c.running.reserve(c.triangles.size());
-    for (const Triangle& t : c.triangles) {
-        const std::size_t n = pieces(longest_edge(t), max_edge);
-        c.per_side += n * n;
-        c.running.push_back(c.per_side);
-    }
-    return c;
-}
-
 // Patch `local` (0 <= local < per_side) of one side of an object, at a uniform point.
-PatchSample census_sample(const Object& object, const CensusObject& c, double max_edge, std::size_t local,
-                          SplitMix64& random) {
+PatchSample census_sample(const Source& c, double max_edge, std::size_t local, SplitMix64& random) {
     PatchSample s;
     const double a = unit(random), b = unit(random);
-    if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
+    if (const auto* r = std::get_if<RectangleShape>(&c.object->shape)) {
         const Grid g = rectangle_grid(*r, max_edge);
         const double i = double(local % g.nu), j = double(local / g.nu);
         s.point = r->origin + (i + a) / double(g.nu) * r->u + (j + b) / double(g.nv) * r->v;
@@ -285,46 +299,22 @@ PatchSample census_sample(const Object& object, const CensusObject& c, double ma
     return s;
 }
 
-// Meshes loaded as build_patches loads them, and every object's bounds.
-std::vector<PolygonMesh> census_meshes(const Scene& scene, PatchCensus& census) {
-    std::vector<PolygonMesh> meshes(scene.objects.size());
-    census.bounds.resize(scene.objects.size());
-    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
-        const Object& object = scene.objects[k];
-        Eigen::AlignedBox3d& box = census.bounds[k];
-        if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
-            for (const Vec3& p :
-                 {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->u + r->v), Vec3(r->origin + r->v)})
-                box.extend(p);
-            continue;
-        }
-        const auto& m = std::get<MeshShape>(object.shape);
-        meshes[k] = load_mesh(m.file, m.transform, scene.file, "objects[" + std::to_string(k) + "].file");
-        census.dropped_degenerate += meshes[k].dropped_degenerate;
-        census.mesh_faces += meshes[k].faces.size();
-        for (const Vec3& p : meshes[k].vertices) box.extend(p);
-    }
-    return meshes;
-}
-
 // Each object's share of `samples` by its patch count (running rounding: the shares add up).
-void draw_samples(const Scene& scene, const std::vector<PolygonMesh>& meshes, const std::vector<std::size_t>& counts,
-                  std::size_t samples, std::uint64_t seed, PatchCensus& census) {
+void draw_samples(const std::vector<Source>& sources, std::size_t samples, std::uint64_t seed, PatchCensus& census) {
     SplitMix64 random(seed);
     std::size_t before = 0;
-    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+    for (std::size_t k = 0; k < sources.size(); ++k) {
+        const Source& c = sources[k];
+        const std::size_t count = c.patch_count * c.sides();
         const auto share = [&](std::size_t upto) {
             return std::size_t(std::llround(double(samples) * double(upto) / double(census.patches)));
         };
-        const std::size_t draws = share(before + counts[k]) - share(before);
-        before += counts[k];
-        if (draws == 0) continue;
-        const Object& object = scene.objects[k];
-        const CensusObject c = census_object(object, meshes[k], census.max_edge);
+        const std::size_t draws = share(before + count) - share(before);
+        before += count;
         for (std::size_t d = 0; d < draws; ++d) {
-            const std::size_t index = std::min(counts[k] - 1, std::size_t(unit(random) * double(counts[k])));
-            PatchSample s = census_sample(object, c, census.max_edge, index % c.per_side, random);
-            if (index >= c.per_side) s.normal = -s.normal;  // the back copy of a two-sided object
+            const std::size_t index = std::min(count - 1, std::size_t(unit(random) * double(count)));
+            PatchSample s = census_sample(c, census.max_edge, index % c.patch_count, random);
+            if (index >= c.patch_count) s.normal = -s.normal;  // the back copy of a two-sided object
             s.object = std::uint32_t(k);
             census.samples.push_back(s);
         }
@@ -335,24 +325,23 @@ void draw_samples(const Scene& scene, const std::vector<PolygonMesh>& meshes, co
 
 PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t seed) {
     PatchCensus census;
-    const std::vector<PolygonMesh> meshes = census_meshes(scene, census);
+    const LoadedObjects loaded = load_objects(scene);
+    census.bounds = loaded.bounds;
+    census.dropped_degenerate = loaded.dropped_degenerate;
+    for (const PolygonMesh& m : loaded.meshes) census.mesh_faces += m.faces.size();
     if (scene.objects.empty()) return census;
-    Eigen::AlignedBox3d box;
-    for (const Eigen::AlignedBox3d& b : census.bounds) box.extend(b);
+    const Eigen::AlignedBox3d box = scene_box(loaded);
     census.diagonal = box.diagonal().norm();
-    census.max_edge = scene.max_edge > 0.0 ? scene.max_edge : census.diagonal / 16.0;
-    TPRF_CHECK_LT(0.0, census.max_edge);
-    std::vector<std::size_t> counts(scene.objects.size());
+    census.max_edge = patch_size(scene, box);
+    std::vector<Source> sources;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
-        const Object& object = scene.objects[k];
-        const std::size_t per_side = census_object(object, meshes[k], census.max_edge).per_side;
-        const std::size_t sides = object.two_sided ? 2 : 1;
-        counts[k] = per_side * sides;
-        census.patches += counts[k];
-        census.corners += counts[k] * (std::holds_alternative<RectangleShape>(object.shape) ? 4 : 3);
-        if ((object.emission > 0.0).any()) census.emissive += counts[k];
+        sources.push_back(cut(scene.objects[k], loaded.meshes[k], census.max_edge));
+        const Source& c = sources.back();
+        census.patches += c.patch_count * c.sides();
+        census.corners += c.corners() * c.patch_count * c.sides();
+        if ((scene.objects[k].emission > 0.0).any()) census.emissive += c.patch_count * c.sides();
     }
-    if (samples > 0 && census.patches > 0) draw_samples(scene, meshes, counts, samples, seed, census);
+    if (samples > 0 && census.patches > 0) draw_samples(sources, samples, seed, census);
     return census;
 }
 

@@ -8,8 +8,10 @@
 #include "tprf/imaging/camera.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/transport/link_set.h"
+#include "tprf/transport/solver.h"
 
 #include <algorithm>
+#include <bit>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -81,7 +83,7 @@ constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lis
 constexpr double kGatherBytesPerPatch = 100;     // FLANN's index over the centroids
 constexpr double kShortLinkBytes = 16;           // a link shorter than a block, in the solver's own list
 constexpr double kSameBinLinkBytes = 8;          // a link within one bin
-constexpr int kBlockBins = 32;                   // SolverOptions::block_bins
+const int kBlockBins = SolverOptions{}.block_bins;  // the solver's block (hierarchical sets: shorter)
 constexpr int kPointSourcePulses = 2;            // pulses per patch and point source: its 16 samples' pulses are
                                                  // merged per bin (IlluminationOptions::merge_bins), 1-2 bins
 constexpr int kAreaSourcePulses = 4;             // pulses per patch lit by area emitters, merged per bin the same way
@@ -111,12 +113,6 @@ constexpr int kTapsPerPixel = 32;                    // at most, once the sample
 
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
-
-int next_pow2(int v) {
-    int r = 1;
-    while (r < v) r <<= 1;
-    return r;
-}
 
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
@@ -269,7 +265,7 @@ void estimate_solver(const Scene& scene, const PatchCensus& census, const PairSh
     const int max_lag = int(std::min(census.diagonal / bin_m, 1e8));
     e.channels = scene_grey(scene) ? 1 : 3;
     e.layers = layers;
-    e.ring_bins = next_pow2(max_lag + kBlockBins + 2);
+    e.ring_bins = int(std::bit_ceil(unsigned(max_lag + kBlockBins + 2)));
     const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
     const double rings = L * nodes * (e.ring_bins + kBlockBins + 1) * C * 4;
     const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;

@@ -55,6 +55,11 @@ struct SamplePoint {
     Vec3 n;
 };
 
+// See Builder::facing.
+struct FacingAngles {
+    double low, high;
+};
+
 // Point pairs sampled between two nodes, with the kernel at each (before visibility).
 struct PairSamples {
     SamplePoint x[kMaxSamples], y[kMaxSamples];
@@ -80,52 +85,46 @@ public:
 
     // Every pair of one patch below r and one below s.
     void refine(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
-        if (!may_face(r, s) || !may_face(s, r)) return;
-        ++counts.candidates;
-        if (m_tree.is_leaf(r) && m_tree.is_leaf(s)) {
-            patch_link(r, s, out, counts);
-            return;
-        }
-        if (judge(r, s, out, counts)) return;
-        // Split the larger node (a patch cannot be split).
-        const bool split_r = !m_tree.is_leaf(r) && (m_tree.is_leaf(s) || m_tree.radius[r] >= m_tree.radius[s]);
-        const std::uint32_t big = split_r ? r : s, other = split_r ? s : r;
+        if (settle(r, s, out, counts)) return;
+        const auto [big, other] = split_choice(r, s);
         for (std::uint32_t child : m_tree.children[big - m_tree.leaves]) refine(child, other, out, counts);
     }
 
-    // Pairs judged one at a time on the calling thread to cut the work into jobs: true when (r, s) is
-    // settled (a link or nothing), false when its children pairs must be judged.
-    bool settle_top(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
-        if (!may_face(r, s) || !may_face(s, r)) return true;
+    // True when (r, s) is settled: a link (two patches, or two nodes the oracle accepts) or nothing
+    // (neither can face the other); false when the pairs of the larger one's children with the other
+    // must be judged.
+    bool settle(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+        const FacingAngles rs = facing(r, s), sr = facing(s, r);
+        if (rs.low >= M_PI / 2 || sr.low >= M_PI / 2) return true;
         ++counts.candidates;
-        return judge(r, s, out, counts);
+        if (m_tree.is_leaf(r) && m_tree.is_leaf(s)) {
+            patch_link(r, s, out, counts);
+            return true;
+        }
+        return judge(r, s, rs.high < M_PI / 2 && sr.high < M_PI / 2, out, counts);
+    }
+
+    // The node of (r, s) to split, the larger (a patch cannot be split), and the other.
+    std::pair<std::uint32_t, std::uint32_t> split_choice(std::uint32_t r, std::uint32_t s) const {
+        const bool split_r = !m_tree.is_leaf(r) && (m_tree.is_leaf(s) || m_tree.radius[r] >= m_tree.radius[s]);
+        return split_r ? std::pair{r, s} : std::pair{s, r};
     }
 
     std::size_t leaves_below(std::uint32_t m) const { return m_tree.last[m] - m_tree.first[m]; }
 
 private:
-    // False when no patch of `from` can face any point of `to`: every direction from `from`'s sphere
-    // to `to`'s sphere lies more than 90 degrees off every normal of `from`'s cone.
-    bool may_face(std::uint32_t from, std::uint32_t to) const {
-        if (m_tree.cone_cos[from] <= -1.0) return true;
-        if (m_tree.is_leaf(from) && m_tree.is_leaf(to)) return true;  // patch_pair decides exactly
+    // The range of angles between a normal of `from`'s cone and a direction from `from`'s sphere to
+    // `to`'s: below 90 degrees at `low`, some patch of `from` may face some point of `to`; below 90 at
+    // `high`, every patch faces every point. Unknown (0 to pi) when the spheres overlap or the cone is
+    // open; two patches are left to patch_pair, which decides exactly.
+    FacingAngles facing(std::uint32_t from, std::uint32_t to) const {
+        if (m_tree.is_leaf(from) && m_tree.is_leaf(to)) return {0.0, M_PI};
         const Vec3 d = m_tree.centre[to] - m_tree.centre[from];
         const double dist = d.norm(), reach = m_tree.radius[from] + m_tree.radius[to];
-        if (dist <= reach) return true;
+        if (dist <= reach || m_tree.cone_cos[from] <= -1.0) return {0.0, M_PI};
         const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
-        const double cone = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0));
-        return off_axis < M_PI / 2 + cone + std::asin(reach / dist) + 1e-9;
-    }
-
-    // True when every patch of `from` faces every point of `to`: the cone of `from`'s normals and the
-    // directions from its sphere to `to`'s sphere stay within 90 degrees of each other.
-    bool all_face(std::uint32_t from, std::uint32_t to) const {
-        const Vec3 d = m_tree.centre[to] - m_tree.centre[from];
-        const double dist = d.norm(), reach = m_tree.radius[from] + m_tree.radius[to];
-        if (dist <= reach || m_tree.cone_cos[from] <= -1.0) return false;
-        const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
-        const double cone = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0));
-        return off_axis + cone + std::asin(reach / dist) < M_PI / 2;
+        const double spread = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0)) + std::asin(reach / dist);
+        return {off_axis - spread - 1e-9, off_axis + spread};
     }
 
     SamplePoint sample(std::uint32_t m, int k, int count, std::uint64_t salt) const {
@@ -156,7 +155,7 @@ private:
 
     // The oracle. True when (r, s) is settled: kept as a link with its delay kernel, or dropped as
     // carrying less than the tolerance; false when it must be refined.
-    bool judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const;
+    bool judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out, Counts& counts) const;
     void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
     void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
                      int count, std::vector<LinkRecord>& out) const;
@@ -196,7 +195,8 @@ void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int cou
     }
 }
 
-bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out,
+                    Counts& counts) const {
     const double dist = (m_tree.centre[r] - m_tree.centre[s]).norm();
     const double gap = dist - m_tree.radius[r] - m_tree.radius[s];
     if (!(gap > 0.0)) return false;  // overlapping bounds: the kernel is unbounded there
@@ -217,8 +217,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& o
     // to zero, whether or not a sample fell on such a member.
     // Such a link may only carry a small share of the tolerance: over the hundreds of links that reach
     // one patch those errors add up in one direction (light on a face turned away, in a shadow).
-    const bool facing = all_face(r, s) && all_face(s, r) && judged.k_min > 0.0;
-    if (!facing && a_big * judged.k_max > kFacingShare * m_h.tolerance) return false;
+    if (!(all_facing && judged.k_min > 0.0) && a_big * judged.k_max > kFacingShare * m_h.tolerance) return false;
     if (a_big * (judged.k_max - judged.k_min) > m_h.tolerance) return false;
     // Accepted on geometry. The form factor comes from fresh samples: the ones that judged the pair
     // were accepted because they varied little, which makes them more likely to have missed where the
@@ -316,22 +315,17 @@ Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, i
     }
     parallel_for(nodes, {threads, 256, true}, [&](std::size_t m) {
         const std::uint64_t a = links.row[m], b = links.row[m + 1];
-        std::vector<std::uint64_t> idx(b - a);
-        for (std::uint64_t k = a; k < b; ++k) idx[k - a] = k;
-        std::sort(idx.begin(), idx.end(), [&](std::uint64_t p, std::uint64_t q) {
-            return links.source[p] != links.source[q] ? links.source[p] < links.source[q]
-                                                      : links.distance[p] < links.distance[q];
+        std::vector<LinkRecord> row;
+        row.reserve(b - a);
+        for (std::uint64_t k = a; k < b; ++k) row.push_back({std::uint32_t(m), links.source[k], links.ff[k], links.distance[k]});
+        std::sort(row.begin(), row.end(), [](const LinkRecord& p, const LinkRecord& q) {
+            return p.source != q.source ? p.source < q.source : p.distance < q.distance;
         });
-        std::vector<std::uint32_t> src(idx.size());
-        std::vector<float> ff(idx.size()), dist(idx.size());
-        for (std::size_t k = 0; k < idx.size(); ++k) {
-            src[k] = links.source[idx[k]];
-            ff[k] = links.ff[idx[k]];
-            dist[k] = links.distance[idx[k]];
+        for (std::uint64_t k = a; k < b; ++k) {
+            links.source[k] = row[k - a].source;
+            links.ff[k] = row[k - a].ff;
+            links.distance[k] = row[k - a].distance;
         }
-        std::copy(src.begin(), src.end(), links.source.begin() + std::ptrdiff_t(a));
-        std::copy(ff.begin(), ff.end(), links.ff.begin() + std::ptrdiff_t(a));
-        std::copy(dist.begin(), dist.end(), links.distance.begin() + std::ptrdiff_t(a));
     });
     return links;
 }
@@ -367,9 +361,8 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
             jobs.push_back(j);
             continue;
         }
-        if (builder.settle_top(j.a, j.b, top, counts)) continue;
-        const bool split_a = !tree.is_leaf(j.a) && (tree.is_leaf(j.b) || tree.radius[j.a] >= tree.radius[j.b]);
-        const std::uint32_t big = split_a ? j.a : j.b, other = split_a ? j.b : j.a;
+        if (builder.settle(j.a, j.b, top, counts)) continue;
+        const auto [big, other] = builder.split_choice(j.a, j.b);
         for (std::uint32_t child : tree.children[big - tree.leaves]) pending.push_back({child, other});
     }
     return jobs;

@@ -9,6 +9,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -173,12 +174,6 @@ constexpr std::size_t kSourceTile = 64;
 // Links per receiver below which the sources are not tiled.
 constexpr std::size_t kDenseRow = 256;
 
-int next_pow2(int v) {
-    int r = 1;
-    while (r < v) r <<= 1;
-    return r;
-}
-
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
 struct SolvePlan {
@@ -192,7 +187,6 @@ struct SolvePlan {
     // Sources per tile of the long pass: kSourceTile for dense rows; one tile for sparse ones
     // (hierarchical links), whose rows would otherwise be walked once per empty tile.
     std::size_t source_tile = kSourceTile;
-    std::uint64_t expanded_links = 0;  // links with a cluster end shorter than a block (see split_links)
     int threads = 1;
     int bt = 0;                     // block length, bins (a power of two)
     int C = 3;                      // channels marched (1 for a grey scene)
@@ -222,8 +216,6 @@ struct SolvePlan {
     std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
 };
 
-// Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
-// bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin).
 // The links that have to be applied bin by bin (lag < bt), as lists by receiver patch.
 struct BinLinks {
     std::vector<std::vector<ShortLink>> shorts;
@@ -260,7 +252,6 @@ void split_links(const Links& links, SolvePlan& plan) {
                 add_bin_link(bins, i, s, t, 1.0f);
                 continue;
             }
-            ++plan.expanded_links;
             for (std::uint32_t r = tree.first[i]; r < tree.last[i]; ++r)
                 for (std::uint32_t q = tree.first[s]; q < tree.last[s]; ++q) {
                     const std::uint32_t leaf = tree.leaf_order[q];
@@ -311,7 +302,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     plan.threads = thread_count(options.threads);
     if (plan.clusters) cut_subtrees(set.tree, plan);
     if (links.size() < kDenseRow * plan.m) plan.source_tile = std::max<std::size_t>(plan.m, 1);
-    plan.bt = next_pow2(std::clamp(options.block_bins, 1, 4096));
+    plan.bt = int(std::bit_ceil(unsigned(std::clamp(options.block_bins, 1, 4096))));
     // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
     if (plan.clusters && set.block_bins > 0)
         while (plan.bt > 1 && plan.bt > set.block_bins) plan.bt /= 2;
@@ -326,7 +317,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     plan.mirror = plan.bt + 1;
     plan.slots.resize(plan.m);
     for (std::size_t k = 0; k < plan.m; ++k) {
-        const int length = next_pow2(plan.send_lag[k] + plan.bt + 2);
+        const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
         plan.slots[k] = {plan.ring_floats, length - 1, length};
         plan.ring_floats += std::size_t(length + plan.mirror) * std::size_t(plan.C);
         plan.ring = std::max(plan.ring, length);
@@ -352,9 +343,9 @@ public:
         : m_patches(patches), m_links(links), m_illumination(illumination), m_plan(plan),
           m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.block_values())),
-          m_emit(std::size_t(plan.L), std::vector<float>(plan.block_values())),
-          m_base(std::size_t(plan.L) * plan.m * std::size_t(plan.C)),
-          m_iterate(std::size_t(plan.L) * plan.m * std::size_t(plan.C)),
+          m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
+          m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
+          m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_out_total(plan.n * std::size_t(plan.bt) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * 3) {}
 
@@ -383,14 +374,11 @@ private:
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
-    void gather_bin(std::size_t i, std::int64_t b0, int o, int l, float* g);
-    void settle_patch(std::size_t i, std::int64_t b0, int o, int l, const float* g);
     void short_links_of(std::size_t i, std::int64_t b0, int o);
     void push_node(std::uint32_t i);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
-    void same_bin_gather(std::size_t i, int l, std::int64_t bin, float* g);
     bool jacobi_sweep(std::int64_t bin);
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
@@ -401,8 +389,8 @@ private:
     const SolvePlan& m_plan;
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
     std::vector<std::vector<float>> m_acc;      // per layer: M x bt x C, long links' sums
-    std::vector<std::vector<float>> m_emit;     // per layer: M x bt x C, the block's emission
-    std::vector<float> m_base, m_iterate;       // L x M x C: one bin before / during the Jacobi sweeps
+    std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C, the block's emission (patches only)
+    std::vector<float> m_base, m_iterate;       // L x N x C: one bin before / during the Jacobi sweeps
     std::vector<float> m_out_total, m_out_terms;
     float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
     std::atomic<int> m_worst_iterations{0};
@@ -412,7 +400,8 @@ std::size_t March::working_bytes() const {
     const SolvePlan& p = m_plan;
     std::size_t working = 0;
     for (const auto& r : m_rings) working += r.size() * sizeof(float);
-    working += 2 * std::size_t(p.L) * p.block_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
+    for (const auto& e : m_emit) working += e.size() * sizeof(float);
+    working += std::size_t(p.L) * p.block_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
                (m_out_total.size() + m_out_terms.size()) * sizeof(float) +
                p.short_links.size() * sizeof(ShortLink) + p.same_links.size() * sizeof(SameBinLink) +
                2 * (p.n + 1) * sizeof(std::uint64_t) + p.slots.size() * sizeof(RingSlot);
@@ -431,11 +420,9 @@ void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v
 
 void March::load_emission(std::size_t i, std::int64_t b0) {
     const int bt = m_plan.bt, C = m_plan.C;
-    for (int l = 0; l < m_plan.L; ++l) {
-        std::fill_n(m_acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-        std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
-    }
+    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
     if (i >= m_plan.n) return;  // clusters emit nothing of their own
+    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
     for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
         const Pulse& p = m_illumination.pulses[k];
         const std::int64_t b = m_plan.pulse_bin(p);
@@ -483,47 +470,34 @@ void March::long_pass(std::int64_t b0) {
     }
 }
 
-// Node i's light gathered at bin b0 + o in layer l: the long links' sum plus its short links.
-void March::gather_bin(std::size_t i, std::int64_t b0, int o, int l, float* g) {
-    const SolvePlan& p = m_plan;
-    const int C = p.C;
-    const int src = p.layers.source[std::size_t(l)];
-    for (int c = 0; c < C; ++c) g[c] = 0.0f;
-    if (src < 0) return;
-    const std::int64_t bin = b0 + o;
-    const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
-    for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
-    for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
-        const ShortLink& s = p.short_links[k];
-        const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
-        if (s.lag > 0) {
-            const float* h0 = ring_at(src, s.source, bin - s.lag);
-            for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
-        } else {
-            for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
-        }
-    }
-}
-
-// Patch i at bin b0 + o in layer l, from the light g it gathered: emission plus albedo times g,
-// kept as the Jacobi base and stored in the ring.
-void March::settle_patch(std::size_t i, std::int64_t b0, int o, int l, const float* g) {
-    const SolvePlan& p = m_plan;
-    const int C = p.C;
-    const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
-    float b[3];
-    for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
-    float* keep = m_base.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
-    for (int c = 0; c < C; ++c) keep[c] = b[c];
-    store(l, i, b0 + o, b);
-}
-
-// Flat links: patch i at bin b0 + o, every layer.
+// Patch i at bin b0 + o: the long links' sum (with every cluster's above it) plus its short links, the
+// emission, stored in the ring.
 void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
-    float g[3];
-    for (int l = 0; l < m_plan.L; ++l) {
-        gather_bin(i, b0, o, l, g);
-        settle_patch(i, b0, o, l, g);
+    const SolvePlan& p = m_plan;
+    const int C = p.C;
+    const std::int64_t bin = b0 + o;
+    for (int l = 0; l < p.L; ++l) {
+        const int src = p.layers.source[std::size_t(l)];
+        float g[3] = {0, 0, 0};
+        const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+        if (src >= 0) {
+            for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
+            for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
+                const ShortLink& s = p.short_links[k];
+                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
+                if (s.lag > 0) {
+                    const float* h0 = ring_at(src, s.source, bin - s.lag);
+                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
+                } else {
+                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
+                }
+            }
+        }
+        float b[3];
+        for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
+        float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+        for (int c = 0; c < C; ++c) keep[c] = b[c];
+        store(l, i, bin, b);
     }
 }
 
@@ -554,9 +528,9 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
         }
 }
 
-// (In a region.) Visits every node of the tree, parents before children (`down`) or children before
-// parents: the clusters above the subtrees on one thread, each subtree (whose clusters are numbered
-// in preorder) on any thread, its patches after its clusters going down and before them going up.
+// (In a region.) Visits every node of the tree, parents before children (`down`), or every cluster,
+// children before parents: the clusters above the subtrees on one thread, each subtree (whose
+// clusters are numbered in preorder) on any thread, its patches after its clusters going down.
 template <class NodeFn>
 void March::over_tree(bool down, NodeFn visit) {
     const SolvePlan& p = m_plan;
@@ -573,7 +547,6 @@ void March::over_tree(bool down, NodeFn visit) {
             for (std::uint32_t c = r; c < r + clusters; ++c) visit(c);
             for (std::uint32_t k = t.first[r]; k < t.last[r]; ++k) visit(t.leaf_order[k]);
         } else {
-            for (std::uint32_t k = t.first[r]; k < t.last[r]; ++k) visit(t.leaf_order[k]);
             for (std::uint32_t c = r + clusters; c-- > r;) visit(c);
         }
     }
@@ -588,21 +561,7 @@ void March::push_block() {
 }
 
 void March::pull_block(std::int64_t b0) {
-    over_tree(false, [&](std::uint32_t i) {
-        if (!m_plan.tree->is_leaf(i)) pull_node(i, b0);
-    });
-}
-
-// Same-bin light gathered by node i in layer l from the current iterate.
-void March::same_bin_gather(std::size_t i, int l, std::int64_t bin, float* g) {
-    const SolvePlan& p = m_plan;
-    const int src = p.layers.source[std::size_t(l)];
-    for (int c = 0; c < p.C; ++c) g[c] = 0.0f;
-    if (src < 0) return;
-    for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
-        const float* h = ring_at(src, p.same_links[k].source, bin);
-        for (int c = 0; c < p.C; ++c) g[c] += p.same_links[k].w * h[c];
-    }
+    over_tree(false, [&](std::uint32_t c) { pull_node(c, b0); });
 }
 
 // One Jacobi sweep of the same-bin system (in a region); true when it has converged to float
@@ -616,24 +575,26 @@ bool March::jacobi_sweep(std::int64_t bin) {
         m_largest = 0.0f;
     }
     float change = 0.0f, largest = 0.0f;
-    // Patch i's next iterate from its same-bin gather g (pushed, with clusters).
-    auto next_of = [&](std::size_t i, int l, const float* g) {
-        const float* keep = m_base.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
-        float* next = m_iterate.data() + (std::size_t(l) * p.m + i) * std::size_t(C);
-        const float* now = ring_at(l, i, bin);
-        for (int c = 0; c < C; ++c) {
-            next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
-            change = std::max(change, std::abs(next[c] - now[c]));
-            largest = std::max(largest, std::abs(next[c]));
-        }
-    };
 #pragma omp for schedule(static) nowait
-    for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t i = 0; i < p.n; ++i) {
         for (int l = 0; l < p.L; ++l) {
-            float g[3];
-            same_bin_gather(i, l, bin, g);
-            next_of(i, l, g);
+            const int src = p.layers.source[std::size_t(l)];
+            const float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+            float* next = m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+            float g[3] = {0, 0, 0};
+            if (src >= 0)
+                for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
+                    const float* h = ring_at(src, p.same_links[k].source, bin);
+                    for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
+                }
+            const float* now = ring_at(l, i, bin);
+            for (int c = 0; c < C; ++c) {
+                next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
+                change = std::max(change, std::abs(next[c] - now[c]));
+                largest = std::max(largest, std::abs(next[c]));
+            }
         }
+    }
 #pragma omp critical(tprf_jacobi_reduction)
     {
         m_change = std::max(m_change, change);
@@ -645,7 +606,7 @@ bool March::jacobi_sweep(std::int64_t bin) {
     const bool converged = m_change <= 1e-7f * m_largest;
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < p.n; ++i)
-        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.m + i) * std::size_t(C));
+        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
     return converged;
 }
 

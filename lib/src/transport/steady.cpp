@@ -34,15 +34,14 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
     const std::size_t m = t.nodes();
     Eigen::VectorXd v = Eigen::VectorXd::Zero(Eigen::Index(m)), g = Eigen::VectorXd::Zero(Eigen::Index(m));
     v.head(n) = x;
-    for (std::size_t k = t.by_level.size(); k-- > 0;) {  // deepest first
-        const std::uint32_t cl = t.by_level[k];
+    for (std::size_t cl = m; cl-- > t.leaves;) {  // preorder ids backwards: children first
         const auto [a, b] = t.children[cl - t.leaves];
         v[cl] = (t.area[a] * v[a] + t.area[b] * v[b]) / t.area[cl];
     }
 #pragma omp parallel for schedule(dynamic, 64)
     for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = row_sum(set.links, v, i);
-    for (std::uint32_t cl : t.by_level)  // the root first
-        if (t.parent[cl] != kNoNode) g[cl] += g[t.parent[cl]];
+    for (std::size_t cl = t.leaves; cl < m; ++cl)  // preorder ids: parents first
+        if (t.parent[cl] != kNoNode) g[Eigen::Index(cl)] += g[t.parent[cl]];
     for (Eigen::Index i = 0; i < n; ++i) {
         const std::uint32_t up = t.parent[std::size_t(i)];
         y[i] = patches.albedo[std::size_t(i)][c] * (g[i] + (up == kNoNode ? 0.0 : g[up]));

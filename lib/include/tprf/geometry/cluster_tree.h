@@ -2,9 +2,11 @@
 /// A binary cluster tree over the patches: the nodes that hierarchical links connect.
 ///
 /// Node ids: 0..N-1 are the patches themselves (the leaves), N..M-1 the clusters, M = 2N - 1 (a single
-/// patch is its own root). Each cluster covers a contiguous range of `leaf_order`, split at the area
-/// median of its longest axis, so that a cluster is compact in space; its bounding sphere and normal
-/// cone bound what any link from or to it can see.
+/// patch is its own root). Each cluster covers a contiguous range of `leaf_order`, split in halves by
+/// position or by orientation (whichever is cheaper, build_cluster_tree), so that a cluster is compact
+/// in space and faces one way where it can; its bounding sphere and normal cone bound what any link
+/// from or to it can see. Ids in preorder put every parent before its children: a sweep over ids
+/// N..M-1 goes down the tree, the reverse sweep up.
 
 #include "tprf/core/types.h"
 
@@ -32,15 +34,11 @@ struct ClusterTree {
     std::vector<std::uint32_t> leaf_order;             ///< N: patches in tree order
     std::vector<std::uint32_t> first, last;            ///< M: node m covers leaf_order[first[m], last[m])
     std::vector<double> area_prefix;                   ///< N + 1: running sum of patch areas in leaf_order
-    /// Clusters by depth, the root first: level d holds by_level[level_first[d], level_first[d + 1]).
-    std::vector<std::uint32_t> by_level;
-    std::vector<std::uint32_t> level_first;
 
     std::size_t nodes() const { return parent.size(); }
     std::size_t clusters() const { return nodes() - leaves; }
     bool is_leaf(std::uint32_t m) const { return m < leaves; }
     std::uint32_t root() const { return nodes() == 0 ? kNoNode : (clusters() > 0 ? std::uint32_t(leaves) : 0u); }
-    int depth() const { return level_first.empty() ? 0 : int(level_first.size()) - 1; }
     /// Bytes held by the tree.
     std::size_t bytes() const;
 };
