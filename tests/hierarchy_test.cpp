@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <set>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -68,16 +69,18 @@ struct NodePair {
     double d_min = INFINITY, d_max = 0.0;
 };
 
-// The node pairs of a link set (rows hold sources in non-decreasing order, so a pair's pieces are
-// consecutive).
+// The node pairs of a link set: a pair's pieces (one source, several distances) summed.
 std::vector<NodePair> node_pairs(const LinkSet& set) {
     std::vector<NodePair> out;
     const Links& l = set.links;
+    std::vector<std::uint64_t> order;
     for (std::size_t m = 0; m < set.nodes(); ++m) {
-        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k) {
-            if (k > l.row[m]) {
-                EXPECT_LE(l.source[k - 1], l.source[k]) << "row " << m;
-            }
+        order.clear();
+        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k) order.push_back(k);
+        std::sort(order.begin(), order.end(), [&](std::uint64_t a, std::uint64_t b) {
+            return l.source[a] != l.source[b] ? l.source[a] < l.source[b] : l.distance[a] < l.distance[b];
+        });
+        for (std::uint64_t k : order) {
             if (out.empty() || out.back().receiver != m || out.back().source != l.source[k])
                 out.push_back({std::uint32_t(m), l.source[k]});
             NodePair& np = out.back();
@@ -290,9 +293,30 @@ Scene plates_with_occluder(double max_edge) {
     return scene;
 }
 
+// Rows ordered by delay octave, then source (LinkSet::links), so that the solver finds each window's
+// links in one range.
+void check_row_order(const LinkSet& h, double bin_width_m, const char* name) {
+    const Links& l = h.links;
+    const float inv_bin = float(1.0 / bin_width_m);
+    std::set<int> octaves;
+    for (std::size_t m = 0; m < h.nodes(); ++m)
+        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k) {
+            const int o = delay_octave(l.distance[k], inv_bin);
+            octaves.insert(o);
+            if (k == l.row[m]) continue;
+            const int before = delay_octave(l.distance[k - 1], inv_bin);
+            EXPECT_LE(before, o) << name << " row " << m;
+            if (before == o) {
+                EXPECT_LE(l.source[k - 1], l.source[k]) << name << " row " << m;
+            }
+        }
+    EXPECT_GE(octaves.size(), 3u) << name;  // else the order would not have been exercised
+}
+
 void check_coverage(const Prepared& p, const LinkSet& h, double tolerance, bool occluded, const char* name) {
     const std::size_t n = p.patches.size();
     const ClusterTree& t = h.tree;
+    check_row_order(h, 0.01, name);
     const std::vector<NodePair> pairs = node_pairs(h);
     // Cluster links exist (else the test would check flat links only).
     std::size_t cluster_pairs = 0;

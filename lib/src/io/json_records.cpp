@@ -33,7 +33,8 @@ nlohmann::json solver_json(const RenderRecord& r) {
             {"working_mb", double(r.stats.working_bytes) / 1e6},
             {"link_bin_updates", r.stats.link_bin_updates},
             {"short_links", r.stats.short_links},
-            {"max_jacobi_iterations", r.stats.max_jacobi_iterations}};
+            {"max_jacobi_iterations", r.stats.max_jacobi_iterations},
+            {"jacobi_sweeps", r.stats.jacobi_sweeps}};
 }
 
 nlohmann::json seconds_json(const PhaseSeconds& s) {
@@ -56,6 +57,9 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
                    {"unwarp", r.camera.unwarp}};
     j["solver"] = solver_json(r);
     j["seconds"] = seconds_json(r.seconds);
+    // The solve's phases (wall times): the long-link pass, the bin-by-bin pass, the output blocks.
+    j["seconds"]["solve_phases"] = {
+        {"long", r.stats.seconds_long}, {"short", r.stats.seconds_short}, {"sink", r.stats.seconds_sink}};
     if (r.sensor) j["sensor"] = {{"exposure", exposure_name(*r.sensor)}, {"measurements", r.measurements}};
     j["peak_rss_mb"] = r.peak_rss_mb;
     j["dropped_degenerate_faces"] = r.dropped_degenerate;

@@ -47,6 +47,8 @@ constexpr double kNegligible = 1e-3;
 // node, or a shadow edge crosses it: its error then falls on those patches in one direction.
 constexpr double kFacingShare = 0.1;
 constexpr int kMaxPieces = 8;
+// Largest product of two nodes' patch counts whose facing is decided patch by patch (Builder::all_behind).
+constexpr std::size_t kExactFacing = 4096;
 
 // A point of node m, sample k of `count`: stratified by area over the node's patches, uniform within
 // the patch it falls on.
@@ -125,6 +127,25 @@ private:
         const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
         const double spread = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0)) + std::asin(reach / dist);
         return {off_axis - spread - 1e-9, off_axis + spread};
+    }
+
+    // True when no corner of a patch below `to` lies in front of any patch below `from` (by
+    // patch_pair's own test and tolerance): no pair of their patches would be linked.
+    bool all_behind(std::uint32_t from, std::uint32_t to) const {
+        for (std::uint32_t a = m_tree.first[from]; a < m_tree.last[from]; ++a) {
+            const std::uint32_t p = m_tree.leaf_order[a];
+            const Vec3& n = m_patches.normal[p];
+            const Vec3& c = m_patches.centroid[p];
+            const double tolerance = 1e-9 * m_radius[p];
+            if (n.dot(m_tree.centre[to] - c) + m_tree.radius[to] <= tolerance) continue;  // all of `to` behind
+            for (std::uint32_t b = m_tree.first[to]; b < m_tree.last[to]; ++b) {
+                const std::uint32_t q = m_tree.leaf_order[b];
+                const Vec3* poly = m_patches.polygon(q);
+                for (std::size_t k = 0; k < m_patches.corners(q); ++k)
+                    if (n.dot(poly[k] - c) > tolerance) return false;
+            }
+        }
+        return true;
     }
 
     SamplePoint sample(std::uint32_t m, int k, int count, std::uint64_t salt) const {
@@ -210,7 +231,10 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
         // would lose whatever part does face, always in the same direction (an enclosure would leak):
         // refine it unless even the largest kernel the bounds allow carries a negligible share of the
         // tolerance.
-        return a_big / (M_PI * gap * gap) <= kNegligible * m_h.tolerance;
+        if (a_big / (M_PI * gap * gap) <= kNegligible * m_h.tolerance) return true;
+        // Small pairs are settled exactly: when no patch of one has the other in front, nothing
+        // passes, and the refinement below them would find no link.
+        return leaves_below(r) * leaves_below(s) <= kExactFacing && (all_behind(r, s) || all_behind(s, r));
     }
     // A member that faces away from the other node gets the link's light all the same (push) or
     // sends with the others (pull): unless the cones show that none does, the kernel's range goes down
@@ -292,8 +316,9 @@ void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double 
     }
 }
 
-// The CSR by receiver, sources non-decreasing within a row (then by distance).
-Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, int threads) {
+// The CSR by receiver, within a row by delay octave (for bins of 1 / inv_bin; all one octave when
+// inv_bin is 0), then source, then distance.
+Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, float inv_bin, int threads) {
     Links links;
     links.row.assign(nodes + 1, 0);
     for (const auto& part : parts)
@@ -318,7 +343,9 @@ Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, i
         std::vector<LinkRecord> row;
         row.reserve(b - a);
         for (std::uint64_t k = a; k < b; ++k) row.push_back({std::uint32_t(m), links.source[k], links.ff[k], links.distance[k]});
-        std::sort(row.begin(), row.end(), [](const LinkRecord& p, const LinkRecord& q) {
+        std::sort(row.begin(), row.end(), [inv_bin](const LinkRecord& p, const LinkRecord& q) {
+            const int op = delay_octave(p.distance, inv_bin), oq = delay_octave(q.distance, inv_bin);
+            if (op != oq) return op < oq;
             return p.source != q.source ? p.source < q.source : p.distance < q.distance;
         });
         for (std::uint64_t k = a; k < b; ++k) {
@@ -410,7 +437,8 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
         }
     });
     counts.push_back(top_counts);
-    set.links = assemble(set.tree.nodes(), parts, threads);
+    const float inv_bin = hierarchy.bin_width_m > 0.0 ? float(1.0 / hierarchy.bin_width_m) : 0.0f;
+    set.links = assemble(set.tree.nodes(), parts, inv_bin, threads);
     if (hierarchy.bin_width_m > 0.0) set.block_bins = hierarchy.min_lag_bins;
     // Area emitters light the scene by patch-to-patch links (illuminate()): exact first bounces.
     std::vector<std::uint32_t> emitting;

@@ -93,13 +93,15 @@ struct RingSlot {
     std::uint64_t offset;  // floats
     std::int32_t mask;     // length - 1
     std::int32_t length;
+    std::int32_t mirror;   // bins mirrored after the ring: the longest window a long link reads, plus one
 };
 
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
 void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end, float inv_bin,
-                 DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, float* acc) {
+                 DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, float* acc,
+                 std::size_t stride) {
     // Locals, not the reference and the vectors: a store through `cursor` would make the compiler
     // reload every array pointer once per link.
     const std::uint32_t* __restrict source = links.source.data();
@@ -120,13 +122,14 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
         }
     }
     cursor = k;
-    for (int e = 0; e < C * BT; ++e) acc[e] += local[e];
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
 }
 
 // The same for block lengths without a specialisation.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
                      float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0,
-                     int C, int bt, float* __restrict acc) {
+                     int C, int bt, float* __restrict acc, std::size_t stride) {
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
     const float* __restrict ff = links.ff.data();
@@ -138,15 +141,16 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
         const float* __restrict h =
             ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);
         for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
-            acc[e] += t.w0 * h[e + C];
-            acc[e] += t.w1 * h[e];
+            float& a = acc[std::size_t(e / C) * stride + std::size_t(e % C)];
+            a += t.w0 * h[e + C];
+            a += t.w1 * h[e];
         }
     }
     cursor = k;
 }
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                              const float*, const RingSlot*, std::int64_t, float*);
+                              const float*, const RingSlot*, std::int64_t, float*, std::size_t);
 
 GatherKernel pick_kernel(int C, int bt) {
     // Hierarchical sets on fine meshes march in blocks of 1 to 8 bins (LinkSet::block_bins).
@@ -173,6 +177,10 @@ constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
 // Links per receiver below which the sources are not tiled.
 constexpr std::size_t kDenseRow = 256;
+// The long pass's longest window, bins: links at least this long are applied this many bins at a
+// time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
+constexpr int kLongestWindow = 32;
+constexpr int kMaxWindows = 16;
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
@@ -189,6 +197,16 @@ struct SolvePlan {
     std::size_t source_tile = kSourceTile;
     int threads = 1;
     int bt = 0;                     // block length, bins (a power of two)
+    // Windows of the long pass: window s is bt << s bins long and is applied at the blocks that
+    // start at its multiples, to the links of delay >= its length (and below the next window's;
+    // the last takes every longer one). The accumulators hold the next `acc_bins` bins.
+    int windows = 1;
+    int acc_bins = 0;               // the last window's length: bt << (windows - 1)
+    // Per receiver: where its links of each window start, then where its row ends (windows + 1
+    // offsets); with one window, the whole row (the kernel skips links shorter than the block).
+    std::vector<std::uint64_t> segments;
+    const Links* links = nullptr;   // the set's links, or `sorted` when their rows were not by octave
+    Links sorted;
     int C = 3;                      // channels marched (1 for a grey scene)
     DelayMode delay = DelayMode::Linear;
     double start_m = 0.0, inv_bin = 0.0;
@@ -204,14 +222,33 @@ struct SolvePlan {
     // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
     // link needs: most patches of a hierarchical set send only to near ones (or not at all).
     std::vector<int> send_lag;      // per node: its longest outgoing link's lag, bins
+    std::vector<int> send_window;   // per node: its longest outgoing long link's window, bins (0: none)
     std::vector<RingSlot> slots;    // per node
     std::size_t ring_floats = 0;    // per layer
-    int ring = 0, mirror = 0;       // longest ring; mirror length
+    int ring = 0;                   // longest ring
     std::int64_t T = 0, b_begin = 0, blocks = 0;
     int fed_layers = 0;             // layers that gather from links
-    GatherKernel kernel = nullptr;  // the long-link kernel for (C, bt), or null for the generic one
+    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
 
-    std::size_t block_values() const { return m * std::size_t(bt) * std::size_t(C); }
+    std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
+    // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
+    // every node together), so that the bin-by-bin passes read them contiguously.
+    std::size_t acc_at(std::size_t i, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + i) * std::size_t(C);
+    }
+    std::size_t acc_stride() const { return m * std::size_t(C); }
+    // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators: what the
+    // bin-by-bin passes read (a few bins of every patch, contiguous), besides the rings.
+    int recent_bins = 0;
+    std::size_t recent_at(std::size_t i, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * n + i) * std::size_t(C);
+    }
+    int window_bins(int s) const { return bt << s; }
+    // The window of a link `lag` bins long: -1 below the block.
+    int window_of(int lag) const {
+        if (lag < bt) return -1;
+        return std::min(int(std::bit_width(unsigned(lag / bt))) - 1, windows - 1);
+    }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
     std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
 };
@@ -241,13 +278,17 @@ void split_links(const Links& links, SolvePlan& plan) {
     const ClusterTree& tree = *plan.tree;
     BinLinks bins{std::vector<std::vector<ShortLink>>(plan.n), std::vector<std::vector<SameBinLink>>(plan.n)};
     plan.send_lag.assign(plan.m, 0);
+    plan.send_window.assign(plan.m, 0);
     for (std::size_t i = 0; i < plan.m; ++i) {
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
             const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             plan.max_lag = std::max(plan.max_lag, t.lag);
             const std::uint32_t s = links.source[k];
             plan.send_lag[s] = std::max(plan.send_lag[s], t.lag);
-            if (t.lag >= plan.bt) continue;
+            if (t.lag >= plan.bt) {
+                plan.send_window[s] = std::max(plan.send_window[s], plan.window_bins(plan.window_of(t.lag)));
+                continue;
+            }
             if (i < plan.n && s < plan.n) {
                 add_bin_link(bins, i, s, t, 1.0f);
                 continue;
@@ -268,6 +309,63 @@ void split_links(const Links& links, SolvePlan& plan) {
         std::vector<SameBinLink>().swap(bins.same[i]);
         plan.short_row[i + 1] = plan.short_links.size();
         plan.same_row[i + 1] = plan.same_links.size();
+    }
+}
+
+// The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
+// hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
+// other rows are sorted here, into a copy, when more than one window is used.
+void plan_windows(const Links& links, SolvePlan& plan) {
+    plan.acc_bins = std::max(plan.bt, kLongestWindow);
+    plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
+    TPRF_CHECK_LE(plan.windows, kMaxWindows);
+    plan.links = &links;
+    const std::size_t S = std::size_t(plan.windows);
+    plan.segments.assign(plan.m * (S + 1), 0);
+    auto window = [&](const Links& l, std::uint64_t k) {
+        return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
+    };
+    if (S == 1) {
+        for (std::size_t i = 0; i < plan.m; ++i) {
+            plan.segments[2 * i] = links.row[i];
+            plan.segments[2 * i + 1] = links.row[i + 1];
+        }
+        return;
+    }
+    bool ordered = true;
+    for (std::size_t i = 0; i < plan.m && ordered; ++i)
+        for (std::uint64_t k = links.row[i] + 1; k < links.row[i + 1] && ordered; ++k)
+            ordered = window(links, k - 1) <= window(links, k);
+    if (!ordered) {
+        // A stable sort of each row by window: sources stay non-decreasing within a window.
+        Links& out = plan.sorted;
+        out.row = links.row;
+        out.source.resize(links.size());
+        out.ff.resize(links.size());
+        out.distance.resize(links.size());
+        std::vector<std::uint64_t> order;
+        for (std::size_t i = 0; i < plan.m; ++i) {
+            order.clear();
+            for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) order.push_back(k);
+            std::stable_sort(order.begin(), order.end(),
+                             [&](std::uint64_t a, std::uint64_t b) { return window(links, a) < window(links, b); });
+            for (std::size_t q = 0; q < order.size(); ++q) {
+                const std::uint64_t at = links.row[i] + q;
+                out.source[at] = links.source[order[q]];
+                out.ff[at] = links.ff[order[q]];
+                out.distance[at] = links.distance[order[q]];
+            }
+        }
+        plan.links = &plan.sorted;
+    }
+    const Links& l = *plan.links;
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        std::uint64_t k = l.row[i];
+        for (std::size_t s = 0; s < S; ++s) {
+            while (k < l.row[i + 1] && window(l, k) < int(s)) ++k;
+            plan.segments[i * (S + 1) + s] = k;
+        }
+        plan.segments[i * (S + 1) + S] = l.row[i + 1];
     }
 }
 
@@ -313,24 +411,29 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     plan.inv_bin_f = float(plan.inv_bin);
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
+    plan_windows(links, plan);
+    plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(links, plan);
-    plan.mirror = plan.bt + 1;
     plan.slots.resize(plan.m);
     for (std::size_t k = 0; k < plan.m; ++k) {
         const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
-        plan.slots[k] = {plan.ring_floats, length - 1, length};
-        plan.ring_floats += std::size_t(length + plan.mirror) * std::size_t(plan.C);
+        const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
+        plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
+        plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
         plan.ring = std::max(plan.ring, length);
     }
     std::vector<int>().swap(plan.send_lag);
+    std::vector<int>().swap(plan.send_window);
     // Light sent before the window opens still travels: march from the earliest pulse, block-aligned.
     std::int64_t first_pulse_bin = 0;
     for (const Pulse& p : illumination.pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
     plan.T = time.bins;
-    plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + plan.bt - 1) / plan.bt) * plan.bt;
+    // Aligned to the longest window, so that every window starts at the first block.
+    const std::int64_t align = plan.acc_bins;
+    plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + align - 1) / align) * align;
     plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
     for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
-    plan.kernel = pick_kernel(plan.C, plan.bt);
+    for (int s = 0; s < plan.windows; ++s) plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s));
     return plan;
 }
 
@@ -339,10 +442,12 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
 // of one OpenMP parallel region and share their loops among them.
 class March {
 public:
-    March(const PatchSet& patches, const Links& links, const Illumination& illumination, const SolvePlan& plan)
-        : m_patches(patches), m_links(links), m_illumination(illumination), m_plan(plan),
+    March(const PatchSet& patches, const Illumination& illumination, const SolvePlan& plan)
+        : m_patches(patches), m_links(*plan.links), m_illumination(illumination), m_plan(plan),
           m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
-          m_acc(std::size_t(plan.L), std::vector<float>(plan.block_values())),
+          m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
+          m_recent(std::size_t(plan.L),
+                   std::vector<float>(std::size_t(plan.recent_bins) * plan.n * std::size_t(plan.C), 0.0f)),
           m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
@@ -351,11 +456,12 @@ public:
 
     // Bytes of the ring buffers, block buffers and short-link lists.
     std::size_t working_bytes() const;
-    // Step 1 (in a region): per receiver, the block's emission and every long link as one contiguous
-    // multiply-add over the block, reading history that is already final.
+    // Step 1 (in a region): per receiver, the block's emission and, for every window that starts at
+    // this block, each of its links as one contiguous multiply-add over the window, reading history
+    // that is already final.
     void long_pass(std::int64_t b0);
     // Step 1b (in a region, clusters only): every cluster's long-link sums added into its children's.
-    void push_block();
+    void push_block(std::int64_t b0);
     // Step 2 (in a region): bin by bin, short links, then the same-bin system by Jacobi iteration.
     void short_pass(std::int64_t b0);
     // Step 2b (in a region, clusters only): every cluster's radiosity over the block from its children's.
@@ -363,19 +469,28 @@ public:
     // Step 3: the block's bins inside the window, handed to the sink.
     void emit_block(std::int64_t b0, const BlockSink& sink);
     int worst_jacobi_iterations() const { return m_worst_iterations.load(); }
+    std::uint64_t jacobi_sweeps() const { return m_sweeps; }
 
 private:
+    const float* recent(int layer, std::size_t patch, std::int64_t bin) const {
+        return m_recent[std::size_t(layer)].data() + m_plan.recent_at(patch, bin);
+    }
     float* ring_at(int layer, std::size_t patch, std::int64_t bin) {
         const RingSlot& slot = m_plan.slots[patch];
         return m_rings[std::size_t(layer)].data() + slot.offset + std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.C);
     }
+    // Node `patch`'s value at `bin` into its ring (and a patch's into the recent bins).
     void store(int layer, std::size_t patch, std::int64_t bin, const float* v);
+    void store_recent(int layer, std::size_t patch, std::int64_t bin, const float* v) {
+        float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(patch, bin);
+        for (int c = 0; c < m_plan.C; ++c) r[c] = v[c];
+    }
     // Layer that a pulse of order `order` enters besides the total (-1: none).
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
     void short_links_of(std::size_t i, std::int64_t b0, int o);
-    void push_node(std::uint32_t i);
+    void push_node(std::uint32_t i, std::int64_t b0);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
@@ -388,12 +503,14 @@ private:
     const Illumination& m_illumination;
     const SolvePlan& m_plan;
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
-    std::vector<std::vector<float>> m_acc;      // per layer: M x bt x C, long links' sums
+    std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
+    std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x N x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C, the block's emission (patches only)
     std::vector<float> m_base, m_iterate;       // L x N x C: one bin before / during the Jacobi sweeps
     std::vector<float> m_out_total, m_out_terms;
     float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
     std::atomic<int> m_worst_iterations{0};
+    std::uint64_t m_sweeps = 0;                 // written by one thread (omp single)
 };
 
 std::size_t March::working_bytes() const {
@@ -401,26 +518,27 @@ std::size_t March::working_bytes() const {
     std::size_t working = 0;
     for (const auto& r : m_rings) working += r.size() * sizeof(float);
     for (const auto& e : m_emit) working += e.size() * sizeof(float);
-    working += std::size_t(p.L) * p.block_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
+    working += std::size_t(p.L) * p.acc_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
                (m_out_total.size() + m_out_terms.size()) * sizeof(float) +
                p.short_links.size() * sizeof(ShortLink) + p.same_links.size() * sizeof(SameBinLink) +
-               2 * (p.n + 1) * sizeof(std::uint64_t) + p.slots.size() * sizeof(RingSlot);
+               2 * (p.n + 1) * sizeof(std::uint64_t) + p.slots.size() * sizeof(RingSlot) +
+               p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes();
     return working;
 }
 
 void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v) {
     const int C = m_plan.C;
+    if (patch < m_plan.n) store_recent(layer, patch, bin, v);
     const RingSlot& slot = m_plan.slots[patch];
     const int pos = int(bin & slot.mask);
     float* r = m_rings[std::size_t(layer)].data() + slot.offset;
     for (int c = 0; c < C; ++c) r[std::size_t(pos * C + c)] = v[c];
-    if (pos < m_plan.mirror)
+    if (pos < slot.mirror)
         for (int c = 0; c < C; ++c) r[std::size_t((pos + slot.length) * C + c)] = v[c];
 }
 
 void March::load_emission(std::size_t i, std::int64_t b0) {
     const int bt = m_plan.bt, C = m_plan.C;
-    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_acc[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
     if (i >= m_plan.n) return;  // clusters emit nothing of their own
     for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
     for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
@@ -435,26 +553,37 @@ void March::load_emission(std::size_t i, std::int64_t b0) {
     }
 }
 
-// Receivers [i0, i1) of one tile: their links (sorted by source) in source tiles, so that the
-// histories one source tile reads stay in cache for all the tile's receivers.
+// Receivers [i0, i1) of one tile: the links of every window that starts at b0 (sorted by source
+// within a window) in source tiles, so that the histories one source tile reads stay in cache for all
+// the tile's receivers.
 void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
     const SolvePlan& p = m_plan;
-    std::uint64_t cursor[kReceiverTile];
+    const std::size_t S = std::size_t(p.windows);
+    int due[kMaxWindows];
+    int count = 0;
+    for (int s = 0; s < p.windows; ++s)
+        if ((b0 & std::int64_t(p.window_bins(s) - 1)) == 0) due[count++] = s;
+    std::uint64_t cursor[kReceiverTile][kMaxWindows];
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         if (src < 0) continue;
         const float* ring_src = m_rings[std::size_t(src)].data();
-        for (std::size_t i = i0; i < i1; ++i) cursor[i - i0] = m_links.row[i];
+        for (std::size_t i = i0; i < i1; ++i)
+            for (int d = 0; d < count; ++d) cursor[i - i0][d] = p.segments[i * (S + 1) + std::size_t(due[d])];
         for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
             const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
             for (std::size_t i = i0; i < i1; ++i) {
-                float* a = m_acc[std::size_t(l)].data() + i * std::size_t(p.bt * p.C);
-                if (p.kernel)
-                    p.kernel(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src,
-                             p.slots.data(), b0, a);
-                else
-                    gather_long_any(m_links, cursor[i - i0], m_links.row[i + 1], s1, p.inv_bin_f, p.delay, ring_src,
-                                    p.slots.data(), b0, p.C, p.bt, a);
+                float* a = m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
+                for (int d = 0; d < count; ++d) {
+                    const int s = due[d];
+                    const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
+                    if (p.kernel[s])
+                        p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
+                                    p.slots.data(), b0, a, p.acc_stride());
+                    else
+                        gather_long_any(m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
+                                        p.slots.data(), b0, p.C, p.window_bins(s), a, p.acc_stride());
+                }
             }
         }
     }
@@ -480,13 +609,18 @@ void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
         const int src = p.layers.source[std::size_t(l)];
         float g[3] = {0, 0, 0};
         const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+        // The long links' sums for this bin, taken (the accumulator ring's slot is free again).
+        float* acc = m_acc[std::size_t(l)].data() + p.acc_at(i, bin);
+        for (int c = 0; c < C; ++c) {
+            g[c] = acc[c];
+            acc[c] = 0.0f;
+        }
         if (src >= 0) {
-            for (int c = 0; c < C; ++c) g[c] = m_acc[std::size_t(l)][at + std::size_t(c)];
             for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
                 const ShortLink& s = p.short_links[k];
-                const float* h1 = ring_at(src, s.source, bin - s.lag - 1);
+                const float* h1 = recent(src, s.source, bin - s.lag - 1);
                 if (s.lag > 0) {
-                    const float* h0 = ring_at(src, s.source, bin - s.lag);
+                    const float* h0 = recent(src, s.source, bin - s.lag);
                     for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
                 } else {
                     for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
@@ -502,22 +636,26 @@ void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
 }
 
 // Node i's long-link sums over the block plus its parent's (after the parent's own push).
-void March::push_node(std::uint32_t i) {
+void March::push_node(std::uint32_t i, std::int64_t b0) {
     const std::uint32_t up = m_plan.tree->parent[i];
     if (up == kNoNode) return;
-    const std::size_t len = std::size_t(m_plan.bt * m_plan.C);
-    for (int l = 0; l < m_plan.L; ++l) {
-        float* own = m_acc[std::size_t(l)].data() + std::size_t(i) * len;
-        const float* from = m_acc[std::size_t(l)].data() + std::size_t(up) * len;
-        for (std::size_t e = 0; e < len; ++e) own[e] += from[e];
-    }
+    for (int l = 0; l < m_plan.L; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
+            float* own = m_acc[std::size_t(l)].data() + m_plan.acc_at(i, bin);
+            const float* from = m_acc[std::size_t(l)].data() + m_plan.acc_at(up, bin);
+            for (int c = 0; c < m_plan.C; ++c) own[c] += from[c];
+        }
 }
 
-// Cluster c's radiosity over the block's bins: the area-weighted mean of its children's.
+// Cluster c's radiosity over the block's bins: the area-weighted mean of its children's. Its long-link
+// sums for the block, pushed to its children by now, are cleared.
 void March::pull_node(std::uint32_t c, std::int64_t b0) {
     const ClusterTree& t = *m_plan.tree;
     const auto [a, b] = t.children[c - t.leaves];
     const float wa = float(t.area[a] / t.area[c]), wb = float(t.area[b] / t.area[c]);
+    for (int l = 0; l < m_plan.L; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin)
+            std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), m_plan.C, 0.0f);
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
             const float* va = ring_at(l, a, bin);
@@ -556,8 +694,8 @@ void March::over_tree(bool down, NodeFn visit) {
     }
 }
 
-void March::push_block() {
-    over_tree(true, [&](std::uint32_t i) { push_node(i); });
+void March::push_block(std::int64_t b0) {
+    over_tree(true, [&](std::uint32_t i) { push_node(i, b0); });
 }
 
 void March::pull_block(std::int64_t b0) {
@@ -584,10 +722,10 @@ bool March::jacobi_sweep(std::int64_t bin) {
             float g[3] = {0, 0, 0};
             if (src >= 0)
                 for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
-                    const float* h = ring_at(src, p.same_links[k].source, bin);
+                    const float* h = recent(src, p.same_links[k].source, bin);
                     for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
                 }
-            const float* now = ring_at(l, i, bin);
+            const float* now = recent(l, i, bin);
             for (int c = 0; c < C; ++c) {
                 next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
                 change = std::max(change, std::abs(next[c] - now[c]));
@@ -606,7 +744,8 @@ bool March::jacobi_sweep(std::int64_t bin) {
     const bool converged = m_change <= 1e-7f * m_largest;
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < p.n; ++i)
-        for (int l = 0; l < p.L; ++l) store(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
+        for (int l = 0; l < p.L; ++l)
+            store_recent(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
     return converged;
 }
 
@@ -620,9 +759,14 @@ void March::short_pass(std::int64_t b0) {
 #pragma omp single
             {
                 if (iteration > m_worst_iterations.load()) m_worst_iterations.store(iteration);
+                m_sweeps += std::uint64_t(iteration);
             }
             break;
         }
+        // The sweeps updated the recent bins only: the rings take the converged values.
+#pragma omp for schedule(static)
+        for (std::size_t i = 0; i < m_plan.n; ++i)
+            for (int l = 0; l < m_plan.L; ++l) store(l, i, b0 + o, recent(l, i, b0 + o));
     }
 }
 
@@ -720,7 +864,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
     TPRF_CHECK_EQ(links.receivers(), set.nodes());
     TPRF_CHECK_EQ(illumination.row.size(), patches.size() + 1);
     const SolvePlan plan = make_plan(patches, set, illumination, time, options);
-    March march(patches, links, illumination, plan);
+    March march(patches, illumination, plan);
     SolveStats stats;
     stats.block_bins = plan.bt;
     stats.ring_bins = plan.ring;
@@ -736,7 +880,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
 #pragma omp parallel num_threads(plan.threads)
         {
             march.long_pass(b0);
-            if (plan.clusters) march.push_block();
+            if (plan.clusters) march.push_block(b0);
             if (omp_get_thread_num() == 0) long_seconds = lap(since);
             march.short_pass(b0);
             if (plan.clusters) march.pull_block(b0);
@@ -750,6 +894,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
     stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(plan.fed_layers) *
                              std::uint64_t(plan.blocks) * std::uint64_t(plan.bt);
     stats.max_jacobi_iterations = march.worst_jacobi_iterations();
+    stats.jacobi_sweeps = march.jacobi_sweeps();
     stats.short_links = plan.short_links.size();
     return stats;
 }

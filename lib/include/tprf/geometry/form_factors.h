@@ -20,7 +20,7 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
 
 /// Options of polygon_form_factor's adaptive quadrature.
 struct FormFactorQuadrature {
-    double relative_tolerance = 1e-3;  ///< stop refining a cell when its refinement changes F by less
+    double relative_tolerance = 1e-2;  ///< stop refining a cell when its refinement changes F by less
     int max_depth = 5;                 ///< at most 4^max_depth cells
 };
 

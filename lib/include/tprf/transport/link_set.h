@@ -15,13 +15,30 @@
 #include "tprf/scene/scene.h"
 #include "tprf/transport/links.h"
 
+#include <algorithm>
+#include <bit>
+
 namespace tprf {
 
 class Visibility;
 
+/// Delay octaves: a link of delay d bins (floor of distance * inv_bin, in float, as the solver
+/// computes it) is in octave 0 when d < 1, else 1 + floor(log2 d), at most kDelayOctaves - 1. The
+/// solver applies the links of octave k >= 1 in blocks of 2^(k-1) bins (and longer ones in its
+/// longest block), so a row sorted by octave splits into one range per block length.
+constexpr int kDelayOctaves = 16;
+inline int delay_octave(float distance, float inv_bin) {
+    const float d = distance * inv_bin;
+    if (!(d >= 1.0f)) return 0;
+    const int lag = d < float(1 << 30) ? int(d) : (1 << 30);
+    return std::min(int(std::bit_width(unsigned(lag))), kDelayOctaves - 1);
+}
+
 struct LinkSet {
     ClusterTree tree;  ///< nodes; no clusters for flat links
-    Links links;       ///< CSR over tree.nodes() receivers, sources non-decreasing within a row
+    /// CSR over tree.nodes() receivers. Flat: sources non-decreasing within a row. Hierarchical (with
+    /// a bin width): delay octaves non-decreasing within a row, then sources, then distances.
+    Links links;
     /// Patch-to-patch links whose source emits (area emitters), CSR over the N patches: the exact
     /// first bounce of area light is computed from these (illuminate()), not from `links`.
     Links emitters;

@@ -56,6 +56,7 @@ struct SolveStats {
     std::uint64_t link_bin_updates = 0; ///< links x bins x fed layers
     std::size_t working_bytes = 0;      ///< ring buffers, block buffers and short-link lists
     int max_jacobi_iterations = 0;      ///< worst zero-delay iteration count in one bin
+    std::uint64_t jacobi_sweeps = 0;    ///< zero-delay sweeps over all bins
     std::uint64_t short_links = 0;      ///< links shorter than a block (applied bin by bin)
     double seconds_long = 0.0;          ///< wall time in the blocked long-link pass
     double seconds_short = 0.0;         ///< wall time in the bin-by-bin pass (short and same-bin links)
