@@ -28,13 +28,6 @@
 namespace tprf {
 namespace {
 
-// The numbers that the bounds below were set from, printed when TPRF_TEST_MEASURE is set (the
-// hierarchy is being tuned: rerun with it to see where a change moved them).
-#define MEASURED(...)                                                                    \
-    do {                                                                                 \
-        if (std::getenv("TPRF_TEST_MEASURE")) std::printf("[measured] " __VA_ARGS__);    \
-    } while (false)
-
 struct Prepared {
     PatchSet patches;
     std::unique_ptr<Visibility> vis;

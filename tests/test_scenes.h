@@ -4,10 +4,19 @@
 #include "tprf/scene/scene.h"
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
 #include <string>
+
+// The numbers that a test's bounds were set from, printed when TPRF_TEST_MEASURE is set (rerun with
+// it to see where a change moved them).
+#define MEASURED(...)                                                                    \
+    do {                                                                                 \
+        if (std::getenv("TPRF_TEST_MEASURE")) std::printf("[measured] " __VA_ARGS__);    \
+    } while (false)
 
 namespace tprf::test {
 

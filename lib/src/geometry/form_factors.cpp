@@ -131,7 +131,7 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
         const Vec3 cross = b.cross(a);
         const double s = cross.norm();
         if (s <= 1e-300) continue;  // x on the edge's line: the edge subtends no angle
-        const double theta = std::atan2(s, a.dot(b));
+        const double theta = angle_between(s, a.dot(b));
         sum += theta * n.dot(cross) / s;
     }
     return std::max(0.0, sum / (2.0 * M_PI));

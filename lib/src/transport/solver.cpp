@@ -37,14 +37,14 @@ inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
 }
 
 struct ShortLink {
-    std::uint32_t source;
+    std::uint32_t source;  // the source patch's position (SolvePlan::order)
     int lag;     // < block length; lag 0 keeps only its w1 tap here (w0 is in the same-bin list)
     float w0;
     float w1;
 };
 
 struct SameBinLink {
-    std::uint32_t source;
+    std::uint32_t source;  // the source patch's position (SolvePlan::order)
     float w;
 };
 
@@ -177,6 +177,8 @@ constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
 // Links per receiver below which the sources are not tiled.
 constexpr std::size_t kDenseRow = 256;
+// Most same-bin sweeps in one bin.
+constexpr int kMaxSweeps = 200;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;
@@ -214,9 +216,21 @@ struct SolvePlan {
     LayerPlan layers;
     int L = 0;                      // layers
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
-    std::vector<std::uint64_t> short_row, same_row;
+    std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<ShortLink> short_links;
     std::vector<SameBinLink> same_links;
+    // The bin-by-bin passes visit patches in the cluster tree's leaf order (near patches together)
+    // and keep their state by position in it: short and same-bin links name their source's position.
+    std::vector<std::uint32_t> order;     // position -> patch
+    std::vector<std::uint32_t> position;  // patch -> position
+    std::vector<float> albedo;            // by position, 3 per patch
+    // Where node i's values are kept in arrays over nodes that the bin-by-bin passes read: patches
+    // by position, clusters by id.
+    std::size_t node_slot(std::size_t i) const { return i < n ? position[i] : i; }
+    // Chebyshev acceleration of the same-bin sweeps: an upper bound of the spectral radius of the
+    // same-bin operator (albedo x weights), or 0 to sweep plain Jacobi.
+    double same_radius = 0.0;
+    std::vector<float> omega;  // Chebyshev weights of sweeps 1..kMaxSweeps
     int max_lag = 0;
     // Rings: the window [t - lag - 1, t] of every read from a node must fit, plus one block; mirrored
     // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
@@ -234,14 +248,14 @@ struct SolvePlan {
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
     // every node together), so that the bin-by-bin passes read them contiguously.
     std::size_t acc_at(std::size_t i, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + i) * std::size_t(C);
+        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + node_slot(i)) * std::size_t(C);
     }
     std::size_t acc_stride() const { return m * std::size_t(C); }
-    // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators: what the
-    // bin-by-bin passes read (a few bins of every patch, contiguous), besides the rings.
+    // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators and by
+    // position: what the bin-by-bin passes read (a few bins of every patch, contiguous), besides the rings.
     int recent_bins = 0;
-    std::size_t recent_at(std::size_t i, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * n + i) * std::size_t(C);
+    std::size_t recent_at(std::size_t q, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * n + q) * std::size_t(C);
     }
     int window_bins(int s) const { return bt << s; }
     // The window of a link `lag` bins long: -1 below the block.
@@ -274,7 +288,7 @@ void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, con
 // touch patches only: a link shorter than a block with a cluster at either end (which the
 // hierarchical build avoids when it knows the bin) is applied as the links between their patches,
 // the receiver's each taking the whole link (push), the source's each its share of the area (pull).
-void split_links(const Links& links, SolvePlan& plan) {
+void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     const ClusterTree& tree = *plan.tree;
     BinLinks bins{std::vector<std::vector<ShortLink>>(plan.n), std::vector<std::vector<SameBinLink>>(plan.n)};
     plan.send_lag.assign(plan.m, 0);
@@ -300,15 +314,25 @@ void split_links(const Links& links, SolvePlan& plan) {
                 }
         }
     }
+    plan.order.assign(tree.leaf_order.begin(), tree.leaf_order.end());
+    plan.position.assign(plan.n, 0);
+    for (std::size_t q = 0; q < plan.n; ++q) plan.position[plan.order[q]] = std::uint32_t(q);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        for (ShortLink& l : bins.shorts[i]) l.source = plan.position[l.source];
+        for (SameBinLink& l : bins.same[i]) l.source = plan.position[l.source];
+    }
     plan.short_row.assign(plan.n + 1, 0);
     plan.same_row.assign(plan.n + 1, 0);
-    for (std::size_t i = 0; i < plan.n; ++i) {
+    plan.albedo.resize(plan.n * 3);
+    for (std::size_t q = 0; q < plan.n; ++q) {
+        const std::size_t i = plan.order[q];
         plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
         plan.same_links.insert(plan.same_links.end(), bins.same[i].begin(), bins.same[i].end());
         std::vector<ShortLink>().swap(bins.shorts[i]);
         std::vector<SameBinLink>().swap(bins.same[i]);
-        plan.short_row[i + 1] = plan.short_links.size();
-        plan.same_row[i + 1] = plan.same_links.size();
+        plan.short_row[q + 1] = plan.short_links.size();
+        plan.same_row[q + 1] = plan.same_links.size();
+        for (int c = 0; c < 3; ++c) plan.albedo[q * 3 + std::size_t(c)] = float(patches.albedo[i][c]);
     }
 }
 
@@ -369,6 +393,32 @@ void plan_windows(const Links& links, SolvePlan& plan) {
     }
 }
 
+// An upper bound of the spectral radius of the same-bin operator M (M_ij = albedo_i w_ij, the largest
+// albedo over channels): by Collatz and Wielandt, rho(M) <= max_i (Mv)_i / v_i for any positive v,
+// and power iterations from v = 1 bring that bound down to rho. M is similar to a symmetric matrix
+// (the weights are reciprocal: A_i w_ij = A_j w_ji), so its spectrum lies in [-rho, rho], the
+// interval that the Chebyshev weights assume.
+double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
+    const std::size_t n = plan.n;
+    std::vector<double> v(n, 1.0), y(n);
+    double bound = 0.0;
+    for (int iteration = 0; iteration < 24; ++iteration) {
+        bound = 0.0;
+        double top = 0.0;
+        for (std::size_t q = 0; q < n; ++q) {  // by position, as the links
+            double sum = 0.0;
+            for (std::uint64_t k = plan.same_row[q]; k < plan.same_row[q + 1]; ++k)
+                sum += double(plan.same_links[k].w) * v[plan.same_links[k].source];
+            y[q] = patches.albedo[plan.order[q]].maxCoeff() * sum;
+            bound = std::max(bound, y[q] / v[q]);
+            top = std::max(top, y[q]);
+        }
+        if (!(top > 0.0)) return 0.0;
+        for (std::size_t i = 0; i < n; ++i) v[i] = y[i] / top + 1e-3;  // kept positive
+    }
+    return bound;
+}
+
 // The subtrees that threads take whole during push and pull: the highest nodes with at most
 // `cut` patches below, so that there are several per thread; the clusters above them, in preorder.
 void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
@@ -413,9 +463,22 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     plan.L = plan.layers.layers();
     plan_windows(links, plan);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
-    split_links(links, plan);
+    split_links(patches, links, plan);
+    // Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in
+    // as many sweeps as there are orders), so they sweep plain Jacobi.
+    if (plan.L == 1 && plan.layers.source[0] == 0 && !plan.same_links.empty()) {
+        const double rho = same_bin_radius(patches, plan);
+        if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
+        double w = 1.0;
+        for (int k = 1; k <= kMaxSweeps; ++k) {
+            w = k == 1 ? 1.0 : k == 2 ? 1.0 / (1.0 - 0.5 * rho * rho) : 1.0 / (1.0 - 0.25 * rho * rho * w);
+            plan.omega.push_back(float(w));
+        }
+    }
     plan.slots.resize(plan.m);
-    for (std::size_t k = 0; k < plan.m; ++k) {
+    // Patches' rings in leaf order (the bin-by-bin passes store them in that order), then clusters'.
+    for (std::size_t at = 0; at < plan.m; ++at) {
+        const std::size_t k = at < plan.n ? plan.order[at] : at;
         const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
         const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
         plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
@@ -451,6 +514,8 @@ public:
           m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
+          m_previous(plan.same_radius > 0.0 ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0),
+          m_same(plan.same_links.empty() ? 0 : std::size_t(plan.L) * plan.n * std::size_t(plan.C), 0.0f),
           m_out_total(plan.n * std::size_t(plan.bt) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * 3) {}
 
@@ -472,29 +537,34 @@ public:
     std::uint64_t jacobi_sweeps() const { return m_sweeps; }
 
 private:
-    const float* recent(int layer, std::size_t patch, std::int64_t bin) const {
-        return m_recent[std::size_t(layer)].data() + m_plan.recent_at(patch, bin);
+    const float* recent(int layer, std::size_t q, std::int64_t bin) const {
+        return m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
+    }
+    // The bin-by-bin state of the patch at position q (m_base, m_iterate, m_previous, m_same).
+    std::size_t state_at(int layer, std::size_t q) const {
+        return (std::size_t(layer) * m_plan.n + q) * std::size_t(m_plan.C);
     }
     float* ring_at(int layer, std::size_t patch, std::int64_t bin) {
         const RingSlot& slot = m_plan.slots[patch];
         return m_rings[std::size_t(layer)].data() + slot.offset + std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.C);
     }
-    // Node `patch`'s value at `bin` into its ring (and a patch's into the recent bins).
-    void store(int layer, std::size_t patch, std::int64_t bin, const float* v);
-    void store_recent(int layer, std::size_t patch, std::int64_t bin, const float* v) {
-        float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(patch, bin);
+    // Node `node`'s value at `bin` into its ring.
+    void store(int layer, std::size_t node, std::int64_t bin, const float* v);
+    // The value at `bin` of the patch at position q into the recent bins.
+    void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v) {
+        float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
         for (int c = 0; c < m_plan.C; ++c) r[c] = v[c];
     }
     // Layer that a pulse of order `order` enters besides the total (-1: none).
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
-    void short_links_of(std::size_t i, std::int64_t b0, int o);
+    void short_links_of(std::size_t q, std::int64_t b0, int o);
     void push_node(std::uint32_t i, std::int64_t b0);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
-    bool jacobi_sweep(std::int64_t bin);
+    bool jacobi_sweep(std::int64_t bin, int iteration);
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
 
@@ -505,8 +575,10 @@ private:
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
     std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x N x C (SolvePlan::recent_at)
-    std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C, the block's emission (patches only)
-    std::vector<float> m_base, m_iterate;       // L x N x C: one bin before / during the Jacobi sweeps
+    std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
+    // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the sweep's new
+    // values, the iterate before the current one (Chebyshev), the last bin's same-bin share.
+    std::vector<float> m_base, m_iterate, m_previous, m_same;
     std::vector<float> m_out_total, m_out_terms;
     float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
     std::atomic<int> m_worst_iterations{0};
@@ -526,10 +598,9 @@ std::size_t March::working_bytes() const {
     return working;
 }
 
-void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v) {
+void March::store(int layer, std::size_t node, std::int64_t bin, const float* v) {
     const int C = m_plan.C;
-    if (patch < m_plan.n) store_recent(layer, patch, bin, v);
-    const RingSlot& slot = m_plan.slots[patch];
+    const RingSlot& slot = m_plan.slots[node];
     const int pos = int(bin & slot.mask);
     float* r = m_rings[std::size_t(layer)].data() + slot.offset;
     for (int c = 0; c < C; ++c) r[std::size_t(pos * C + c)] = v[c];
@@ -540,12 +611,13 @@ void March::store(int layer, std::size_t patch, std::int64_t bin, const float* v
 void March::load_emission(std::size_t i, std::int64_t b0) {
     const int bt = m_plan.bt, C = m_plan.C;
     if (i >= m_plan.n) return;  // clusters emit nothing of their own
-    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + i * std::size_t(bt * C), bt * C, 0.0f);
+    const std::size_t q = m_plan.position[i];
+    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + q * std::size_t(bt * C), bt * C, 0.0f);
     for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
         const Pulse& p = m_illumination.pulses[k];
         const std::int64_t b = m_plan.pulse_bin(p);
         if (!p.propagates || b < b0 || b >= b0 + bt) continue;
-        const std::size_t at = i * std::size_t(bt * C) + std::size_t((b - b0) * C);
+        const std::size_t at = q * std::size_t(bt * C) + std::size_t((b - b0) * C);
         const int targets[2] = {m_plan.layers.total, exact_layer(p.order)};
         for (int l : targets)
             if (l >= 0)
@@ -599,16 +671,18 @@ void March::long_pass(std::int64_t b0) {
     }
 }
 
-// Patch i at bin b0 + o: the long links' sum (with every cluster's above it) plus its short links, the
-// emission, stored in the ring.
-void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
+// The patch at position q at bin b0 + o: the long links' sum (with every cluster's above it) plus its
+// short links, the emission, stored in the recent bins (the rings take it after the same-bin sweeps).
+void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
     const SolvePlan& p = m_plan;
     const int C = p.C;
     const std::int64_t bin = b0 + o;
+    const std::size_t i = p.order[q];
+    const float* albedo = p.albedo.data() + 3 * q;
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         float g[3] = {0, 0, 0};
-        const std::size_t at = i * std::size_t(p.bt * C) + std::size_t(o * C);
+        const std::size_t at = q * std::size_t(p.bt * C) + std::size_t(o * C);
         // The long links' sums for this bin, taken (the accumulator ring's slot is free again).
         float* acc = m_acc[std::size_t(l)].data() + p.acc_at(i, bin);
         for (int c = 0; c < C; ++c) {
@@ -616,7 +690,7 @@ void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
             acc[c] = 0.0f;
         }
         if (src >= 0) {
-            for (std::uint64_t k = p.short_row[i]; k < p.short_row[i + 1]; ++k) {
+            for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
                 const ShortLink& s = p.short_links[k];
                 const float* h1 = recent(src, s.source, bin - s.lag - 1);
                 if (s.lag > 0) {
@@ -628,10 +702,16 @@ void March::short_links_of(std::size_t i, std::int64_t b0, int o) {
             }
         }
         float b[3];
-        for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + float(m_patches.albedo[i][c]) * g[c];
-        float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+        for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
+        float* keep = m_base.data() + state_at(l, q);
         for (int c = 0; c < C; ++c) keep[c] = b[c];
-        store(l, i, bin, b);
+        if (!m_same.empty()) {
+            // The same-bin sweeps start from the last bin's same-bin share: profiles are smooth where
+            // the sweeps take longest, so they start nearer their fixed point.
+            const float* last = m_same.data() + state_at(l, q);
+            for (int c = 0; c < C; ++c) b[c] += last[c];
+        }
+        store_recent(l, q, bin, b);
     }
 }
 
@@ -702,11 +782,16 @@ void March::pull_block(std::int64_t b0) {
     over_tree(false, [&](std::uint32_t c) { pull_node(c, b0); });
 }
 
-// One Jacobi sweep of the same-bin system (in a region); true when it has converged to float
-// resolution, where further sweeps cannot change the stored values meaningfully.
-bool March::jacobi_sweep(std::int64_t bin) {
+// One Jacobi sweep of the same-bin system (in a region), sweep `iteration` (from 1) of this bin; true
+// when it has converged to float resolution, where further sweeps cannot change the stored values
+// meaningfully. With SolvePlan::same_radius, Chebyshev's semi-iteration (Golub and Varga 1961):
+// x_{k+1} = omega_{k+1} (J(x_k) - x_{k-1}) + x_{k-1}, which has the same fixed point and, for a
+// spectrum in [-rho, rho], converges at rho / (1 + sqrt(1 - rho^2)) per sweep instead of rho.
+bool March::jacobi_sweep(std::int64_t bin, int iteration) {
     const SolvePlan& p = m_plan;
     const int C = p.C;
+    const bool extrapolate = p.same_radius > 0.0 && iteration > 1;
+    const float omega = extrapolate ? p.omega[std::size_t(std::min(iteration, kMaxSweeps) - 1)] : 1.0f;
 #pragma omp single
     {
         m_change = 0.0f;
@@ -714,20 +799,23 @@ bool March::jacobi_sweep(std::int64_t bin) {
     }
     float change = 0.0f, largest = 0.0f;
 #pragma omp for schedule(static) nowait
-    for (std::size_t i = 0; i < p.n; ++i) {
+    for (std::size_t q = 0; q < p.n; ++q) {
+        const float* albedo = p.albedo.data() + 3 * q;
         for (int l = 0; l < p.L; ++l) {
             const int src = p.layers.source[std::size_t(l)];
-            const float* keep = m_base.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
-            float* next = m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C);
+            const float* keep = m_base.data() + state_at(l, q);
+            float* next = m_iterate.data() + state_at(l, q);
             float g[3] = {0, 0, 0};
             if (src >= 0)
-                for (std::uint64_t k = p.same_row[i]; k < p.same_row[i + 1]; ++k) {
+                for (std::uint64_t k = p.same_row[q]; k < p.same_row[q + 1]; ++k) {
                     const float* h = recent(src, p.same_links[k].source, bin);
                     for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
                 }
-            const float* now = recent(l, i, bin);
+            const float* now = recent(l, q, bin);
+            const float* before = extrapolate ? m_previous.data() + state_at(l, q) : nullptr;
             for (int c = 0; c < C; ++c) {
-                next[c] = keep[c] + float(m_patches.albedo[i][c]) * g[c];
+                next[c] = keep[c] + albedo[c] * g[c];
+                if (extrapolate) next[c] = before[c] + omega * (next[c] - before[c]);
                 change = std::max(change, std::abs(next[c] - now[c]));
                 largest = std::max(largest, std::abs(next[c]));
             }
@@ -743,19 +831,20 @@ bool March::jacobi_sweep(std::int64_t bin) {
     // reset cannot overtake a slow thread.
     const bool converged = m_change <= 1e-7f * m_largest;
 #pragma omp for schedule(static)
-    for (std::size_t i = 0; i < p.n; ++i)
-        for (int l = 0; l < p.L; ++l)
-            store_recent(l, i, bin, m_iterate.data() + (std::size_t(l) * p.n + i) * std::size_t(C));
+    for (std::size_t q = 0; q < p.n; ++q)
+        for (int l = 0; l < p.L; ++l) {
+            if (p.same_radius > 0.0) std::copy_n(recent(l, q, bin), C, m_previous.data() + state_at(l, q));
+            store_recent(l, q, bin, m_iterate.data() + state_at(l, q));
+        }
     return converged;
 }
 
 void March::short_pass(std::int64_t b0) {
     for (int o = 0; o < m_plan.bt; ++o) {
 #pragma omp for schedule(static)
-        for (std::size_t i = 0; i < m_plan.n; ++i) short_links_of(i, b0, o);
-        if (m_plan.same_links.empty()) continue;
-        for (int iteration = 1; iteration <= 200; ++iteration) {
-            if (!jacobi_sweep(b0 + o)) continue;
+        for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of(q, b0, o);
+        for (int iteration = 1; iteration <= kMaxSweeps && !m_plan.same_links.empty(); ++iteration) {
+            if (!jacobi_sweep(b0 + o, iteration)) continue;
 #pragma omp single
             {
                 if (iteration > m_worst_iterations.load()) m_worst_iterations.store(iteration);
@@ -763,10 +852,17 @@ void March::short_pass(std::int64_t b0) {
             }
             break;
         }
-        // The sweeps updated the recent bins only: the rings take the converged values.
+        // The sweeps updated the recent bins only: the rings take the converged values, and the
+        // next bin's sweeps the same-bin share.
 #pragma omp for schedule(static)
-        for (std::size_t i = 0; i < m_plan.n; ++i)
-            for (int l = 0; l < m_plan.L; ++l) store(l, i, b0 + o, recent(l, i, b0 + o));
+        for (std::size_t q = 0; q < m_plan.n; ++q)
+            for (int l = 0; l < m_plan.L; ++l) {
+                const float* v = recent(l, q, b0 + o);
+                store(l, m_plan.order[q], b0 + o, v);
+                if (m_same.empty()) continue;
+                const std::size_t at = state_at(l, q);
+                for (int c = 0; c < m_plan.C; ++c) m_same[at + std::size_t(c)] = v[c] - m_base[at + std::size_t(c)];
+            }
     }
 }
 
