@@ -871,6 +871,8 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
     const SolvePlan& p = m_plan;
     const int C = p.C, L = p.L;
     const LayerPlan& plan = p.layers;
+    // From the recent bins (which hold the whole block), not the rings: compact, and in cache.
+    const std::size_t q = p.position[i];
     auto put = [&](float* out, int o, int c, float v) {
         out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
     };
@@ -878,11 +880,11 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
         const std::int64_t bin = lo + o;
         float total[3] = {0, 0, 0};
         if (plan.total >= 0) {
-            const float* v = ring_at(plan.total, i, bin);
+            const float* v = recent(plan.total, q, bin);
             for (int c = 0; c < C; ++c) total[c] = v[c];
         } else {
             for (int l = 0; l < L; ++l) {
-                const float* v = ring_at(l, i, bin);
+                const float* v = recent(l, q, bin);
                 for (int c = 0; c < C; ++c) total[c] += v[c];
             }
         }
@@ -891,12 +893,12 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
             float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * 3;
             float v[3] = {0, 0, 0};
             if (k < plan.exact) {
-                const float* r = ring_at(k, i, bin);
+                const float* r = recent(k, q, bin);
                 for (int c = 0; c < C; ++c) v[c] = r[c];
             } else {  // the tail: every order from k on
                 for (int c = 0; c < C; ++c) v[c] = total[c];
                 for (int l = 0; l < plan.exact; ++l) {
-                    const float* r = ring_at(l, i, bin);
+                    const float* r = recent(l, q, bin);
                     for (int c = 0; c < C; ++c) v[c] -= r[c];
                 }
             }
