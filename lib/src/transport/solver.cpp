@@ -121,6 +121,7 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
             local[e] += t.w1 * h[e];
         }
     }
+    if (k == cursor) return;  // no link of this window in this source tile: nothing to add
     cursor = k;
     for (int b = 0; b < BT; ++b)
         for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
@@ -649,6 +650,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
+                    if (cursor[i - i0][d] >= end) continue;
                     if (p.kernel[s])
                         p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
                                     p.slots.data(), b0, a, p.acc_stride());
@@ -871,8 +873,12 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
     const SolvePlan& p = m_plan;
     const int C = p.C, L = p.L;
     const LayerPlan& plan = p.layers;
-    // From the recent bins (which hold the whole block), not the rings: compact, and in cache.
+    // Short blocks from the recent bins (which hold the whole block; compact, and in cache), long ones
+    // from the ring, where a patch's bins are contiguous.
     const std::size_t q = p.position[i];
+    auto value = [&](int layer, std::int64_t bin) -> const float* {
+        return count <= 4 ? recent(layer, q, bin) : ring_at(layer, i, bin);
+    };
     auto put = [&](float* out, int o, int c, float v) {
         out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
     };
@@ -880,11 +886,11 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
         const std::int64_t bin = lo + o;
         float total[3] = {0, 0, 0};
         if (plan.total >= 0) {
-            const float* v = recent(plan.total, q, bin);
+            const float* v = value(plan.total, bin);
             for (int c = 0; c < C; ++c) total[c] = v[c];
         } else {
             for (int l = 0; l < L; ++l) {
-                const float* v = recent(l, q, bin);
+                const float* v = value(l, bin);
                 for (int c = 0; c < C; ++c) total[c] += v[c];
             }
         }
@@ -893,12 +899,12 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
             float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * 3;
             float v[3] = {0, 0, 0};
             if (k < plan.exact) {
-                const float* r = recent(k, q, bin);
+                const float* r = value(k, bin);
                 for (int c = 0; c < C; ++c) v[c] = r[c];
             } else {  // the tail: every order from k on
                 for (int c = 0; c < C; ++c) v[c] = total[c];
                 for (int l = 0; l < plan.exact; ++l) {
-                    const float* r = recent(l, q, bin);
+                    const float* r = value(l, bin);
                     for (int c = 0; c < C; ++c) v[c] -= r[c];
                 }
             }
