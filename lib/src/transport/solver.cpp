@@ -96,6 +96,9 @@ struct RingSlot {
     std::int32_t mirror;   // bins mirrored after the ring: the longest window a long link reads, plus one
 };
 
+// Links ahead whose source history the long-link kernel prefetches.
+constexpr std::uint64_t kAhead = 8;
+
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
@@ -110,6 +113,16 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
     float local[C * BT] = {};
     std::uint64_t k = cursor;
     for (; k < end && source[k] < source_end; ++k) {
+        // Sparse rows (hierarchical sets) read a scattered ring per link: ask for the one kAhead links
+        // on, and for the slot of the one after that, while this link is summed.
+        if (k + 2 * kAhead < end) {
+            __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
+            const RingSlot& next = slots[source[k + kAhead]];
+            const int lag = int(distance[k + kAhead] * inv_bin);
+            const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * C;
+            for (int line = 0; line < (C * (BT + 1) * 4 + 63) / 64 && line < 4; ++line)
+                __builtin_prefetch(at + 16 * line);
+        }
         const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const RingSlot& slot = slots[source[k]];
