@@ -327,6 +327,32 @@ TEST(Solver, OneAndTwoThreadsGiveIdenticalProfiles) {
     EXPECT_EQ(c.total, d.total);
 }
 
+TEST(Solver, EveryBlockLengthGivesTheSameProfiles) {
+    // Delays of 7 to 72 bins: blocks of 1 to 16 bins apply them in windows of 1 to 32 bins (rows of
+    // a flat set sorted into windows), blocks of 32 in one window, and blocks of 64 partly bin by
+    // bin. Every schedule sums the same terms, in another order: float rounding apart, one answer.
+    Scene scene;
+    scene.max_edge = 0.2;
+    test::add_closed_cube(scene, 1.0, 0.7);
+    scene.lights.push_back(PointLight{Vec3(0.3, 0.6, 0.8), Rgb(1.0, 0.5, 0.25)});
+    const Prepared p = prepare(scene);
+    SolverOptions reference;
+    reference.block_bins = 32;
+    const Profiles r = solve(p, time_axis(300, 0.02), reference);
+    float peak = 0.0f;
+    for (float v : r.total) peak = std::max(peak, v);
+    ASSERT_GT(peak, 0.0f);
+    for (int b : {1, 2, 4, 16, 64}) {
+        SolverOptions options;
+        options.block_bins = b;
+        const Profiles q = solve(p, time_axis(300, 0.02), options);
+        ASSERT_EQ(q.stats.block_bins, b);
+        float worst = 0.0f;
+        for (std::size_t k = 0; k < r.total.size(); ++k) worst = std::max(worst, std::abs(q.total[k] - r.total[k]));
+        EXPECT_LE(worst, 1e-5f * peak) << "blocks of " << b << " bins";
+    }
+}
+
 TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {
     // A grey 1 m cube cut into 4 x 4 squares per wall: N = 96 patches, each linked to the 80 squares of
     // the other five walls. The longest link joins opposite corner squares of opposite walls,
