@@ -42,6 +42,13 @@ Prepared prepare(const Scene& scene) {
     return p;
 }
 
+// The sample Cornell box cut into squares of at most 10 cm (about 300 patches).
+Scene cornell_box() {
+    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
+    scene.max_edge = 0.1;
+    return scene;
+}
+
 LinkSet hierarchical(const Prepared& p, double tolerance, int threads = 0, double bin_width_m = 0.0,
                      HierarchyStats* stats = nullptr) {
     LinkOptions options;
@@ -258,8 +265,7 @@ TEST(ClusterTree, InvariantsHoldOnAClosedCube) {
 }
 
 TEST(ClusterTree, InvariantsHoldOnTheCornellBoxMeshes) {
-    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
-    scene.max_edge = 0.1;
+    const Scene scene = cornell_box();
     const PatchSet patches = build_patches(scene);
     check_tree(patches, build_cluster_tree(patches));
     // One patch: a tree of its own, no clusters.
@@ -671,9 +677,7 @@ TEST(Hierarchy, NoIndirectLightArrivesBeforeItsShortestPathAllows) {
 // 5. Accuracy against the flat method.
 
 TEST(Hierarchy, CornellBoxMatchesTheFlatMethod) {
-    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
-    scene.max_edge = 0.1;
-    const Prepared p = prepare(scene);
+    const Prepared p = prepare(cornell_box());
     const std::size_t n = p.patches.size();
     const double w = 0.01;
     const TimeAxis time = test::time_axis(512, w);
@@ -754,8 +758,7 @@ TEST(Hierarchy, HiddenPatchesAndSurfacesBehindAPatchSendItNothing) {
     // unless they carry under a tenth of the tolerance, those were 0.447 (the ceiling behind the
     // light showed 16% of the scene's mean radiosity) and 0.144 (a face of the tall block lit by the
     // green wall behind it).
-    Scene scene = load_scene(std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "cornell-box.json");
-    scene.max_edge = 0.1;
+    const Scene scene = cornell_box();
     const Prepared p = prepare(scene);
     const std::size_t n = p.patches.size();
     const double tolerance = 0.01;

@@ -6,9 +6,11 @@
 
 #include <cmath>
 #include <cstddef>
+#include <initializer_list>
 #include <limits>
 #include <numbers>
 #include <string>
+#include <string_view>
 #include <utility>
 
 namespace tprf {
@@ -23,6 +25,19 @@ using nlohmann::json;
 // geometry are checked by validate() on the built Scene, whatever built it.
 
 using Node = JsonNode;
+
+// The enum value that `n` names among `choices`; else one error that says what `n` is and what it may be.
+template <class E>
+E parse_choice(const Node& n, std::string_view what, std::initializer_list<std::pair<std::string_view, E>> choices) {
+    const std::string name = n.string();
+    std::string expected;
+    for (const auto& [key, value] : choices) {
+        if (name == key) return value;
+        if (!expected.empty()) expected += " or ";
+        expected += in_quotes(key);
+    }
+    n.fail("unknown " + std::string(what) + " " + in_quotes(name) + " (expected " + expected + ")");
+}
 
 Camera parse_camera(const Node& n) {
     n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
@@ -165,15 +180,9 @@ SolverSettings parse_solver(const Node& n) {
         // refuses the other negative counts.
         if (s.max_bounces == -1) max_bounces->fail("must be >= 0");
     }
-    if (const auto delay = n.find("delay")) {
-        const std::string d = delay->string();
-        if (d == "nearest")
-            s.delay = DelayMode::Nearest;
-        else if (d == "linear")
-            s.delay = DelayMode::Linear;
-        else
-            delay->fail("unknown delay mode " + in_quotes(d) + " (expected \"nearest\" or \"linear\")");
-    }
+    if (const auto delay = n.find("delay"))
+        s.delay = parse_choice<DelayMode>(*delay, "delay mode",
+                                          {{"nearest", DelayMode::Nearest}, {"linear", DelayMode::Linear}});
     if (const auto bounces = n.find("bounces")) s.bounces = bounces->boolean();
     return s;
 }
@@ -184,15 +193,8 @@ TimeAxis parse_time(const JsonNode& n) {
     t.bins = n.child("bins").integer();
     t.bin_width = n.child("bin_width").number();
     if (const auto start = n.find("start")) t.start = start->number();
-    if (const auto unit = n.find("unit")) {
-        const std::string u = unit->string();
-        if (u == "m")
-            t.unit = TimeUnit::Metres;
-        else if (u == "ps")
-            t.unit = TimeUnit::Picoseconds;
-        else
-            unit->fail("unknown time unit " + in_quotes(u) + " (expected \"m\" or \"ps\")");
-    }
+    if (const auto unit = n.find("unit"))
+        t.unit = parse_choice<TimeUnit>(*unit, "time unit", {{"m", TimeUnit::Metres}, {"ps", TimeUnit::Picoseconds}});
     return t;
 }
 
@@ -207,15 +209,9 @@ double parse_max_edge(const Node& n) {
 LinkSettings parse_links(const Node& n) {
     n.check_keys({"method", "tolerance"});
     LinkSettings links;
-    if (const auto method = n.find("method")) {
-        const std::string m = method->string();
-        if (m == "flat")
-            links.method = LinkMethod::Flat;
-        else if (m == "hierarchical")
-            links.method = LinkMethod::Hierarchical;
-        else
-            method->fail("unknown link method " + in_quotes(m) + " (expected \"hierarchical\" or \"flat\")");
-    }
+    if (const auto method = n.find("method"))
+        links.method = parse_choice<LinkMethod>(*method, "link method",
+                                                {{"hierarchical", LinkMethod::Hierarchical}, {"flat", LinkMethod::Flat}});
     if (const auto tolerance = n.find("tolerance")) links.tolerance = tolerance->number();
     return links;
 }

@@ -166,23 +166,25 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, const RingSlot*, std::int64_t, float*, std::size_t);
 
-GatherKernel pick_kernel(int C, int bt) {
-    // Hierarchical sets on fine meshes march in blocks of 1 to 8 bins (LinkSet::block_bins).
-    if (C == 1 && bt == 1) return gather_long<1, 1>;
-    if (C == 1 && bt == 2) return gather_long<1, 2>;
-    if (C == 1 && bt == 4) return gather_long<1, 4>;
-    if (C == 3 && bt == 1) return gather_long<3, 1>;
-    if (C == 3 && bt == 2) return gather_long<3, 2>;
-    if (C == 3 && bt == 4) return gather_long<3, 4>;
-    if (C == 1 && bt == 8) return gather_long<1, 8>;
-    if (C == 1 && bt == 16) return gather_long<1, 16>;
-    if (C == 1 && bt == 32) return gather_long<1, 32>;
-    if (C == 1 && bt == 64) return gather_long<1, 64>;
-    if (C == 3 && bt == 8) return gather_long<3, 8>;
-    if (C == 3 && bt == 16) return gather_long<3, 16>;
-    if (C == 3 && bt == 32) return gather_long<3, 32>;
-    return nullptr;
+// The long-link kernel for C channels and windows of `bins` bins (the block's and the longer
+// windows up to kLongestWindow), or null for the generic one.
+template <int C>
+GatherKernel kernel_for(int bins) {
+    switch (bins) {
+        case 1: return gather_long<C, 1>;
+        case 2: return gather_long<C, 2>;
+        case 4: return gather_long<C, 4>;
+        case 8: return gather_long<C, 8>;
+        case 16: return gather_long<C, 16>;
+        case 32: return gather_long<C, 32>;
+        case 64:  // grey scenes only: 3 x 64 sums do not fit in registers
+            if constexpr (C == 1) return gather_long<C, 64>;
+            return nullptr;
+        default: return nullptr;
+    }
 }
+
+GatherKernel pick_kernel(int C, int bins) { return C == 1 ? kernel_for<1>(bins) : kernel_for<3>(bins); }
 
 // Tiles of the long-link pass (March::long_pass): a tile of 256 receivers walks its links in tiles of
 // 64 sources, so that those sources' rings (64 x ring x 3 floats, under 0.5 MB for rings of 512) stay
@@ -261,8 +263,9 @@ struct SolvePlan {
     std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
     // every node together), so that the bin-by-bin passes read them contiguously.
-    std::size_t acc_at(std::size_t i, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + node_slot(i)) * std::size_t(C);
+    std::size_t acc_at(std::size_t i, std::int64_t bin) const { return acc_at_slot(node_slot(i), bin); }
+    std::size_t acc_at_slot(std::size_t slot, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
     }
     std::size_t acc_stride() const { return m * std::size_t(C); }
     // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators and by
@@ -692,14 +695,13 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
     const SolvePlan& p = m_plan;
     const int C = p.C;
     const std::int64_t bin = b0 + o;
-    const std::size_t i = p.order[q];
     const float* albedo = p.albedo.data() + 3 * q;
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         float g[3] = {0, 0, 0};
         const std::size_t at = q * std::size_t(p.bt * C) + std::size_t(o * C);
         // The long links' sums for this bin, taken (the accumulator ring's slot is free again).
-        float* acc = m_acc[std::size_t(l)].data() + p.acc_at(i, bin);
+        float* acc = m_acc[std::size_t(l)].data() + p.acc_at_slot(q, bin);
         for (int c = 0; c < C; ++c) {
             g[c] = acc[c];
             acc[c] = 0.0f;
