@@ -44,7 +44,7 @@ const Stage& stage() {
         tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
         out->sources = tprf::light_sources(out->scene, out->patches, *out->visibility);
-        out->emission = tprf::illuminate(out->sources, out->patches, out->links.emitters, *out->visibility, emitter_options);
+        out->emission = tprf::illuminate(out->sources, out->patches, *out->visibility, emitter_options);
         return out;
     }();
     return *s;

@@ -46,7 +46,7 @@ const Problem& problem() {
         out->links = tprf::flat_link_set(out->patches, visibility, link_options);
         tprf::IlluminationOptions emitter_options;
         emitter_options.threads = kThreads;
-        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, out->links.emitters, visibility, emitter_options);
+        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, visibility, emitter_options);
         return out;
     }();
     return *p;

@@ -59,7 +59,7 @@ LinkSet hierarchical(const Prepared& p, double tolerance, int threads = 0, doubl
     return hierarchical_link_set(p.patches, *p.vis, options, h, stats);
 }
 
-Illumination lit(const Prepared& p, const LinkSet& set) { return illuminate(p.sources, p.patches, set.emitters, *p.vis); }
+Illumination lit(const Prepared& p) { return illuminate(p.sources, p.patches, *p.vis); }
 
 // One node pair's link: the pieces of its delay kernel summed.
 struct NodePair {
@@ -452,7 +452,7 @@ TEST(Hierarchy, FurnaceTotalRadiosityIsEmissionOverOneMinusAlbedo) {
     ASSERT_GT(cluster_link_count(h), 0u);
     for (double a : {0.5, 0.8}) {
         for (Rgb& albedo : p.patches.albedo) albedo = Rgb::Constant(a);
-        const Illumination e = lit(p, h);
+        const Illumination e = lit(p);
         // E: the power that the point light puts into the patches (order-1 pulses, albedo applied).
         double injected = 0.0;
         for (std::size_t i = 0; i < n; ++i)
@@ -596,7 +596,7 @@ TEST(Hierarchy, NoIndirectLightArrivesBeforeItsShortestPathAllows) {
     const double w = 0.01;
     const TimeAxis time = test::time_axis(400, w);
     const LinkSet h = hierarchical(p, 0.01, 0, w), f = flat_link_set(p.patches, *p.vis);
-    const Illumination e = lit(p, h);
+    const Illumination e = lit(p);
     SolverOptions options;
     options.bounce_terms = 3;  // orders 0, 1 and 2+
     const Profiles ph = solve(p, h, e, time, options), pf = solve(p, f, e, time, options);
@@ -684,7 +684,7 @@ TEST(Hierarchy, CornellBoxMatchesTheFlatMethod) {
     HierarchyStats stats;
     const LinkSet h = hierarchical(p, 0.01, 0, w, &stats), f = flat_link_set(p.patches, *p.vis);
     ASSERT_GT(stats.cluster_links, 0u);
-    const Illumination eh = lit(p, h), ef = lit(p, f);
+    const Illumination eh = lit(p), ef = eh;  // the same direct light for both
     const std::vector<Rgb> bh = solve_steady(p.patches, h, eh), bf = solve_steady(p.patches, f, ef);
     double diff = 0.0, ref = 0.0, worst_patch = 0.0;
     for (std::size_t i = 0; i < n; ++i)

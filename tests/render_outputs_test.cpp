@@ -187,14 +187,6 @@ double lambert_point(double rho, double intensity, const Vec3& light, const Vec3
     return rho / M_PI * intensity * std::max(0.0, normal.dot(d) / d.norm()) / d.squaredNorm();
 }
 
-// Differential area at x on a plane to a parallel rectangle [x0, x1] x [y0, y1] at height h above it:
-// Howell's B-3 (normal through a corner) added and subtracted over the four corners; B-3 is odd in each
-// side, so the signs handle points outside the rectangle's shadow too.
-double ff_point_to_parallel_rectangle(double px, double py, double x0, double x1, double y0, double y1, double h) {
-    const auto f = [&](double a, double b) { return tprf::test::ff_point_parallel_rectangle_corner(a, b, h); };
-    return f(x1 - px, y1 - py) - f(x0 - px, y1 - py) - f(x1 - px, y0 - py) + f(x0 - px, y0 - py);
-}
-
 class RenderOutputs : public ::testing::Test {
 protected:
     void SetUp() override {
@@ -648,12 +640,13 @@ TEST_F(RenderOutputs, AreaLitFloorMatchesTheFormFactorToTheEmitter) {
     const Cube cube = read_cube(out / "transient.npy");
     const Image steady = read_image(out / "steady.npy");
     const Pinhole cam(scene["camera"]);
-    const auto F = [&](double x, double y) { return ff_point_to_parallel_rectangle(x, y, -0.5, 0.5, -0.5, 0.5, h); };
+    const auto F = [&](double x, double y) { return tprf::test::ff_point_to_parallel_rectangle(x, y, -0.5, 0.5, -0.5, 0.5, h); };
     // The camera interpolates patch profiles (patch averages of F) between the patches within two
     // circumradii R of the point (imaging/gather.h). We compare pixels whose kernel lies wholly on the
     // floor (3R from its edges), and allow the variation of F within one circumradius of the point,
-    // plus 0.5% for the links' form factors (they match the patch average of F to 0.24% here). Measured:
-    // errors up to 3.0%, at most 0.31 of that allowance.
+    // plus 0.5% for the patch-to-emitter form factors (illuminate() integrates the patch average of F
+    // to about 1e-5; the 0.5% dates from the links' form factors, 0.24% off here). Measured: errors up
+    // to 3.0%, at most 0.31 of that allowance.
     const double R = max_edge / std::sqrt(2.0);
     int checked = 0, hidden = 0;
     for (int r = 0; r < N; ++r)
@@ -680,8 +673,9 @@ TEST_F(RenderOutputs, AreaLitFloorMatchesTheFormFactorToTheEmitter) {
             EXPECT_NEAR(steady.at(r, c), rho * Le * f, rho * Le * (variation + 0.005 * f))
                 << "floor pixel " << r << "," << c << " at " << x.transpose();
             // The first light: nothing before the straight line from the emitter (exact), and no later than
-            // the emitter's sample points allow: they lie max_edge / 4 inside each emitter patch, so the
-            // shortest sampled path may exceed the exact one by sqrt(2) max_edge / 4.
+            // sqrt(2) max_edge / 4 after it. Every floor patch here sees the emitter's paths spread over
+            // more than 16 bins, so illuminate() times them by 32 x 32 cells of 1/32 m, whose centres lie
+            // within sqrt(2) / 64 m (0.022 m < 0.035 m) of every point of the emitter.
             const Vec3 nearest(std::clamp(x.x(), -0.5, 0.5), std::clamp(x.y(), -0.5, 0.5), h);
             const double path = (x - nearest).norm() + leg;
             const int first = cube.first_bin(r, c);

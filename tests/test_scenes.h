@@ -86,6 +86,15 @@ inline double ff_point_parallel_rectangle_corner(double a, double b, double c) {
     return 1.0 / (2 * M_PI) * (A / a1 * std::atan(B / a1) + B / b1 * std::atan(A / b1));
 }
 
+/// Differential area at (px, py) on a plane to a parallel rectangle [x0, x1] x [y0, y1] at height h
+/// above it: Howell's B-3 added and subtracted over the four corners; B-3 is odd in each side, so the
+/// signs handle points outside the rectangle's shadow too.
+inline double ff_point_to_parallel_rectangle(double px, double py, double x0, double x1, double y0, double y1,
+                                             double h) {
+    const auto f = [&](double a, double b) { return ff_point_parallel_rectangle_corner(a, b, h); };
+    return f(x1 - px, y1 - py) - f(x0 - px, y1 - py) - f(x1 - px, y0 - py) + f(x0 - px, y0 - py);
+}
+
 /// A closed box [0,sx] x [0,sy] x [0,sz] of six rectangles facing inward.
 inline void add_closed_box(Scene& scene, const Vec3& size, double albedo = 0.5, double emission = 0.0) {
     const Vec3 X = size.x() * Vec3::UnitX(), Y = size.y() * Vec3::UnitY(), Z = size.z() * Vec3::UnitZ();

@@ -181,9 +181,8 @@ void emit_triangle(PatchSet& patches, const Triangle& t, std::size_t n, const Ob
 
 }  // namespace
 
-Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v) {
-    const Vec3* p = patches.polygon(i);
-    if (patches.corners(i) == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
+Vec3 polygon_point(const Vec3* p, std::size_t count, double u, double v) {
+    if (count == 4) return (1 - u) * (1 - v) * p[0] + u * (1 - v) * p[1] + u * v * p[2] + (1 - u) * v * p[3];
     const double su = std::sqrt(u);
     return (1 - su) * p[0] + su * (1 - v) * p[1] + su * v * p[2];
 }

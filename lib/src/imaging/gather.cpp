@@ -123,7 +123,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
     const double weight = points.weight;
     parallel_for(pts.size(), {options.threads, 256, true}, [&](std::size_t h) {
         const SensingPoint& sp = pts[h];
-        const float earliest = float(earliest_path(sources, patches, sp.point)) + sp.leg;
+        const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
         for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
             per_point_taps[h].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
         direct_arrivals(sp, weight, patches, sources, vis, per_point_direct[h]);

@@ -60,6 +60,7 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
     // The solve's phases (wall times): the long-link pass, the bin-by-bin pass, the output blocks.
     j["seconds"]["solve_phases"] = {
         {"long", r.stats.seconds_long}, {"short", r.stats.seconds_short}, {"sink", r.stats.seconds_sink}};
+    j["seconds"]["gather_phases"] = {{"illumination", r.seconds.illumination}};
     if (r.sensor) j["sensor"] = {{"exposure", exposure_name(*r.sensor)}, {"measurements", r.measurements}};
     j["peak_rss_mb"] = r.peak_rss_mb;
     j["dropped_degenerate_faces"] = r.dropped_degenerate;

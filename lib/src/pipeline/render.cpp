@@ -79,7 +79,8 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     IlluminationOptions light_options;
     light_options.threads = options.threads;
     light_options.merge_bins = &scene.time;
-    t.illumination = illuminate(t.sources, t.patches, t.links.emitters, *t.visibility, light_options);
+    t.illumination = illuminate(t.sources, t.patches, *t.visibility, light_options);
+    report.seconds.illumination = seconds_since(start);
     t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, {options.threads, options.progress});
     report.seconds.gather = seconds_since(start);
 }

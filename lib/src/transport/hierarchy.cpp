@@ -440,11 +440,6 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
     const float inv_bin = hierarchy.bin_width_m > 0.0 ? float(1.0 / hierarchy.bin_width_m) : 0.0f;
     set.links = assemble(set.tree.nodes(), parts, inv_bin, threads);
     if (hierarchy.bin_width_m > 0.0) set.block_bins = hierarchy.min_lag_bins;
-    // Area emitters light the scene by patch-to-patch links (illuminate()): exact first bounces.
-    std::vector<std::uint32_t> emitting;
-    for (std::size_t i = 0; i < patches.size(); ++i)
-        if ((patches.emission[i] > 0.0).any()) emitting.push_back(std::uint32_t(i));
-    set.emitters = emitter_patch_links(patches, visibility, options, emitting);
     if (options.progress) options.progress("links", 1.0);
     if (stats) {
         *stats = {};

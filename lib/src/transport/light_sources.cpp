@@ -1,5 +1,7 @@
 #include "tprf/transport/light_sources.h"
 
+#include "tprf/core/error.h"
+#include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/scene/scene.h"
@@ -9,10 +11,8 @@
 #include <variant>
 
 namespace tprf {
-namespace {
 
-// Distance from x to a convex planar polygon: to its plane when x projects inside, else to the
-// nearest edge.
+// To its plane when x projects inside, else to the nearest edge.
 double distance_to_polygon(const Vec3& x, const Vec3* poly, std::size_t count, const Vec3& normal) {
     const Vec3 projected = x - normal.dot(x - poly[0]) * normal;
     bool inside = true;
@@ -26,6 +26,24 @@ double distance_to_polygon(const Vec3& x, const Vec3* poly, std::size_t count, c
         best = std::min(best, (a + s * ab - x).norm());
     }
     return inside ? (x - projected).norm() : best;
+}
+
+namespace {
+
+AreaSource make_area_source(const Vec3* corners, std::size_t count, const Rgb& radiance, std::uint32_t object) {
+    TPRF_CHECK(count == 3 || count == 4);
+    AreaSource a;
+    std::copy(corners, corners + count, a.corners.begin());
+    a.count = std::uint8_t(count);
+    const Vec3 cross = count == 4 ? Vec3((corners[2] - corners[0]).cross(corners[3] - corners[1]))
+                                  : Vec3((corners[1] - corners[0]).cross(corners[2] - corners[0]));
+    a.normal = cross.normalized();
+    a.area = polygon_area(corners, count);
+    a.centroid = Vec3::Zero();
+    for (std::size_t k = 0; k < count; ++k) a.centroid += corners[k] / double(count);  // a parallelogram's or triangle's
+    a.radiance = radiance;
+    a.object = object;
+    return a;
 }
 
 // The spot as a Lambertian point: radiant intensity albedo P cos(theta) / pi about its normal.
@@ -76,9 +94,34 @@ LightSources light_sources(const Scene& scene, const PatchSet& patches, const Vi
         }
     for (const LaserSpot& spot : sources.spots)
         if (spot.hit) sources.points.push_back(spot_source(spot, patches, visibility));
-    for (std::size_t i = 0; i < patches.size(); ++i)
-        if ((patches.emission[i] > 0.0).any()) sources.emissive.push_back(std::uint32_t(i));
+    sources.areas = area_sources(&scene, patches);
     return sources;
+}
+
+Vec3 AreaSource::point(double u, double v) const { return polygon_point(corners.data(), count, u, v); }
+
+std::vector<AreaSource> area_sources(const Scene* scene, const PatchSet& patches) {
+    std::vector<AreaSource> out;
+    // One source per side of an emissive rectangle, made when its first patch on that side is met.
+    std::vector<std::array<bool, 2>> made(scene ? scene->objects.size() : 0, {false, false});
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+        if (!(patches.emission[i] > 0.0).any()) continue;
+        const std::uint32_t object = patches.object[i];
+        const RectangleShape* rect = nullptr;
+        if (scene && object < scene->objects.size()) rect = std::get_if<RectangleShape>(&scene->objects[object].shape);
+        if (!rect) {
+            out.push_back(make_area_source(patches.polygon(i), patches.corners(i), patches.emission[i], object));
+            continue;
+        }
+        const bool back = patches.normal[i].dot(rect->u.cross(rect->v)) < 0.0;
+        if (made[object][back]) continue;
+        made[object][back] = true;
+        std::array<Vec3, 4> c = {rect->origin, rect->origin + rect->u, rect->origin + rect->u + rect->v,
+                                 rect->origin + rect->v};
+        if (back) std::reverse(c.begin(), c.end());
+        out.push_back(make_area_source(c.data(), 4, patches.emission[i], object));
+    }
+    return out;
 }
 
 bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visibility& visibility,
@@ -97,11 +140,11 @@ bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visib
     return true;
 }
 
-double earliest_path(const LightSources& sources, const PatchSet& patches, const Vec3& x) {
+double earliest_path(const LightSources& sources, const Vec3& x) {
     double best = std::numeric_limits<double>::infinity();
     for (const PointSource& s : sources.points) best = std::min(best, s.path + (s.origin - x).norm());
-    for (std::uint32_t e : sources.emissive)
-        best = std::min(best, distance_to_polygon(x, patches.polygon(e), patches.corners(e), patches.normal[e]));
+    for (const AreaSource& a : sources.areas)
+        best = std::min(best, distance_to_polygon(x, a.polygon(), a.count, a.normal));
     return std::isfinite(best) ? best : 0.0;
 }
 

@@ -143,35 +143,6 @@ bool near_pair(const PatchSet& patches, const std::vector<double>& radius, doubl
     return (patches.centroid[i] - patches.centroid[j]).squaredNorm() < limit * limit;
 }
 
-Links emitter_patch_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
-                          const std::vector<std::uint32_t>& emitting) {
-    const std::size_t n = patches.size();
-    const std::vector<double> radius = circumradii(patches);
-    std::vector<std::vector<std::pair<std::uint32_t, float>>> rows(n);
-    parallel_for(emitting.empty() ? 0 : n, {options.threads, 64, true}, [&](std::size_t i) {
-        LinkStats counts;
-        for (std::uint32_t e : emitting) {
-            if (e == i) continue;
-            const std::size_t a = std::min<std::size_t>(i, e), b = std::max<std::size_t>(i, e);
-            PairFormFactors f;
-            if (patch_pair(patches, vis, options, radius, a, b, near_pair(patches, radius, options.near_factor, a, b), f,
-                           counts))
-                rows[i].push_back({e, float(a == i ? f.ij : f.ji)});
-        }
-    });
-    Links out;
-    out.row.assign(n + 1, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-        for (const auto& [e, ff] : rows[i]) {
-            out.source.push_back(e);
-            out.ff.push_back(ff);
-            out.distance.push_back(float((patches.centroid[i] - patches.centroid[e]).norm()));
-        }
-        out.row[i + 1] = out.source.size();
-    }
-    return out;
-}
-
 std::vector<double> circumradii(const PatchSet& patches) {
     std::vector<double> r(patches.size());
     for (std::size_t i = 0; i < patches.size(); ++i) r[i] = circumradius(patches, i);

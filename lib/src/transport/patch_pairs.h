@@ -31,12 +31,3 @@ bool near_pair(const PatchSet& patches, const std::vector<double>& radius, doubl
 std::vector<double> circumradii(const PatchSet& patches);
 
 }  // namespace tprf
-
-namespace tprf {
-
-/// Patch-to-patch links from each patch in `emitting` (sorted) to every patch that it faces and sees:
-/// a CSR over all patches, as emitter_links() would cut it out of the flat links.
-Links emitter_patch_links(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
-                          const std::vector<std::uint32_t>& emitting);
-
-}  // namespace tprf

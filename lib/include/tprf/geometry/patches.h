@@ -47,9 +47,15 @@ struct PatchOptions {
 /// the scene gives none). A two-sided object yields each patch twice, once per side.
 PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
 
-/// The point of patch i at (u, v) in the unit square: bilinear on a quad (uniform in area for the
-/// parallelograms of rectangle grids), the square-root map on a triangle (uniform in area).
-Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v);
+/// The point of a triangle or quad (`count` 3 or 4 corners) at (u, v) in the unit square: bilinear on a
+/// quad (uniform in area for parallelograms), the square-root map on a triangle (uniform in area).
+Vec3 polygon_point(const Vec3* corners, std::size_t count, double u, double v);
+
+/// The point of patch i at (u, v) in the unit square (polygon_point of its corners; the quads of
+/// rectangle grids are parallelograms).
+inline Vec3 patch_point(const PatchSet& patches, std::size_t i, double u, double v) {
+    return polygon_point(patches.polygon(i), patches.corners(i), u, v);
+}
 
 /// Largest distance from patch i's centroid to its corners, metres.
 double circumradius(const PatchSet& patches, std::size_t i);

@@ -6,9 +6,11 @@
 /// light_sources.h: a point light, or a laser's spot seen as a Lambertian point) reaches each
 /// stratified sample point x of a patch at its path plus |source - x|; a laser spot's own patch
 /// holds the reflected power at the spot's path; an emissive patch shows its own pulse at path 0,
-/// and its direct light reaches each linked patch with the energy of the exact form factor, spread
-/// over the paths |y - x| between stratified points y of the emitter and x of the receiver in
-/// proportion to the point-to-point kernel cos cos / r^2 (visibility included).
+/// and each area source (an emissive polygon, however many patches it is cut into) reaches each
+/// patch in front of it with the energy of the exact patch-to-polygon form factor times the fraction
+/// that shadow rays find unblocked, spread over the paths |y - x| between stratified points x of the
+/// patch and y of the polygon in proportion to the point-to-point kernel cos cos / r^2. Its cost is
+/// per patch and source, not per pair of patches.
 
 #include "tprf/core/time_axis.h"
 #include "tprf/core/types.h"
@@ -20,7 +22,6 @@
 namespace tprf {
 
 struct PatchSet;
-struct Links;
 class Visibility;
 
 /// One pulse of exitance at a patch.
@@ -46,7 +47,14 @@ struct Illumination {
 /// Options of the illumination stage.
 struct IlluminationOptions {
     int samples = 16;           ///< stratified points per patch for point sources
-    int area_samples = 4;       ///< stratified points per patch on each side of an emitter's link
+    int area_samples = 4;       ///< stratified points per patch that area sources light
+    /// Shadow rays from each of those points to an area source (to the centres of a grid of cells over
+    /// it). The pulses' times come from a grid of cells whose paths span about half a bin of
+    /// merge_bins (2 x 2 to 32 x 32 cells; 4 x 4 without merge_bins), each taking its shadow cell's ray.
+    int emitter_rays = 16;
+    /// Where those rays disagree (a penumbra), the point's pairs take a grid of at least this many cells
+    /// instead, with a shadow ray each.
+    int penumbra_rays = 256;
     int threads = 0;            ///< 0: all cores
     /// When set, a patch's pulses that fall in one bin of this axis with the same order, source and
     /// propagation are merged into one (at the first one's path): exact for every consumer, each of
@@ -55,10 +63,9 @@ struct IlluminationOptions {
     const TimeAxis* merge_bins = nullptr;
 };
 
-/// Computes the pulses that every source (point sources, laser spots, emissive patches) sends into
-/// the patch system. Shadow rays decide visibility from point sources. `emitters`: patch-to-patch
-/// links by receiver whose sources emit (LinkSet::emitters; links from other sources are skipped).
-Illumination illuminate(const LightSources& sources, const PatchSet& patches, const Links& emitters,
-                        const Visibility& visibility, const IlluminationOptions& options = {});
+/// Computes the pulses that every source (point sources, laser spots, area sources) sends into the
+/// patch system. Shadow rays decide visibility.
+Illumination illuminate(const LightSources& sources, const PatchSet& patches, const Visibility& visibility,
+                        const IlluminationOptions& options = {});
 
 }  // namespace tprf

@@ -5,10 +5,13 @@
 ///
 /// A point light is a point source; a laser becomes the spot it hits, which sends the light it
 /// reflects on as a Lambertian point (its own patch is lit by the spot's power directly). Emissive
-/// patches are area sources: their light enters through the links' exact form factors.
+/// surfaces are area sources: whole polygons (an emissive rectangle however finely it is cut into
+/// patches), whose first bounce is integrated from the polygon (transport/illumination.h), so that
+/// its cost does not grow with the emitter's patch count.
 
 #include "tprf/core/types.h"
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -47,12 +50,33 @@ struct LaserSpot {
     Rgb power = Rgb::Zero();    ///< the laser's power, W per channel
 };
 
+/// A convex planar polygon that sends radiance L_e from its front: an emissive rectangle (each side of
+/// a two-sided one), or one emissive patch of any other object (a mesh's).
+struct AreaSource {
+    std::array<Vec3, 4> corners{};   ///< counter-clockwise about `normal`, metres
+    std::uint8_t count = 0;          ///< corners used: 3 or 4 (a quad is a parallelogram)
+    Vec3 normal = Vec3::UnitZ();     ///< unit front normal
+    Vec3 centroid = Vec3::Zero();    ///< metres
+    double area = 0.0;               ///< m^2
+    Rgb radiance = Rgb::Zero();      ///< L_e, W/(m^2 sr)
+    std::uint32_t object = 0;        ///< index into Scene::objects
+
+    const Vec3* polygon() const { return corners.data(); }
+    /// The point at (u, v) in the unit square, uniform in area (polygon_point).
+    Vec3 point(double u, double v) const;
+};
+
 /// Every source of a scene.
 struct LightSources {
     std::vector<PointSource> points;     ///< point lights (scene order), then the lasers' spots
     std::vector<LaserSpot> spots;        ///< where each laser landed, in scene order (hit or not)
-    std::vector<std::uint32_t> emissive; ///< patches with emission > 0
+    std::vector<AreaSource> areas;       ///< the emissive patches as whole polygons (area_sources)
 };
+
+/// The emissive patches of `patches` as area sources: the patches of an emissive rectangle of `scene`
+/// (per side) become that rectangle; every other emissive patch is a source of its own. Without a
+/// scene (nullptr), every emissive patch is its own source.
+std::vector<AreaSource> area_sources(const Scene* scene, const PatchSet& patches);
 
 /// Where a laser's ray first meets the scene (a back side absorbs: hit stays false).
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visibility& visibility);
@@ -76,6 +100,9 @@ bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visib
             PointArrival& out);
 
 /// The shortest optical path by which any light of `sources` can reach x, metres (0 without sources).
-double earliest_path(const LightSources& sources, const PatchSet& patches, const Vec3& x);
+double earliest_path(const LightSources& sources, const Vec3& x);
+
+/// Distance from x to a convex planar polygon with unit normal `normal`, metres.
+double distance_to_polygon(const Vec3& x, const Vec3* poly, std::size_t count, const Vec3& normal);
 
 }  // namespace tprf

@@ -39,9 +39,6 @@ struct LinkSet {
     /// CSR over tree.nodes() receivers. Flat: sources non-decreasing within a row. Hierarchical (with
     /// a bin width): delay octaves non-decreasing within a row, then sources, then distances.
     Links links;
-    /// Patch-to-patch links whose source emits (area emitters), CSR over the N patches: the exact
-    /// first bounce of area light is computed from these (illuminate()), not from `links`.
-    Links emitters;
     /// When > 0, every link with a cluster at either end is at least this many bins long: the solver
     /// keeps its blocks this short, so that those links are applied a block at a time (push and pull
     /// once per block); shorter ones would be applied patch by patch.
@@ -50,7 +47,7 @@ struct LinkSet {
     std::size_t patches() const { return tree.leaves; }
     std::size_t nodes() const { return tree.nodes(); }
     /// Bytes held by the tree and the links.
-    std::size_t bytes() const { return tree.bytes() + links.bytes() + emitters.bytes(); }
+    std::size_t bytes() const { return tree.bytes() + links.bytes(); }
 };
 
 /// The flat method: every facing, visible pair of patches (compute_links), no clusters.
@@ -87,8 +84,5 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
 /// `bin_width_m` (and then its counts in `stats`, when given).
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
                       double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr);
-
-/// The links of `links` whose source patch emits (flat link sets take their `emitters` from here).
-Links emitter_links(const PatchSet& patches, const Links& links);
 
 }  // namespace tprf
