@@ -337,6 +337,7 @@ PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t
         sources.push_back(cut(scene.objects[k], loaded.meshes[k], census.max_edge));
         const Source& c = sources.back();
         census.patches += c.patch_count * c.sides();
+        census.object_patches.push_back(c.patch_count * c.sides());
         census.corners += c.corners() * c.patch_count * c.sides();
         if ((scene.objects[k].emission > 0.0).any()) census.emissive += c.patch_count * c.sides();
     }

@@ -86,25 +86,41 @@ constexpr double kSameBinLinkBytes = 8;          // a link within one bin
 const int kBlockBins = SolverOptions{}.block_bins;  // the solver's block (hierarchical sets: shorter)
 constexpr int kPointSourcePulses = 2;            // pulses per patch and point source: its 16 samples' pulses are
                                                  // merged per bin (IlluminationOptions::merge_bins), 1-2 bins
-constexpr int kAreaSourcePulses = 4;             // pulses per patch lit by area emitters, merged per bin the same way
+// Area sources: a lit patch keeps a pulse per bin that the source's paths span from it (merged there).
 
 // Link counts.
 constexpr std::size_t kPairSamples = 1024;       // patches sampled to estimate which pairs face each other
-/// Hierarchical links per patch and per doubling of the patch count: links = c N log2 N. Measured: 30 on
-/// the Cornell box at 17k patches and tolerance 0.01 (7.3M links); more at smaller tolerances.
-constexpr double kHierarchicalLinksPerPatchLog2 = 30.0;
+/// Hierarchical links: c N^0.45 sqrt(0.003 / tolerance), a fit to what the builder made (bench/RESULTS.md,
+/// third step): the Cornell box from 4k to 1M patches at tolerance 0.003 (1 cm bins: 2.7M to 51.5M
+/// links, the fit within 0.6x-1.6x; at 5 mm bins up to 1.7x more), the statue at 0.01-0.001 (within
+/// 1.3x). The count grows slower than N: far apart, the same cluster links serve finer patches.
+constexpr double kHierarchicalLinksScale = 1.03e5;
+constexpr double kHierarchicalLinksExponent = 0.45;
+/// The share of a full ring (the scene's diagonal) that an average node of a hierarchical set keeps
+/// (its longest outgoing link): (N / 16k)^(-1/3), at most 1. Measured on the Cornell box: 0.84 (4k),
+/// 0.74 (16k), 0.47 (64k), 0.30 (256k), 0.20 (1M); the statue (57k): 0.9.
+double hierarchical_ring_share(double n) { return std::min(1.0, std::cbrt(16000.0 / std::max(n, 1.0))); }
 
 // Seconds on 2 threads.
 constexpr double kPatchSeconds = 4e-7;               // per patch (110k patches in 0.04 s)
 constexpr double kMeshSecondsPerFace = 1.5e-6;       // reading a mesh file and cutting it (54k faces: 0.08 s)
 constexpr double kEmbreeSeconds = 1.2e-6;            // per patch (110k patches in 0.12 s)
 constexpr double kPairsPerSecond = 4.2e6;            // flat links: unordered pairs considered (4.1-4.4 M/s)
-constexpr double kHierarchicalLinkSeconds = 2e-6;    // per hierarchical link (Cornell box, 17k patches: 2.2e-6)
+/// Hierarchical link stage: s N^0.74 sqrt(0.003 / tolerance) (the Cornell box: 3.7 s at 4k patches, 42 s at
+/// 64k, 262 s at 1M; the statue at 0.01: 12 s, 0.7x of it).
+constexpr double kHierarchicalLinkSecondsScale = 9.5e-3;
+constexpr double kHierarchicalLinkSecondsExponent = 0.74;
 constexpr double kPulseSeconds = 2e-7;               // per pulse, shadow rays included
+constexpr double kAreaSourceSeconds = 4e-5;          // per patch and area source that face each other (the
+                                                     // Cornell box's light: 2.9e-5 at 4.5k patches and 5 mm
+                                                     // bins, 4.4e-5 at 1M patches and 1 cm)
 constexpr double kSampleSeconds = 2e-6;              // per camera sample (0.35-1.0 M samples/s)
 constexpr double kTapBinSeconds = 1.0 / 1.5e9;       // the film: one tap applied to one bin
 constexpr double kLinkBinSeconds[2] = {1.0 / 8e9, 1.0 / 4e9};  // the solve: link-bin updates, grey / colour
 constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin by bin
+/// The hierarchical solve per patch and bin: 2.6e-7 to 1.4e-6 s on the Cornell box from 4k to 1M patches
+/// (3 channels), 4.3e-7 on the statue (1 channel).
+constexpr double kHierarchicalPatchBinSeconds = 5e-7;
 constexpr double kWriteSeconds = 0.2;                // the images and render.json
 constexpr double kCubeBytesPerSecond = 0.7e9;        // writing back the memory-mapped cubes
 constexpr double kSteadySecondsPerLink = 3e-8;       // the steady state (BiCGSTAB on the links, 3 channels)
@@ -214,36 +230,57 @@ double lit_share(const Scene& scene, const PatchCensus& census) {
     return double(lit) / double(gx * gy);
 }
 
-// Links and the cluster tree, their bytes and the builder's seconds, for the scene's method. Returns
-// the links whose source emits (LinkSet::emitters), which the illumination spreads into pulses.
-double estimate_links(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
+// Links and the cluster tree, their bytes and the builder's seconds, for the scene's method.
+void estimate_links(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
     const double n = double(census.patches), others = std::max(n - 1.0, 0.0);
     const double flat = shares.facing * n * others;  // facing pairs, both directions (visibility not removed)
-    const double emitter_links = double(census.emissive) * others * shares.emitter_facing;
     double links = flat, rows = n, tree = 0.0, seconds = 0.5 * n * others / kPairsPerSecond;
     e.nodes = census.patches;
     if (scene.links.method == LinkMethod::Hierarchical) {
-        links = std::min(flat, kHierarchicalLinksPerPatchLog2 * n * std::log2(std::max(n, 2.0)));
+        const double tolerance_factor = std::sqrt(0.003 / scene.links.tolerance);
+        links = std::min(flat, kHierarchicalLinksScale * std::pow(n, kHierarchicalLinksExponent) * tolerance_factor);
         e.nodes = census.patches > 0 ? 2 * census.patches - 1 : 0;
         rows = double(e.nodes);
         tree = kTreeBytesPerNode * rows;
-        seconds = kHierarchicalLinkSeconds * links;
+        seconds = kHierarchicalLinkSecondsScale * std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor;
     }
     e.links = to_size(links);
-    e.link_bytes = to_size(kLinkBytes * (links + emitter_links) + kRowBytes * (rows + n) + tree);
+    e.link_bytes = to_size(kLinkBytes * links + kRowBytes * (rows + n) + tree);
     e.link_build_bytes = to_size(kLinkBuildBytes * links);
     e.seconds.links = kEmbreeSeconds * n + seconds;
-    return emitter_links;
+}
+
+// Area sources as illuminate() makes them (light_sources.h): one per side of an emissive rectangle,
+// one per emissive patch of a mesh. Returns their count and, summed over them, the bins their paths
+// span from a patch (their diameter in bins, plus one for where the patch's points fall).
+std::array<double, 2> area_source_bins(const Scene& scene, const PatchCensus& census) {
+    double sources = 0.0, bins = 0.0;
+    const double bin_m = scene.time.bin_width_m();
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        const Object& o = scene.objects[k];
+        if (!(o.emission > 0.0).any()) continue;
+        const double sides = o.two_sided ? 2.0 : 1.0;
+        if (const auto* r = std::get_if<RectangleShape>(&o.shape)) {
+            sources += sides;
+            bins += sides * ((r->u + r->v).norm() / bin_m + 2.0);
+        } else {
+            const double patches = double(census.object_patches[k]);
+            sources += patches;
+            bins += patches * (census.max_edge / bin_m + 2.0);
+        }
+    }
+    return {sources, bins};
 }
 
 // The illumination's pulses and the camera's gather; the film's seconds (taps x bins) are counted here
 // too, as render.json counts them.
-void estimate_camera(const Scene& scene, const PatchCensus& census, double emitter_links, ResourceEstimate& e) {
+void estimate_camera(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
     const double n = double(census.patches);
+    const auto [area_sources, area_bins] = area_source_bins(scene, census);
     const double pulses = kPointSourcePulses * n * double(scene.lights.size()) +
-                          (emitter_links > 0.0 ? kAreaSourcePulses * n : 0.0) + double(census.emissive);
+                          shares.emitter_facing * n * area_bins + double(census.emissive);
     e.illumination_bytes = to_size(kPulseBytes * pulses);
-    double seconds = kPulseSeconds * pulses;
+    double seconds = kPulseSeconds * pulses + kAreaSourceSeconds * shares.emitter_facing * n * area_sources;
     if (scene.camera) {
         e.lit_pixels = lit_share(scene, census);
         const double pixels = double(scene.camera->width) * double(scene.camera->height) * e.lit_pixels;
@@ -267,7 +304,8 @@ void estimate_solver(const Scene& scene, const PatchCensus& census, const PairSh
     e.layers = layers;
     e.ring_bins = int(std::bit_ceil(unsigned(max_lag + kBlockBins + 2)));
     const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
-    const double rings = L * nodes * (e.ring_bins + kBlockBins + 1) * C * 4;
+    const double share = scene.links.method == LinkMethod::Hierarchical ? hierarchical_ring_share(n) : 1.0;
+    const double rings = L * nodes * (share * e.ring_bins + kBlockBins + 1) * C * 4;
     const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
     const double outputs = (1.0 + terms + 1.0 + cubes) * n * kBlockBins * 3 * 4;  // solver's and films' blocks
     const double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
@@ -278,6 +316,9 @@ void estimate_solver(const Scene& scene, const PatchCensus& census, const PairSh
     const double link_bins = double(e.links) * scene.time.bins * fed;
     e.seconds.solve = link_bins * (kLinkBinSeconds[e.channels == 1 ? 0 : 1] +
                                    shares.shorter_than_block * kShortLinkBinSeconds * C / 3.0);
+    // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
+    if (scene.links.method == LinkMethod::Hierarchical)
+        e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * n * scene.time.bins);
 }
 
 // The memory-mapped cubes the solve fills (the transient cube, per-bounce cubes, patch profiles), and
@@ -349,8 +390,8 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     const double bin_m = scene.time.bin_width_m();
     const PairShares shares = pair_shares(scene, census, kBlockBins * bin_m, bin_m);
     e.facing_fraction = shares.facing;
-    const double emitter_links = estimate_links(scene, census, shares, e);
-    estimate_camera(scene, census, emitter_links, e);
+    estimate_links(scene, census, shares, e);
+    estimate_camera(scene, census, shares, e);
     estimate_solver(scene, census, shares, e);
     estimate_outputs(scene, census, patch_profiles, e);
     sum_peak(e);

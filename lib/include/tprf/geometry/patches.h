@@ -84,6 +84,7 @@ struct PatchCensus {
     double diagonal = 0.0;             ///< bounding-box diagonal of every object, metres
     int dropped_degenerate = 0;        ///< mesh faces dropped, as build_patches counts them
     std::vector<Eigen::AlignedBox3d> bounds;  ///< per object: its bounding box, metres
+    std::vector<std::size_t> object_patches;  ///< per object: its patches, both sides counted
     /// About `samples` patches drawn uniformly from all N (each object gets its share by its patch
     /// count), at a uniform point of the patch (a rectangle's grid cell) or of its mesh triangle.
     std::vector<PatchSample> samples;
