@@ -49,37 +49,6 @@ Pulse spot_pulse(const PatchSet& patches, std::size_t i, const PointSource& spot
     return p;
 }
 
-// How finely the first bounce of an area source is sampled at one receiving patch.
-struct AreaGrid {
-    int receiver = 2;   // receiver points per side
-    int timing = 4;     // source cells per side whose paths set the pulses' times
-    int shadow = 4;     // source cells per side that shadow rays test first
-    int penumbra = 16;  // cells per side, a ray each, where those disagree (or `timing`, if finer)
-};
-
-// One unblocked point pair of an area source's first bounce: its path and its kernel weight.
-struct PairSample {
-    double path;
-    double weight;
-};
-
-// The grid for patch i and source a: enough timing cells that a cell's paths span about half a bin
-// (at most 32 per side), as seen from the patch's centroid.
-AreaGrid area_grid(const PatchSet& patches, std::size_t i, const AreaSource& a, const IlluminationOptions& options) {
-    AreaGrid g;
-    g.receiver = grid_side(options.area_samples);
-    if (options.merge_bins) {
-        const Vec3& x = patches.centroid[i];
-        double far = 0.0;
-        for (int k = 0; k < a.count; ++k) far = std::max(far, (a.corners[std::size_t(k)] - x).norm());
-        const double spread = far - distance_to_polygon(x, a.polygon(), a.count, a.normal);
-        g.timing = int(std::clamp(std::ceil(2.0 * spread / options.merge_bins->bin_width_m()), 2.0, 32.0));
-    }
-    g.shadow = grid_side(options.emitter_rays);
-    g.penumbra = std::max(grid_side(options.penumbra_rays), g.shadow);
-    return g;
-}
-
 // Whether anything of patch i is in front of source a and anything of a in front of patch i.
 bool faces(const PatchSet& patches, std::size_t i, const AreaSource& a) {
     bool receiver_front = false, source_front = false;
@@ -90,11 +59,12 @@ bool faces(const PatchSet& patches, std::size_t i, const AreaSource& a) {
     return receiver_front && source_front;
 }
 
-Pulse area_pulse(double path, const Rgb& energy) {
+Pulse area_pulse(double path, const Rgb& energy, std::int32_t source) {
     Pulse p;
     p.path = path;
     p.energy = energy;
     p.order = 1;
+    p.area_source = source;
     return p;
 }
 
@@ -104,7 +74,8 @@ Pulse area_pulse(double path, const Rgb& energy) {
 // unblocked: exact where nothing is in the way. Its time spread is that kernel, each pair at its own
 // path.
 void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t i, const AreaSource& a,
-                     const IlluminationOptions& options, std::vector<PairSample>& pairs, std::vector<Pulse>& out) {
+                     std::int32_t source, const IlluminationOptions& options, std::vector<AreaPair>& pairs,
+                     std::vector<Pulse>& out) {
     if (!faces(patches, i, a)) return;
     FormFactorQuadrature quadrature;
     quadrature.relative_tolerance = 1e-3;
@@ -112,88 +83,26 @@ void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t
                                           a.count, a.normal, quadrature);
     const Rgb energy = patches.albedo[i] * ff * M_PI * a.radiance;
     if (!(energy > 0.0).any()) return;
-    const AreaGrid g = area_grid(patches, i, a, options);
     const Vec3& ni = patches.normal[i];
-    const double lift = vis.epsilon();
+    const double bin_m = options.merge_bins ? options.merge_bins->bin_width_m() : 0.0;
+    const AreaSampling sampling =
+        area_sampling(a, patches.centroid[i], bin_m, options.emitter_rays, options.penumbra_rays);
+    const int g = grid_side(options.area_samples);
     pairs.clear();
-    double total = 0.0;  // the kernel over every pair, blocked or not, times its cell's share of the source
-    const int coarse = g.shadow;
-    // The kernel from x to the centre of cell (u, v) of an n x n grid over the source, and its path.
-    const auto kernel = [&](const Vec3& x, int u, int v, int n, double& path) {
-        const Vec3 d = a.point((u + 0.5) / n, (v + 0.5) / n) - x;
-        const double r2 = d.squaredNorm();
-        path = std::sqrt(r2);
-        return std::max(0.0, ni.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2);
-    };
-    // Whether the ray from x to the centre of that cell is unblocked.
-    const auto open_to = [&](const Vec3& x, int u, int v, int n) {
-        return !vis.occluded(x + lift * ni, a.point((u + 0.5) / n, (v + 0.5) / n) + lift * a.normal);
-    };
-    std::vector<char> coarse_open(std::size_t(coarse * coarse));
-    for (int s = 0; s < g.receiver * g.receiver; ++s) {
-        const Vec3 x = sample_patch(patches, i, s, g.receiver);
-        // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
-        // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
-        bool any_open = false, any_blocked = false;
-        for (int c = 0; c < coarse * coarse; ++c) {
-            double path;
-            const int u = c % coarse, v = c / coarse;
-            char& o = coarse_open[std::size_t(c)];
-            o = 2;  // not tested
-            if (!(kernel(x, u, v, coarse, path) > 0.0)) continue;
-            o = char(open_to(x, u, v, coarse));
-            (o ? any_open : any_blocked) = true;
-        }
-        const bool penumbra = any_open && any_blocked;
-        const int n = penumbra ? std::max(g.timing, g.penumbra) : g.timing;
-        for (int c = 0; c < n * n; ++c) {
-            const int u = c % n, v = c / n;
-            double path;
-            const double w = kernel(x, u, v, n, path) / (double(n) * n);
-            if (!(w > 0.0)) continue;
-            total += w;
-            bool open;
-            if (penumbra) {
-                open = open_to(x, u, v, n);
-            } else {
-                const int cu = u * coarse / n, cv = v * coarse / n;
-                char& o = coarse_open[std::size_t(cv * coarse + cu)];
-                if (o == 2) o = char(open_to(x, cu, cv, coarse));  // its centre faces away, this pair does not
-                open = o != 0;
-            }
-            if (open) pairs.push_back({path, w});
-        }
-    }
+    double total = 0.0;  // the weight of every pair, blocked or not
+    for (int s = 0; s < g * g; ++s) total += arrive_area(a, sample_patch(patches, i, s, g), ni, vis, sampling, pairs);
     if (!(total > 0.0)) {
         // No sampled pair faces both ways, yet F > 0 (a sliver near a horizon): the centroids' path
         // carries it, if unblocked.
         const Vec3& x = patches.centroid[i];
+        const double lift = vis.epsilon();
         if (vis.occluded(x + lift * ni, a.centroid + lift * a.normal)) return;
         pairs.push_back({(x - a.centroid).norm(), 1.0});
         total = 1.0;
     }
     const Rgb scale = energy / total;
-    if (!options.merge_bins) {
-        for (const PairSample& q : pairs) out.push_back(area_pulse(q.path, scale * q.weight));
-        return;
-    }
-    // Merged per bin of the axis here, without sorting: one pulse per bin at its first pair's path.
-    const double inv_bin = 1.0 / options.merge_bins->bin_width_m(), start = options.merge_bins->start_m();
-    const auto bin = [&](double path) { return std::floor((path - start) * inv_bin); };
-    double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
-    for (const PairSample& q : pairs) {
-        lowest = std::min(lowest, bin(q.path));
-        highest = std::max(highest, bin(q.path));
-    }
-    if (pairs.empty()) return;
-    std::vector<PairSample> per_bin(std::size_t(highest - lowest) + 1, PairSample{0.0, 0.0});
-    for (const PairSample& q : pairs) {
-        PairSample& b = per_bin[std::size_t(bin(q.path) - lowest)];
-        if (b.weight == 0.0) b.path = q.path;
-        b.weight += q.weight;
-    }
-    for (const PairSample& b : per_bin)
-        if (b.weight > 0.0) out.push_back(area_pulse(b.path, scale * b.weight));
+    if (options.merge_bins) pairs = merge_pairs_by_bin(pairs, bin_m, options.merge_bins->start_m());
+    for (const AreaPair& q : pairs) out.push_back(area_pulse(q.path, scale * q.weight, source));
 }
 
 // An emissive patch's own light, seen at path 0; its onward light goes out with exact paths through
@@ -211,7 +120,8 @@ void merge_by_bin(std::vector<Pulse>& pulses, const TimeAxis& time) {
     if (pulses.size() < 2) return;
     const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
     auto key = [&](const Pulse& p) {
-        return std::make_tuple(std::floor((p.path - start) * inv_bin), p.order, p.propagates, p.point_source);
+        return std::make_tuple(std::floor((p.path - start) * inv_bin), p.order, p.propagates, p.point_source,
+                               p.area_source);
     };
     std::stable_sort(pulses.begin(), pulses.end(), [&](const Pulse& a, const Pulse& b) { return key(a) < key(b); });
     std::size_t kept = 0;
@@ -242,10 +152,11 @@ Illumination illuminate(const LightSources& sources, const PatchSet& patches, co
     const int grid = grid_side(options.samples);
     std::vector<std::vector<Pulse>> per_patch(patches.size());
     parallel_for(patches.size(), {options.threads, 16, true}, [&](std::size_t i) {
-        thread_local std::vector<PairSample> pairs;
+        thread_local std::vector<AreaPair> pairs;
         std::vector<Pulse>& out = per_patch[i];
         if ((patches.emission[i] > 0.0).any()) out.push_back(self_pulse(patches, i));
-        for (const AreaSource& a : sources.areas) light_from_area(patches, vis, i, a, options, pairs, out);
+        for (std::size_t a = 0; a < sources.areas.size(); ++a)
+            light_from_area(patches, vis, i, sources.areas[a], std::int32_t(a), options, pairs, out);
         for (std::size_t s = 0; s < sources.points.size(); ++s) {
             const PointSource& source = sources.points[s];
             if (source.patch == i)

@@ -148,4 +148,87 @@ double earliest_path(const LightSources& sources, const Vec3& x) {
     return std::isfinite(best) ? best : 0.0;
 }
 
+AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int shadow_rays, int penumbra_rays) {
+    const auto side = [](int cells) { return std::max(1, int(std::lround(std::sqrt(double(std::max(cells, 1)))))); };
+    AreaSampling s;
+    if (bin_m > 0.0) {
+        double far = 0.0;
+        for (int k = 0; k < a.count; ++k) far = std::max(far, (a.corners[std::size_t(k)] - x).norm());
+        const double spread = far - distance_to_polygon(x, a.polygon(), a.count, a.normal);
+        s.timing = int(std::clamp(std::ceil(2.0 * spread / bin_m), 2.0, 32.0));
+    }
+    s.shadow = side(shadow_rays);
+    s.penumbra = std::max(side(penumbra_rays), s.shadow);
+    return s;
+}
+
+double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis, const AreaSampling& s,
+                   std::vector<AreaPair>& out) {
+    const double lift = vis.epsilon();
+    const int coarse = s.shadow;
+    // The kernel from x to the centre of cell (u, v) of an m x m grid over the source, and its path.
+    const auto kernel = [&](int u, int v, int m, double& path) {
+        const Vec3 d = a.point((u + 0.5) / m, (v + 0.5) / m) - x;
+        const double r2 = d.squaredNorm();
+        path = std::sqrt(r2);
+        return std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2);
+    };
+    const auto open_to = [&](int u, int v, int m) {
+        return !vis.occluded(x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
+    };
+    // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
+    // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
+    thread_local std::vector<char> coarse_open;
+    coarse_open.assign(std::size_t(coarse * coarse), char(2));  // 2: not tested
+    bool any_open = false, any_blocked = false;
+    for (int c = 0; c < coarse * coarse; ++c) {
+        double path;
+        const int u = c % coarse, v = c / coarse;
+        if (!(kernel(u, v, coarse, path) > 0.0)) continue;
+        const bool o = open_to(u, v, coarse);
+        coarse_open[std::size_t(c)] = char(o);
+        (o ? any_open : any_blocked) = true;
+    }
+    const bool penumbra = any_open && any_blocked;
+    const int m = penumbra ? std::max(s.timing, s.penumbra) : s.timing;
+    double total = 0.0;
+    for (int c = 0; c < m * m; ++c) {
+        const int u = c % m, v = c / m;
+        double path;
+        const double w = kernel(u, v, m, path) / (double(m) * m);
+        if (!(w > 0.0)) continue;
+        total += w;
+        bool open;
+        if (penumbra) {
+            open = open_to(u, v, m);
+        } else {
+            const int cu = u * coarse / m, cv = v * coarse / m;
+            char& o = coarse_open[std::size_t(cv * coarse + cu)];
+            if (o == 2) o = char(open_to(cu, cv, coarse));  // its centre faces away, this pair does not
+            open = o != 0;
+        }
+        if (open) out.push_back({path, w});
+    }
+    return total;
+}
+
+std::vector<AreaPair> merge_pairs_by_bin(const std::vector<AreaPair>& pairs, double bin_m, double start_m) {
+    if (pairs.empty()) return {};
+    const double inv_bin = 1.0 / bin_m;
+    const auto bin = [&](double path) { return std::floor((path - start_m) * inv_bin); };
+    double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
+    for (const AreaPair& q : pairs) {
+        lowest = std::min(lowest, bin(q.path));
+        highest = std::max(highest, bin(q.path));
+    }
+    std::vector<AreaPair> per_bin(std::size_t(highest - lowest) + 1);
+    for (const AreaPair& q : pairs) {
+        AreaPair& b = per_bin[std::size_t(bin(q.path) - lowest)];
+        if (b.weight == 0.0) b.path = q.path;
+        b.weight += q.weight;
+    }
+    std::erase_if(per_bin, [](const AreaPair& b) { return !(b.weight > 0.0); });
+    return per_bin;
+}
+
 }  // namespace tprf

@@ -36,6 +36,9 @@ struct Pulse {
     /// points evaluate point sources exactly (imaging/gather.h), so the film leaves these pulses out
     /// of the patch profiles it interpolates.
     std::int32_t point_source = -1;
+    /// The area source (index into LightSources::areas) whose first bounce this is, or -1. Sensing
+    /// points evaluate area sources exactly too, and the film leaves these pulses out the same way.
+    std::int32_t area_source = -1;
 };
 
 /// Pulses grouped by patch (CSR): patch i's pulses are pulses[row[i] .. row[i+1]).

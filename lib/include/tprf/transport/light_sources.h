@@ -99,6 +99,36 @@ struct PointArrival {
 bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visibility& visibility,
             PointArrival& out);
 
+/// One unblocked point pair between a surface point x and an area source: its path |y - x| and its
+/// weight, the kernel cos cos / r^2 times its cell's share of the source.
+struct AreaPair {
+    double path = 0.0;
+    double weight = 0.0;
+};
+
+/// How an area source is sampled from one surface point: a grid of cells over the source.
+struct AreaSampling {
+    int timing = 4;     ///< cells per side whose centres time the light
+    int shadow = 4;     ///< cells per side that shadow rays test first
+    int penumbra = 16;  ///< cells per side, a ray each, where those disagree (or `timing`, if finer)
+};
+
+/// The sampling of source a seen from x: timing cells whose paths span about half of `bin_m` (2 to 32
+/// per side; 4 when bin_m is 0), and shadow grids of about `shadow_rays` and `penumbra_rays` cells.
+AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int shadow_rays, int penumbra_rays);
+
+/// The light of area source a at the point x with unit normal n: appends to `out` the pairs between x
+/// and the cells' centres that shadow rays find unblocked (to the shadow grid's cells; where those
+/// disagree, a penumbra, to every cell of the finer grid), and returns the weight of all pairs, blocked
+/// or not (0 when no cell centre faces x). The unblocked share of the weight is the share of the
+/// exact form factor point_polygon_form_factor(x, n, a) that reaches x.
+double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& visibility,
+                   const AreaSampling& sampling, std::vector<AreaPair>& out);
+
+/// `pairs` summed per bin of width bin_m from start_m (one pair per bin that has any, at its first
+/// pair's path, in increasing bins). Exact for every consumer, each of which places light by its bin.
+std::vector<AreaPair> merge_pairs_by_bin(const std::vector<AreaPair>& pairs, double bin_m, double start_m);
+
 /// The shortest optical path by which any light of `sources` can reach x, metres (0 without sources).
 double earliest_path(const LightSources& sources, const Vec3& x);
 
