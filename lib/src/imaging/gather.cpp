@@ -2,6 +2,7 @@
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
+#include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
@@ -51,9 +52,33 @@ std::vector<std::pair<std::uint32_t, double>> kernel_weights(const PatchSet& pat
     return weights;
 }
 
-// Exact direct light of every point source at the sensing point, seen along its leg.
+// Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
+// with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
+// spread over their paths (merged per bin of the time axis, when there is one).
+void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patches, const AreaSource& a,
+                   const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
+    const Vec3& n = patches.normal[sp.patch];
+    const double ff = point_polygon_form_factor(sp.point, n, a.polygon(), a.count, a.normal);
+    if (!(ff > 0.0)) return;
+    const double bin_m = options.time ? options.time->bin_width_m() : 0.0;
+    thread_local std::vector<AreaPair> pairs;
+    pairs.clear();
+    double total = arrive_area(a, sp.point, n, vis, area_sampling(a, sp.point, bin_m, options.emitter_rays,
+                                                                  options.penumbra_rays), pairs);
+    if (!(total > 0.0)) {
+        // No cell centre faces x, yet F > 0 (a sliver near its horizon): the centroid's path carries it.
+        if (vis.occluded(sp.point + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal)) return;
+        pairs.push_back({(sp.point - a.centroid).norm(), 1.0});
+        total = 1.0;
+    }
+    const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
+    if (options.time) pairs = merge_pairs_by_bin(pairs, bin_m, options.time->start_m() - sp.leg);
+    for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});
+}
+
+// Exact direct light of every point and area source at the sensing point, seen along its leg.
 void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patches, const LightSources& sources,
-                     const Visibility& vis, std::vector<DirectArrival>& out) {
+                     const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
     const Rgb& albedo = patches.albedo[sp.patch];
     for (const PointSource& source : sources.points) {
         if (source.patch == sp.patch) continue;
@@ -61,42 +86,53 @@ void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patc
         if (!arrive(source, sp.point, patches.normal[sp.patch], vis, a)) continue;
         out.push_back({sp.output, a.path + sp.leg, a.reflected(albedo) * (weight / M_PI), source.order});
     }
+    for (const AreaSource& a : sources.areas) area_arrivals(sp, weight, patches, a, vis, options, out);
 }
 
-// Sorts each run of consecutive elements of one output by `less`.
-template <class T, class Output, class Less>
-void sort_runs(std::vector<T>& v, Output output, Less less) {
-    for (std::size_t a = 0; a < v.size();) {
-        std::size_t b = a + 1;
-        while (b < v.size() && output(v[b]) == output(v[a])) ++b;
-        std::sort(v.begin() + std::ptrdiff_t(a), v.begin() + std::ptrdiff_t(b), less);
-        a = b;
+// Arrivals of one output (sorted by path) that share a bin of `time` and an order, merged into the first
+// of them: exact for the film, which places each arrival by its bin.
+void merge_arrivals(std::vector<DirectArrival>& v, std::size_t from, const TimeAxis& time) {
+    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    const auto bin = [&](const DirectArrival& a) { return std::floor((a.path - start) * inv_bin); };
+    std::size_t kept = from;
+    for (std::size_t k = from; k < v.size(); ++k) {
+        // Sorted by path, arrivals of one bin are consecutive apart from other orders between them:
+        // look back over the arrivals kept in this bin.
+        bool merged = false;
+        for (std::size_t j = kept; j-- > from && bin(v[j]) == bin(v[k]);)
+            if (v[j].order == v[k].order) {
+                v[j].radiance += v[k].radiance;
+                merged = true;
+                break;
+            }
+        if (!merged) v[kept++] = v[k];
     }
+    v.resize(kept);
 }
 
-// The points' lists as one CSR by output: the points come in output order, so their lists laid end to
-// end give every output's taps and arrivals in one run.
-Gather assemble(const SensingPoints& points, int width, int height, const std::vector<std::vector<PixelTap>>& taps,
-                const std::vector<std::vector<DirectArrival>>& direct) {
+// The outputs' lists as one CSR: run k holds the points of output outputs[k] (in output order), and its
+// taps and arrivals; each run's lists are freed once taken.
+Gather assemble(std::size_t count, int width, int height, const std::vector<std::uint32_t>& outputs,
+                std::vector<std::vector<PixelTap>>& taps, std::vector<std::vector<DirectArrival>>& direct) {
     Gather g;
     g.width = width;
     g.height = height;
-    g.row.assign(points.outputs + 1, 0);
-    for (std::size_t h = 0; h < taps.size(); ++h) g.row[points.points[h].output + 1] += taps[h].size();
-    for (std::size_t o = 0; o < points.outputs; ++o) g.row[o + 1] += g.row[o];
-    g.taps.reserve(g.row[points.outputs]);
-    for (std::size_t h = 0; h < taps.size(); ++h) {
-        g.taps.insert(g.taps.end(), taps[h].begin(), taps[h].end());
-        g.direct.insert(g.direct.end(), direct[h].begin(), direct[h].end());
+    g.row.assign(count + 1, 0);
+    for (std::size_t k = 0; k < outputs.size(); ++k) g.row[outputs[k] + 1] = taps[k].size();
+    for (std::size_t o = 0; o < count; ++o) g.row[o + 1] += g.row[o];
+    g.taps.reserve(g.row[count]);
+    std::size_t arrivals = 0;
+    for (const auto& d : direct) arrivals += d.size();
+    g.direct.reserve(arrivals);
+    for (std::size_t k = 0; k < outputs.size(); ++k) {
+        std::sort(taps[k].begin(), taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
+            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
+        });
+        g.taps.insert(g.taps.end(), taps[k].begin(), taps[k].end());
+        g.direct.insert(g.direct.end(), direct[k].begin(), direct[k].end());
+        std::vector<PixelTap>().swap(taps[k]);
+        std::vector<DirectArrival>().swap(direct[k]);
     }
-    for (std::size_t o = 0; o < points.outputs; ++o)
-        std::sort(g.taps.begin() + std::ptrdiff_t(g.row[o]), g.taps.begin() + std::ptrdiff_t(g.row[o + 1]),
-                  [](const PixelTap& a, const PixelTap& b) {
-                      return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
-                  });
-    sort_runs(g.direct, [](const DirectArrival& d) { return d.pixel; }, [](const DirectArrival& a, const DirectArrival& b) {
-        return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
-    });
     return g;
 }
 
@@ -117,18 +153,37 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
     const Neighbours near = find_neighbours(points, patches, radius, options.threads);
     if (options.progress) options.progress("camera", 0.6);
 
+    // Runs of points with one output (a pixel's samples), gathered together so that their arrivals are
+    // sorted by path and, with a time axis, merged per bin before the next run's are made.
     const std::vector<SensingPoint>& pts = points.points;
-    std::vector<std::vector<PixelTap>> per_point_taps(pts.size());
-    std::vector<std::vector<DirectArrival>> per_point_direct(pts.size());
+    std::vector<std::size_t> run_start;
+    std::vector<std::uint32_t> run_output;
+    for (std::size_t h = 0; h < pts.size(); ++h)
+        if (h == 0 || pts[h].output != pts[h - 1].output) {
+            run_start.push_back(h);
+            run_output.push_back(pts[h].output);
+        }
+    run_start.push_back(pts.size());
+    const std::size_t runs = run_output.size();
+    std::vector<std::vector<PixelTap>> run_taps(runs);
+    std::vector<std::vector<DirectArrival>> run_direct(runs);
     const double weight = points.weight;
-    parallel_for(pts.size(), {options.threads, 256, true}, [&](std::size_t h) {
-        const SensingPoint& sp = pts[h];
-        const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
-        for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
-            per_point_taps[h].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
-        direct_arrivals(sp, weight, patches, sources, vis, per_point_direct[h]);
+    parallel_for(runs, {options.threads, 64, true}, [&](std::size_t k) {
+        std::vector<DirectArrival>& direct = run_direct[k];
+        for (std::size_t h = run_start[k]; h < run_start[k + 1]; ++h) {
+            const SensingPoint& sp = pts[h];
+            const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
+            for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
+                run_taps[k].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
+            direct_arrivals(sp, weight, patches, sources, vis, options, direct);
+        }
+        std::sort(direct.begin(), direct.end(), [](const DirectArrival& a, const DirectArrival& b) {
+            return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+        });
+        if (options.time) merge_arrivals(direct, 0, *options.time);
+        direct.shrink_to_fit();
     });
-    Gather g = assemble(points, width, height, per_point_taps, per_point_direct);
+    Gather g = assemble(points.outputs, width, height, run_output, run_taps, run_direct);
     if (options.progress) options.progress("camera", 1.0);
     return g;
 }

@@ -81,7 +81,11 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     light_options.merge_bins = &scene.time;
     t.illumination = illuminate(t.sources, t.patches, *t.visibility, light_options);
     report.seconds.illumination = seconds_since(start);
-    t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, {options.threads, options.progress});
+    GatherOptions gather_options;
+    gather_options.threads = options.threads;
+    gather_options.progress = options.progress;
+    gather_options.time = &scene.time;
+    t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, gather_options);
     report.seconds.gather = seconds_since(start);
 }
 

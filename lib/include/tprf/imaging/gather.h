@@ -10,6 +10,7 @@
 /// is counted twice.
 
 #include "tprf/core/progress.h"
+#include "tprf/core/time_axis.h"
 #include "tprf/core/types.h"
 #include "tprf/imaging/sensing_points.h"
 
@@ -57,6 +58,11 @@ struct Gather {
 struct GatherOptions {
     int threads = 0;        ///< 0: all cores
     ProgressFn progress;    ///< phase "camera"
+    /// The time axis: area sources' direct light is timed by cells whose paths span about half of its
+    /// bin, and merged per bin of it (per sensing point). Without one, 4 x 4 cells and no merging.
+    const TimeAxis* time = nullptr;
+    int emitter_rays = 16;  ///< shadow rays from a sensing point to an area source (IlluminationOptions)
+    int penumbra_rays = 256;///< where those disagree
 };
 
 /// Prepares the gather of `points` (outputs laid out as width x height). Outputs without points
