@@ -207,12 +207,13 @@ double parse_max_edge(const Node& n) {
 }
 
 LinkSettings parse_links(const Node& n) {
-    n.check_keys({"method", "tolerance"});
+    n.check_keys({"method", "tolerance", "time_bins"});
     LinkSettings links;
     if (const auto method = n.find("method"))
         links.method = parse_choice<LinkMethod>(*method, "link method",
                                                 {{"hierarchical", LinkMethod::Hierarchical}, {"flat", LinkMethod::Flat}});
     if (const auto tolerance = n.find("tolerance")) links.tolerance = tolerance->number();
+    if (const auto time_bins = n.find("time_bins")) links.time_bins = time_bins->number();
     return links;
 }
 

@@ -304,6 +304,9 @@ void check_settings(const Scene& scene, const At& root) {
     finite(scene.links.tolerance, tolerance);
     if (!(scene.links.tolerance > 0.0)) tolerance.fail("must be > 0");
     if (scene.links.tolerance >= 1.0) tolerance.fail("must be < 1 (a form-factor error; 0.001 is a good start)");
+    const At time_bins = root.key("links").key("time_bins");
+    finite(scene.links.time_bins, time_bins);
+    if (scene.links.time_bins < 0.0) time_bins.fail("must be >= 0 (0 turns the timing criterion off)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
 }
 

@@ -249,6 +249,9 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     // A shadow that covers a small part of either node is found by its rays only when enough of them
     // are cast: more for links that carry more (each patch in such a shadow would get all of it).
     const double carried = a_big * judged.k_sum / m_samples;
+    if (m_h.time_bins > 0.0 && m_h.bin_width_m > 0.0 &&
+        carried * (m_tree.radius[r] + m_tree.radius[s]) / m_h.bin_width_m > m_h.time_bins * m_h.tolerance)
+        return false;
     const int count = std::clamp(int(std::ceil(m_samples * std::sqrt(carried / (kFacingShare * m_h.tolerance)))),
                                  m_samples, kMaxSamples);
     PairSamples p;

@@ -18,6 +18,7 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
     HierarchyOptions hierarchy;
     hierarchy.tolerance = settings.tolerance;
     hierarchy.bin_width_m = bin_width_m;
+    hierarchy.time_bins = settings.time_bins;
     return hierarchical_link_set(patches, visibility, options, hierarchy, stats);
 }
 

@@ -87,6 +87,9 @@ enum class LinkMethod {
 struct LinkSettings {
     LinkMethod method = LinkMethod::Flat;  ///< flat until the hierarchical method is measured (docs/links.md)
     double tolerance = 1e-3;               ///< > 0: largest accepted form-factor error of one cluster link
+    /// >= 0: refine a cluster link whose form factor times its members' timing offset in bins exceeds
+    /// time_bins x tolerance (HierarchyOptions::time_bins); 0: off. Beyond SPEC (docs/links.md).
+    double time_bins = 4.0;
 };
 
 /// A scene. Whatever builds one (a parser, a test, a binding) calls validate() (scene/validate.h)
