@@ -577,6 +577,12 @@ private:
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
     void short_links_of(std::size_t q, std::int64_t b0, int o);
+    // g += the short links (or the same-bin links) of the patch at position q at `bin`, from layer src,
+    // with C known at compile time, so that the sums stay in registers.
+    template <int C>
+    void add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const;
+    template <int C>
+    void add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const;
     void push_node(std::uint32_t i, std::int64_t b0);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
@@ -691,6 +697,34 @@ void March::long_pass(std::int64_t b0) {
 
 // The patch at position q at bin b0 + o: the long links' sum (with every cluster's above it) plus its
 // short links, the emission, stored in the recent bins (the rings take it after the same-bin sweeps).
+template <int C>
+void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const {
+    const SolvePlan& p = m_plan;
+    float sum[C] = {};
+    for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
+        const ShortLink& s = p.short_links[k];
+        const float* h1 = recent(src, s.source, bin - s.lag - 1);
+        if (s.lag > 0) {
+            const float* h0 = recent(src, s.source, bin - s.lag);
+            for (int c = 0; c < C; ++c) sum[c] += s.w0 * h0[c] + s.w1 * h1[c];
+        } else {
+            for (int c = 0; c < C; ++c) sum[c] += s.w1 * h1[c];
+        }
+    }
+    for (int c = 0; c < C; ++c) g[c] += sum[c];
+}
+
+template <int C>
+void March::add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const {
+    const SolvePlan& p = m_plan;
+    float sum[C] = {};
+    for (std::uint64_t k = p.same_row[q]; k < p.same_row[q + 1]; ++k) {
+        const float* h = recent(src, p.same_links[k].source, bin);
+        for (int c = 0; c < C; ++c) sum[c] += p.same_links[k].w * h[c];
+    }
+    for (int c = 0; c < C; ++c) g[c] += sum[c];
+}
+
 void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
     const SolvePlan& p = m_plan;
     const int C = p.C;
@@ -706,18 +740,7 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
             g[c] = acc[c];
             acc[c] = 0.0f;
         }
-        if (src >= 0) {
-            for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
-                const ShortLink& s = p.short_links[k];
-                const float* h1 = recent(src, s.source, bin - s.lag - 1);
-                if (s.lag > 0) {
-                    const float* h0 = recent(src, s.source, bin - s.lag);
-                    for (int c = 0; c < C; ++c) g[c] += s.w0 * h0[c] + s.w1 * h1[c];
-                } else {
-                    for (int c = 0; c < C; ++c) g[c] += s.w1 * h1[c];
-                }
-            }
-        }
+        if (src >= 0) (C == 1 ? add_short_links<1>(src, q, bin, g) : add_short_links<3>(src, q, bin, g));
         float b[3];
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
@@ -823,11 +846,7 @@ bool March::jacobi_sweep(std::int64_t bin, int iteration) {
             const float* keep = m_base.data() + state_at(l, q);
             float* next = m_iterate.data() + state_at(l, q);
             float g[3] = {0, 0, 0};
-            if (src >= 0)
-                for (std::uint64_t k = p.same_row[q]; k < p.same_row[q + 1]; ++k) {
-                    const float* h = recent(src, p.same_links[k].source, bin);
-                    for (int c = 0; c < C; ++c) g[c] += p.same_links[k].w * h[c];
-                }
+            if (src >= 0) (C == 1 ? add_same_links<1>(src, q, bin, g) : add_same_links<3>(src, q, bin, g));
             const float* now = recent(l, q, bin);
             const float* before = extrapolate ? m_previous.data() + state_at(l, q) : nullptr;
             for (int c = 0; c < C; ++c) {
