@@ -21,8 +21,19 @@ struct Clipped {
     std::size_t count = 0;
 };
 
-// Area and area centroid of a convex polygon, by a fan of triangles.
+// Area and area centroid of a convex polygon, by a fan of triangles (a triangle's and a
+// parallelogram's directly: their centroid is the corners' mean).
 void area_centroid(const Vec3* p, std::size_t count, double& area, Vec3& centroid) {
+    if (count == 3) {
+        area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).norm();
+        centroid = (p[0] + p[1] + p[2]) / 3.0;
+        return;
+    }
+    if (count == 4 && (p[0] + p[2] - p[1] - p[3]).squaredNorm() <= 1e-24 * (p[2] - p[0]).squaredNorm()) {
+        area = (p[1] - p[0]).cross(p[3] - p[0]).norm();
+        centroid = 0.25 * (p[0] + p[1] + p[2] + p[3]);
+        return;
+    }
     Vec3 twice_normal_area = Vec3::Zero();
     Vec3 weighted = Vec3::Zero();
     for (std::size_t k = 1; k + 1 < count; ++k) {
@@ -108,9 +119,9 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
 
     // Clip to x's upper hemisphere (Sutherland-Hodgman against the plane n . (y - x) = 0). Corners
     // that lie in that plane (a shared edge of perpendicular patches) are kept: they add nothing.
-    double scale = 0.0;
-    for (std::size_t k = 0; k < count; ++k) scale = std::max(scale, (poly[k] - x).norm());
-    const double tolerance = 1e-12 * scale;
+    double scale2 = 0.0;
+    for (std::size_t k = 0; k < count; ++k) scale2 = std::max(scale2, (poly[k] - x).squaredNorm());
+    const double tolerance = 1e-12 * std::sqrt(scale2);
     Clipped clipped;
     for (std::size_t k = 0; k < count; ++k) {
         const Vec3& p = poly[k];
@@ -124,10 +135,12 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
 
     // Lambert's contour integral. With the polygon counter-clockwise about a normal that faces x,
     // b x a points toward the polygon's side of x, so every term of a front-facing polygon is >= 0.
+    std::array<Vec3, 9> d;
+    for (std::size_t k = 0; k < clipped.count; ++k) d[k] = clipped.v[k] - x;
     double sum = 0.0;
     for (std::size_t k = 0; k < clipped.count; ++k) {
-        const Vec3 a = clipped.v[k] - x;
-        const Vec3 b = clipped.v[(k + 1) % clipped.count] - x;
+        const Vec3& a = d[k];
+        const Vec3& b = d[k + 1 < clipped.count ? k + 1 : 0];
         const Vec3 cross = b.cross(a);
         const double s = cross.norm();
         if (s <= 1e-300) continue;  // x on the edge's line: the edge subtends no angle
