@@ -273,6 +273,16 @@ TEST_F(Mesh, FaceIndexOutOfRangeIsAnError) {
     expect_input_error(write("bad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n"), "vertex 9");
 }
 
+TEST_F(Mesh, PointCloudsAreNamedAsSuch) {
+    // Vertices and no faces: PLY and OFF declare 0 faces, OBJ has no f lines.
+    expect_input_error(write("cloud.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                          "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n"),
+                       "has 3 vertices and no faces: a point cloud, not a surface");
+    expect_input_error(write("cloud.off", "OFF\n4 0 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"),
+                       "has 4 vertices and no faces: a point cloud");
+    expect_input_error(write("cloud.obj", "v 0 0 0\nv 1 0 0\n"), "has 2 vertices and no faces: a point cloud");
+}
+
 TEST_F(Mesh, AllDegenerateIsEmpty) {
     expect_input_error(write("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 2 2\n"),
                        "empty: no faces left after dropping 2 degenerate");

@@ -210,6 +210,11 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
 
     const std::size_t in_file =
         std::max({faces_in_file(file, ext), importer.declared_faces, importer.faces.size()});
+    if (in_file == 0 && importer.file_vertices > 0)
+        fail_input(scene_file, json_path,
+                   name + " has " + std::to_string(importer.file_vertices) +
+                       " vertices and no faces: a point cloud, not a surface (tprf renders surfaces; "
+                       "mesh it first, e.g. by Poisson reconstruction)");
     PolygonMesh mesh;
     mesh.dropped_degenerate = static_cast<int>(in_file - importer.faces.size());
     std::vector<int> remap(positions.size(), -1);
