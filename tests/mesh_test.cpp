@@ -273,6 +273,19 @@ TEST_F(Mesh, FaceIndexOutOfRangeIsAnError) {
     expect_input_error(write("bad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n"), "vertex 9");
 }
 
+TEST_F(Mesh, OffWithCommentsBlankLinesAndCountsOnTheHeaderLineLoads) {
+    // What tools write (issue 19): comments before the header, between and inside the sections, blank
+    // lines, and the counts on the header line. A unit square as two triangles.
+    const std::string off = "# written by some tool\n\nOFF 4 2 0   # vertices faces edges\n# the corners\n"
+                            "0 0 0\n1 0 0 # trailing comment\n\n1 1 0\n0 1 0\n# the faces\n3 0 1 2\n3 0 2 3\n";
+    const auto mesh = tprf::load_mesh(write("commented.off", off), Eigen::Matrix4d::Identity(), "scene.json",
+                                      "objects[0].file");
+    EXPECT_EQ(mesh.vertices.size(), 4u);
+    ASSERT_EQ(mesh.faces.size(), 2u);
+    EXPECT_EQ(mesh.dropped_degenerate, 0);
+    for (const auto& face : mesh.faces) EXPECT_EQ(face.size(), 3u);
+}
+
 TEST_F(Mesh, PointCloudsAreNamedAsSuch) {
     // Vertices and no faces: PLY and OFF declare 0 faces, OBJ has no f lines.
     expect_input_error(write("cloud.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"

@@ -144,6 +144,35 @@ std::size_t faces_in_file(const std::filesystem::path& file, const std::string& 
     return 0;
 }
 
+// An ASCII OFF file as OpenMesh's reader takes it: '#' comments (whole lines and the rest of a line)
+// and blank lines removed, which tools write and the reader refuses (or misreads), and counts written
+// on the header line ("OFF 8 6 12") moved to a line of their own. Empty for binary OFF ("OFF BINARY"),
+// which is left to OpenMesh as it is.
+std::string off_text(const std::filesystem::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    std::string out, line;
+    bool header = true;
+    while (std::getline(in, line)) {
+        if (const auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
+        std::istringstream words(line);
+        std::string first;
+        if (!(words >> first)) continue;  // blank
+        if (header) {
+            header = false;
+            std::string rest;
+            std::getline(words, rest);
+            if (first.ends_with("OFF") && rest.find("BINARY") != std::string::npos) return {};
+            if (first.ends_with("OFF") && rest.find_first_not_of(" \t\r") != std::string::npos) {
+                out += first + "\n" + rest + "\n";
+                continue;
+            }
+        }
+        out += line;
+        out += '\n';
+    }
+    return out;
+}
+
 Vec3 newell(const std::vector<Vec3>& vertices, const std::vector<int>& face) {
     Vec3 n = Vec3::Zero();
     for (std::size_t i = 0; i < face.size(); ++i) {
@@ -182,8 +211,14 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
             fail_input(scene_file, json_path,
                        name + ": unknown mesh format '" + ext + "' (OpenMesh reads " + known + ")");
         OpenMesh::IO::Options options;
-        if (!OpenMesh::IO::IOManager().read(file.string(), importer, options))
-            fail_input(scene_file, json_path, name + " is not a valid " + ext.substr(1) + " file");
+        bool read = false;
+        if (const std::string text = ext == ".off" ? off_text(file) : std::string(); !text.empty()) {
+            std::istringstream stream(text);
+            read = OpenMesh::IO::IOManager().read(stream, ext, importer, options);
+        } else {
+            read = OpenMesh::IO::IOManager().read(file.string(), importer, options);
+        }
+        if (!read) fail_input(scene_file, json_path, name + " is not a valid " + ext.substr(1) + " file");
     }
     for (const auto& face : importer.faces)
         for (int v : face)
