@@ -173,6 +173,23 @@ std::string off_text(const std::filesystem::path& file) {
     return out;
 }
 
+// Reads `file` (extension `ext`) into `importer` with OpenMesh's readers, silenced; returns what is
+// wrong (to follow the file's name), or nothing.
+std::string read_file(const std::filesystem::path& file, const std::string& ext, RecordingImporter& importer) {
+    OpenMeshSilencer silencer;
+    if (const std::string known = readable_extensions(); known.find("*" + ext + " ") == std::string::npos)
+        return ": unknown mesh format '" + ext + "' (OpenMesh reads " + known + ")";
+    OpenMesh::IO::Options options;
+    bool read = false;
+    if (const std::string text = ext == ".off" ? off_text(file) : std::string(); !text.empty()) {
+        std::istringstream stream(text);
+        read = OpenMesh::IO::IOManager().read(stream, ext, importer, options);
+    } else {
+        read = OpenMesh::IO::IOManager().read(file.string(), importer, options);
+    }
+    return read ? std::string() : " is not a valid " + ext.substr(1) + " file";
+}
+
 Vec3 newell(const std::vector<Vec3>& vertices, const std::vector<int>& face) {
     Vec3 n = Vec3::Zero();
     for (std::size_t i = 0; i < face.size(); ++i) {
@@ -205,21 +222,8 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
     const std::string ext = lower_extension(file);
     OmMesh om;
     RecordingImporter importer(om);
-    {
-        OpenMeshSilencer silencer;
-        if (const std::string known = readable_extensions(); known.find("*" + ext + " ") == std::string::npos)
-            fail_input(scene_file, json_path,
-                       name + ": unknown mesh format '" + ext + "' (OpenMesh reads " + known + ")");
-        OpenMesh::IO::Options options;
-        bool read = false;
-        if (const std::string text = ext == ".off" ? off_text(file) : std::string(); !text.empty()) {
-            std::istringstream stream(text);
-            read = OpenMesh::IO::IOManager().read(stream, ext, importer, options);
-        } else {
-            read = OpenMesh::IO::IOManager().read(file.string(), importer, options);
-        }
-        if (!read) fail_input(scene_file, json_path, name + " is not a valid " + ext.substr(1) + " file");
-    }
+    if (const std::string problem = read_file(file, ext, importer); !problem.empty())
+        fail_input(scene_file, json_path, name + problem);
     for (const auto& face : importer.faces)
         for (int v : face)
             if (v < 0 || static_cast<std::size_t>(v) >= importer.file_vertices)
