@@ -152,6 +152,24 @@ TEST_F(PatchesMesh, CornerOnAnEdgeLeavesNoSliver) {
     expect_well_formed(p, 10.0);
 }
 
+TEST_F(PatchesMesh, ConcavePolygonIsEarClippedNotFanned) {
+    // An L of area 3 (the unit square [1,2] x [1,2] cut from [0,2] x [0,2]), written from the corner
+    // (2, 1) next to the notch: a fan from there would cover the notch and fold over itself.
+    tprf::Scene scene;
+    scene.objects.push_back(mesh("v 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nv 0 0 0\nv 2 0 0\nf 1 2 3 4 5 6\n"));
+    scene.max_edge = 10.0;
+    const auto p = tprf::build_patches(scene);
+    EXPECT_EQ(p.size(), 4u);  // n - 2 triangles
+    EXPECT_NEAR(total_area(p), 3.0, kTol);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        EXPECT_LT((p.normal[i] - Vec3::UnitZ()).norm(), kTol) << "patch " << i;
+        // Nothing of the notch: every centroid lies in the L.
+        const Vec3& c = p.centroid[i];
+        EXPECT_FALSE(c.x() > 1.0 && c.y() > 1.0) << "patch " << i << " at " << c.transpose();
+    }
+    expect_well_formed(p, 10.0);
+}
+
 TEST_F(PatchesMesh, TwoSidedDoublesWithOppositeNormals) {
     tprf::Scene scene;
     scene.objects.push_back(rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY(), true));

@@ -35,11 +35,69 @@ Grid rectangle_grid(const RectangleShape& r, double max_edge) {
 
 using Triangle = std::array<Vec3, 3>;
 
-// Fan triangulation, exact for the convex polygons that mesh files hold in practice. Fan pieces without
-// area (a corner lying on an edge of the polygon) are left out: they carry no energy and have no normal.
-// "Without area" is relative to the polygon, which load_mesh guarantees is not degenerate itself.
+// Whether the polygon turns the same way (about its Newell normal n) at every corner.
+bool is_convex(const std::vector<Vec3>& v, const std::vector<int>& face, const Vec3& n) {
+    const std::size_t m = face.size();
+    for (std::size_t k = 0; k < m; ++k) {
+        const Vec3& a = v[face[(k + m - 1) % m]];
+        const Vec3& b = v[face[k]];
+        const Vec3& c = v[face[(k + 1) % m]];
+        if ((b - a).cross(c - b).dot(n) < 0.0) return false;
+    }
+    return true;
+}
+
+// Ear clipping of a simple planar polygon that is not convex, counter-clockwise about its Newell normal
+// n: a corner whose triangle with its neighbours turns the polygon's way and holds no other corner is
+// cut off, until three are left. A polygon with no ear (it crosses itself) is fanned from what is left.
+void ear_clip(const std::vector<Vec3>& v, const std::vector<int>& face, const Vec3& n, std::vector<Triangle>& out) {
+    std::vector<int> left(face);
+    const auto turn = [&](const Vec3& a, const Vec3& b, const Vec3& c) { return (b - a).cross(c - b).dot(n); };
+    const auto inside = [&](const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+        return turn(a, b, p) >= 0.0 && turn(b, c, p) >= 0.0 && turn(c, a, p) >= 0.0;
+    };
+    while (left.size() > 3) {
+        const std::size_t m = left.size();
+        bool cut = false;
+        for (std::size_t k = 0; k < m && !cut; ++k) {
+            const Vec3& a = v[left[(k + m - 1) % m]];
+            const Vec3& b = v[left[k]];
+            const Vec3& c = v[left[(k + 1) % m]];
+            if (!(turn(a, b, c) > 0.0)) continue;
+            bool empty = true;
+            for (std::size_t j = 0; j < m && empty; ++j)
+                if (j != k && j != (k + 1) % m && j != (k + m - 1) % m && inside(v[left[j]], a, b, c)) empty = false;
+            if (!empty) continue;
+            out.push_back({a, b, c});
+            left.erase(left.begin() + std::ptrdiff_t(k));
+            cut = true;
+        }
+        if (!cut) break;
+    }
+    for (std::size_t i = 1; i + 1 < left.size(); ++i) out.push_back({v[left[0]], v[left[i]], v[left[i + 1]]});
+}
+
+// Convex polygons (what mesh files hold in practice) are fanned from their first corner; the others
+// are ear-clipped. Pieces without area (a corner lying on an edge of the polygon) are left out: they
+// carry no energy and have no normal. "Without area" is relative to the polygon, which load_mesh
+// guarantees is not degenerate itself.
 void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
+    std::vector<Triangle> pieces;
     for (const auto& face : mesh.faces) {
+        if (face.size() > 3) {
+            Vec3 n = Vec3::Zero();
+            for (std::size_t k = 0; k < face.size(); ++k)
+                n += mesh.vertices[face[k]].cross(mesh.vertices[face[(k + 1) % face.size()]]);
+            if (!is_convex(mesh.vertices, face, n)) {
+                pieces.clear();
+                ear_clip(mesh.vertices, face, n, pieces);
+                double polygon = 0.0;
+                for (const Triangle& t : pieces) polygon += (t[1] - t[0]).cross(t[2] - t[0]).norm();
+                for (const Triangle& t : pieces)
+                    if ((t[1] - t[0]).cross(t[2] - t[0]).norm() > 1e-12 * polygon) out.push_back(t);
+                continue;
+            }
+        }
         const Vec3& a = mesh.vertices[face[0]];
         double polygon = 0.0;
         for (std::size_t i = 1; i + 1 < face.size(); ++i)
