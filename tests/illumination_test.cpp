@@ -3,6 +3,7 @@
 
 #include "tprf/transport/illumination.h"
 
+#include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/transport/light_sources.h"
@@ -55,7 +56,7 @@ TEST(AreaSources, AnEmissiveRectangleIsOneSourcePerSideHoweverFinelyItIsCut) {
         ASSERT_EQ(areas.size(), 2u) << max_edge;
         for (const AreaSource& a : areas) {
             EXPECT_EQ(a.count, 4);
-            EXPECT_NEAR(a.area, 0.12, 1e-12);
+            EXPECT_NEAR(polygon_area(a.polygon(), a.count), 0.12, 1e-12);
             EXPECT_NEAR((a.centroid - Vec3(0.15, 0.2, 1)).norm(), 0.0, 1e-12);
             EXPECT_EQ(a.radiance[0], 2.0);
             EXPECT_EQ(a.object, 0u);

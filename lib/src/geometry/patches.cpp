@@ -82,31 +82,20 @@ void ear_clip(const std::vector<Vec3>& v, const std::vector<int>& face, const Ve
 // carry no energy and have no normal. "Without area" is relative to the polygon, which load_mesh
 // guarantees is not degenerate itself.
 void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
+    const std::vector<Vec3>& v = mesh.vertices;
     std::vector<Triangle> pieces;
     for (const auto& face : mesh.faces) {
-        if (face.size() > 3) {
-            Vec3 n = Vec3::Zero();
-            for (std::size_t k = 0; k < face.size(); ++k)
-                n += mesh.vertices[face[k]].cross(mesh.vertices[face[(k + 1) % face.size()]]);
-            if (!is_convex(mesh.vertices, face, n)) {
-                pieces.clear();
-                ear_clip(mesh.vertices, face, n, pieces);
-                double polygon = 0.0;
-                for (const Triangle& t : pieces) polygon += (t[1] - t[0]).cross(t[2] - t[0]).norm();
-                for (const Triangle& t : pieces)
-                    if ((t[1] - t[0]).cross(t[2] - t[0]).norm() > 1e-12 * polygon) out.push_back(t);
-                continue;
-            }
-        }
-        const Vec3& a = mesh.vertices[face[0]];
+        Vec3 n = Vec3::Zero();
+        for (std::size_t k = 0; k < face.size(); ++k) n += v[face[k]].cross(v[face[(k + 1) % face.size()]]);
+        pieces.clear();
+        if (is_convex(v, face, n))
+            for (std::size_t i = 1; i + 1 < face.size(); ++i) pieces.push_back({v[face[0]], v[face[i]], v[face[i + 1]]});
+        else
+            ear_clip(v, face, n, pieces);
         double polygon = 0.0;
-        for (std::size_t i = 1; i + 1 < face.size(); ++i)
-            polygon += (mesh.vertices[face[i]] - a).cross(mesh.vertices[face[i + 1]] - a).norm();
-        for (std::size_t i = 1; i + 1 < face.size(); ++i) {
-            const Vec3& b = mesh.vertices[face[i]];
-            const Vec3& c = mesh.vertices[face[i + 1]];
-            if ((b - a).cross(c - a).norm() > 1e-12 * polygon) out.push_back({a, b, c});
-        }
+        for (const Triangle& t : pieces) polygon += (t[1] - t[0]).cross(t[2] - t[0]).norm();
+        for (const Triangle& t : pieces)
+            if ((t[1] - t[0]).cross(t[2] - t[0]).norm() > 1e-12 * polygon) out.push_back(t);
     }
 }
 

@@ -47,7 +47,7 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
     for (std::size_t i = 0; i < n; ++i)
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
             const Pulse& p = m_illumination.pulses[k];
-            if ((p.point_source < 0 && p.area_source < 0) || !takes_order(p.order)) continue;
+            if (!p.exact_at_sensors() || !takes_order(p.order)) continue;
             const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
             float* v = m_indirect.data() + (i * bins + std::size_t(b)) * 3;
@@ -118,8 +118,7 @@ std::vector<float> steady_image(const Gather& gather, const Illumination& illumi
     std::vector<Rgb> indirect(steady);
     for (std::size_t i = 0; i < indirect.size(); ++i)
         for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k)
-            if (illumination.pulses[k].point_source >= 0 || illumination.pulses[k].area_source >= 0)
-                indirect[i] -= illumination.pulses[k].energy;
+            if (illumination.pulses[k].exact_at_sensors()) indirect[i] -= illumination.pulses[k].energy;
     std::vector<float> image(pixels * 3, 0.0f);
     for (std::size_t px = 0; px < pixels; ++px) {
         Rgb v = Rgb::Zero();

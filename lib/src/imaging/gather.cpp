@@ -65,12 +65,7 @@ void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patche
     pairs.clear();
     double total = arrive_area(a, sp.point, n, vis, area_sampling(a, sp.point, bin_m, options.emitter_rays,
                                                                   options.penumbra_rays), pairs);
-    if (!(total > 0.0)) {
-        // No cell centre faces x, yet F > 0 (a sliver near its horizon): the centroid's path carries it.
-        if (vis.occluded(sp.point + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal)) return;
-        pairs.push_back({(sp.point - a.centroid).norm(), 1.0});
-        total = 1.0;
-    }
+    if (!(total > 0.0) && !(total = arrive_area_centroid(a, sp.point, n, vis, pairs))) return;
     const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
     if (options.time) pairs = merge_pairs_by_bin(pairs, bin_m, options.time->start_m() - sp.leg);
     for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});
@@ -89,29 +84,32 @@ void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patc
     for (const AreaSource& a : sources.areas) area_arrivals(sp, weight, patches, a, vis, options, out);
 }
 
-// Arrivals of one output (sorted by path) that share a bin of `time` and an order, merged into the first
-// of them: exact for the film, which places each arrival by its bin.
-void merge_arrivals(std::vector<DirectArrival>& v, std::size_t from, const TimeAxis& time) {
-    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
-    const auto bin = [&](const DirectArrival& a) { return std::floor((a.path - start) * inv_bin); };
-    std::size_t kept = from;
-    for (std::size_t k = from; k < v.size(); ++k) {
-        // Sorted by path, arrivals of one bin are consecutive apart from other orders between them:
-        // look back over the arrivals kept in this bin.
-        bool merged = false;
-        for (std::size_t j = kept; j-- > from && bin(v[j]) == bin(v[k]);)
-            if (v[j].order == v[k].order) {
-                v[j].radiance += v[k].radiance;
-                merged = true;
-                break;
-            }
-        if (!merged) v[kept++] = v[k];
+// One output's arrivals in path order; with a time axis, those that share a bin and an order are summed
+// (in path order) into the earliest of them: exact for the film, which places each arrival by its bin.
+void order_arrivals(std::vector<DirectArrival>& v, const TimeAxis* time) {
+    const auto by_path = [](const DirectArrival& a, const DirectArrival& b) {
+        return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+    };
+    if (!time) {
+        std::sort(v.begin(), v.end(), by_path);
+        return;
+    }
+    const double inv_bin = 1.0 / time->bin_width_m(), start = time->start_m();
+    const auto key = [&](const DirectArrival& a) { return std::pair(std::floor((a.path - start) * inv_bin), a.order); };
+    std::sort(v.begin(), v.end(),
+              [&](const DirectArrival& a, const DirectArrival& b) { return key(a) != key(b) ? key(a) < key(b) : by_path(a, b); });
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < v.size(); ++k) {
+        if (kept > 0 && key(v[kept - 1]) == key(v[k]))
+            v[kept - 1].radiance += v[k].radiance;
+        else
+            v[kept++] = v[k];
     }
     v.resize(kept);
 }
 
 // The outputs' lists as one CSR: run k holds the points of output outputs[k] (in output order), and its
-// taps and arrivals; each run's lists are freed once taken.
+// taps and arrivals, each in order; each run's lists are freed once taken.
 Gather assemble(std::size_t count, int width, int height, const std::vector<std::uint32_t>& outputs,
                 std::vector<std::vector<PixelTap>>& taps, std::vector<std::vector<DirectArrival>>& direct) {
     Gather g;
@@ -125,9 +123,6 @@ Gather assemble(std::size_t count, int width, int height, const std::vector<std:
     for (const auto& d : direct) arrivals += d.size();
     g.direct.reserve(arrivals);
     for (std::size_t k = 0; k < outputs.size(); ++k) {
-        std::sort(taps[k].begin(), taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
-            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
-        });
         g.taps.insert(g.taps.end(), taps[k].begin(), taps[k].end());
         g.direct.insert(g.direct.end(), direct[k].begin(), direct[k].end());
         std::vector<PixelTap>().swap(taps[k]);
@@ -177,10 +172,10 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
                 run_taps[k].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
             direct_arrivals(sp, weight, patches, sources, vis, options, direct);
         }
-        std::sort(direct.begin(), direct.end(), [](const DirectArrival& a, const DirectArrival& b) {
-            return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+        std::sort(run_taps[k].begin(), run_taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
+            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
         });
-        if (options.time) merge_arrivals(direct, 0, *options.time);
+        order_arrivals(direct, options.time);
         direct.shrink_to_fit();
     });
     Gather g = assemble(points.outputs, width, height, run_output, run_taps, run_direct);

@@ -90,15 +90,7 @@ void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t
     pairs.clear();
     double total = 0.0;  // the weight of every pair, blocked or not
     for (int s = 0; s < g * g; ++s) total += arrive_area(a, sample_patch(patches, i, s, g), ni, vis, sampling, pairs);
-    if (!(total > 0.0)) {
-        // No sampled pair faces both ways, yet F > 0 (a sliver near a horizon): the centroids' path
-        // carries it, if unblocked.
-        const Vec3& x = patches.centroid[i];
-        const double lift = vis.epsilon();
-        if (vis.occluded(x + lift * ni, a.centroid + lift * a.normal)) return;
-        pairs.push_back({(x - a.centroid).norm(), 1.0});
-        total = 1.0;
-    }
+    if (!(total > 0.0) && !(total = arrive_area_centroid(a, patches.centroid[i], ni, vis, pairs))) return;
     const Rgb scale = energy / total;
     if (options.merge_bins) pairs = merge_pairs_by_bin(pairs, bin_m, options.merge_bins->start_m());
     for (const AreaPair& q : pairs) out.push_back(area_pulse(q.path, scale * q.weight, source));

@@ -38,7 +38,6 @@ AreaSource make_area_source(const Vec3* corners, std::size_t count, const Rgb& r
     const Vec3 cross = count == 4 ? Vec3((corners[2] - corners[0]).cross(corners[3] - corners[1]))
                                   : Vec3((corners[1] - corners[0]).cross(corners[2] - corners[0]));
     a.normal = cross.normalized();
-    a.area = polygon_area(corners, count);
     a.centroid = Vec3::Zero();
     for (std::size_t k = 0; k < count; ++k) a.centroid += corners[k] / double(count);  // a parallelogram's or triangle's
     a.radiance = radiance;
@@ -210,6 +209,13 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
         if (open) out.push_back({path, w});
     }
     return total;
+}
+
+double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,
+                            std::vector<AreaPair>& out) {
+    if (vis.occluded(x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal)) return 0.0;
+    out.push_back({(x - a.centroid).norm(), 1.0});
+    return 1.0;
 }
 
 std::vector<AreaPair> merge_pairs_by_bin(const std::vector<AreaPair>& pairs, double bin_m, double start_m) {

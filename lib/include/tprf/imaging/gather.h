@@ -13,6 +13,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/core/types.h"
 #include "tprf/imaging/sensing_points.h"
+#include "tprf/transport/light_sources.h"
 
 #include <cstdint>
 #include <vector>
@@ -61,8 +62,8 @@ struct GatherOptions {
     /// The time axis: area sources' direct light is timed by cells whose paths span about half of its
     /// bin, and merged per bin of it (per sensing point). Without one, 4 x 4 cells and no merging.
     const TimeAxis* time = nullptr;
-    int emitter_rays = 16;  ///< shadow rays from a sensing point to an area source (IlluminationOptions)
-    int penumbra_rays = 256;///< where those disagree
+    int emitter_rays = kAreaShadowRays;     ///< shadow rays from a sensing point to an area source
+    int penumbra_rays = kAreaPenumbraRays;  ///< where those disagree
 };
 
 /// Prepares the gather of `points` (outputs laid out as width x height). Outputs without points

@@ -39,6 +39,10 @@ struct Pulse {
     /// The area source (index into LightSources::areas) whose first bounce this is, or -1. Sensing
     /// points evaluate area sources exactly too, and the film leaves these pulses out the same way.
     std::int32_t area_source = -1;
+
+    /// Whether sensing points evaluate this pulse's light themselves (a point or area source's direct
+    /// light), so that the film takes it out of the patch profiles it interpolates.
+    bool exact_at_sensors() const { return point_source >= 0 || area_source >= 0; }
 };
 
 /// Pulses grouped by patch (CSR): patch i's pulses are pulses[row[i] .. row[i+1]).
@@ -54,10 +58,10 @@ struct IlluminationOptions {
     /// Shadow rays from each of those points to an area source (to the centres of a grid of cells over
     /// it). The pulses' times come from a grid of cells whose paths span about half a bin of
     /// merge_bins (2 x 2 to 32 x 32 cells; 4 x 4 without merge_bins), each taking its shadow cell's ray.
-    int emitter_rays = 16;
+    int emitter_rays = kAreaShadowRays;
     /// Where those rays disagree (a penumbra), the point's pairs take a grid of at least this many cells
     /// instead, with a shadow ray each.
-    int penumbra_rays = 256;
+    int penumbra_rays = kAreaPenumbraRays;
     int threads = 0;            ///< 0: all cores
     /// When set, a patch's pulses that fall in one bin of this axis with the same order, source and
     /// propagation are merged into one (at the first one's path): exact for every consumer, each of

@@ -57,7 +57,6 @@ struct AreaSource {
     std::uint8_t count = 0;          ///< corners used: 3 or 4 (a quad is a parallelogram)
     Vec3 normal = Vec3::UnitZ();     ///< unit front normal
     Vec3 centroid = Vec3::Zero();    ///< metres
-    double area = 0.0;               ///< m^2
     Rgb radiance = Rgb::Zero();      ///< L_e, W/(m^2 sr)
     std::uint32_t object = 0;        ///< index into Scene::objects
 
@@ -106,6 +105,11 @@ struct AreaPair {
     double weight = 0.0;
 };
 
+/// Shadow rays from a surface point to an area source first, and where they disagree (the defaults of
+/// IlluminationOptions and GatherOptions).
+inline constexpr int kAreaShadowRays = 16;
+inline constexpr int kAreaPenumbraRays = 256;
+
 /// How an area source is sampled from one surface point: a grid of cells over the source.
 struct AreaSampling {
     int timing = 4;     ///< cells per side whose centres time the light
@@ -124,6 +128,11 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int
 /// exact form factor point_polygon_form_factor(x, n, a) that reaches x.
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& visibility,
                    const AreaSampling& sampling, std::vector<AreaPair>& out);
+
+/// When no cell centre of `a` faces x, yet F > 0 (a sliver near x's horizon): one pair along the path
+/// from x to a's centroid, of weight 1, if that ray is unblocked. Returns the weight added (1 or 0).
+double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& visibility,
+                            std::vector<AreaPair>& out);
 
 /// `pairs` summed per bin of width bin_m from start_m (one pair per bin that has any, at its first
 /// pair's path, in increasing bins). Exact for every consumer, each of which places light by its bin.
