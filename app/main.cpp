@@ -83,13 +83,43 @@ tprf::ResourceEstimate print_estimate(const tprf::Scene& scene, const tprf::Pipe
     return e;
 }
 
-int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool quiet) {
+// What was dropped from each mesh file, one line per mesh (even with --quiet: the geometry is not
+// quite what the file holds).
+void print_mesh_repairs(const std::vector<tprf::MeshReport>& meshes) {
+    for (const tprf::MeshReport& m : meshes)
+        if (m.repairs.any())
+            std::fprintf(stderr, "tprf: warning: mesh file '%s' (objects[%zu].file): dropped %s\n", m.file.c_str(),
+                         m.object, tprf::describe(m.repairs).c_str());
+}
+
+// One line per mesh file: its size, its bounding box after the transform and what was dropped.
+void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
+    for (const tprf::MeshReport& m : meshes) {
+        const Eigen::Vector3d& lo = m.bounds.min();
+        const Eigen::Vector3d& hi = m.bounds.max();
+        const std::string repairs = tprf::describe(m.repairs);
+        std::printf("mesh     objects[%zu] '%s': %zu vertices, %zu faces, %zu triangles; box (%.6g, %.6g, %.6g) to "
+                    "(%.6g, %.6g, %.6g) m; %s%s\n",
+                    m.object, m.file.c_str(), m.vertices, m.faces, m.triangles, lo.x(), lo.y(), lo.z(), hi.x(),
+                    hi.y(), hi.z(), repairs.empty() ? "nothing dropped" : "dropped ", repairs.c_str());
+    }
+}
+
+int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool meshes_only, bool quiet) {
     const tprf::Scene scene = tprf::load_scene(scene_file);
     tprf::PipelineOptions options;
     options.threads = threads;
     options.max_memory_gb = max_memory_gb;
     std::printf("scene    %s\n", scene_file.c_str());
+    if (meshes_only) {
+        const std::vector<tprf::MeshReport> meshes = tprf::describe_meshes(scene);
+        print_meshes(meshes);
+        print_mesh_repairs(meshes);
+        return 0;
+    }
     const tprf::ResourceEstimate e = print_estimate(scene, options);
+    print_meshes(e.meshes);
+    print_mesh_repairs(e.meshes);
     if (e.link_stage_bytes > tprf::memory_limit_bytes(options)) {
         // Building the links to count them would exceed the limit: the counts stay estimates.
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
@@ -102,9 +132,6 @@ int run_info(const std::string& scene_file, int threads, double max_memory_gb, b
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::SceneSummary s = tprf::describe_scene(scene, options);
     bar.finish();
-    if (s.dropped_degenerate > 0)
-        std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
-                     s.dropped_degenerate);
     std::printf("patches  %zu (max_edge %.6g m)\n", s.patches, s.max_edge);
     if (scene.links.method == tprf::LinkMethod::Flat)
         std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
@@ -129,9 +156,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::RenderReport r = tprf::render_file(scene_file, options);
     bar.finish();
-    if (r.dropped_degenerate > 0)
-        std::fprintf(stderr, "tprf: warning: %d degenerate mesh faces dropped (zero area or repeated vertices)\n",
-                     r.dropped_degenerate);
+    print_mesh_repairs(r.meshes);
     print_warnings(r.warnings);
     if (!quiet)
         std::fprintf(stderr,
@@ -186,6 +211,10 @@ int main(int argc, char** argv) {
     double info_max_memory = 0.0;
     info->add_option("--max-memory", info_max_memory, "the render limit to compare the estimate with, GB")
         ->check(CLI::PositiveNumber);
+    bool info_meshes = false;
+    info->add_flag("--meshes", info_meshes,
+                   "only load the mesh files and print, per mesh, its vertices, faces, triangles, bounding box "
+                   "and what was dropped (no estimate, no links)");
     tprf::RenderOptions render;
     std::string output;
     auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
@@ -221,7 +250,7 @@ int main(int argc, char** argv) {
         return rc == 0 ? 0 : 2;
     }
     try {
-        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, quiet);
+        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, info_meshes, quiet);
         if (rend->parsed()) {
             render.output = output;
             render.threads = threads;

@@ -139,6 +139,53 @@ TEST_F(Cli, InfoPrintsPatchesLinksAndTheTimeWindow) {
     EXPECT_EQ(entries(), before) << "info wrote something";
 }
 
+// A scene of one mesh file (its text given), for the mesh tests of `tprf info`.
+fs::path mesh_scene(const fs::path& dir, const std::string& mesh_name, const std::string& mesh_text) {
+    std::ofstream(dir / mesh_name, std::ios::binary) << mesh_text;
+    const fs::path scene = dir / (mesh_name + ".json");
+    std::ofstream(scene) << R"({"time": {"bins": 16, "bin_width": 0.1},
+      "camera": {"position": [0.5, 0.5, 3], "look_at": [0.5, 0.5, 0], "up": [0, 1, 0], "fov": 40, "width": 8, "height": 8},
+      "lights": [{"type": "point", "position": [0.5, 0.5, 1], "intensity": 1.0}],
+      "objects": [{"type": "mesh", "file": ")" + mesh_name + R"(", "transform": {"scale": 2, "translate": [1, 0, 0]}}]})";
+    return scene;
+}
+
+TEST_F(Cli, InfoMeshesPrintsEachMeshAndWhatWasDroppedWithoutLinks) {
+    // The unit square, a duplicate of its first triangle, a zero-area triangle and an unused vertex;
+    // scaled by 2 and moved by +1 in x: the box (1, 0, 0) to (3, 2, 0).
+    const fs::path scene = mesh_scene(m_dir, "sq.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 9 9 9\nv 2 0 0\n"
+                                                       "f 1 2 3\nf 1 3 4\nf 2 3 1\nf 1 2 6\n");
+    int status = -1;
+    const std::string out = run_stdout("info --meshes " + scene.string(), status);
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("sq.obj': 4 vertices, 2 faces, 2 triangles; box (1, 0, 0) to (3, 2, 0) m; "
+                       "dropped 1 zero-area face, 1 duplicate face and 2 unreferenced vertices"),
+              std::string::npos)
+        << out;
+    EXPECT_EQ(line_after(out, "links"), "") << "--meshes must not build links: " << out;
+    EXPECT_EQ(line_after(out, "estimate"), "") << out;
+    // The warning goes to stderr, once per mesh.
+    const Outcome r = run("info --meshes " + scene.string());
+    EXPECT_EQ(r.err.rfind("tprf: warning: mesh file '", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find("sq.obj' (objects[0].file): dropped 1 zero-area face"), std::string::npos)
+        << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
+
+TEST_F(Cli, BadMeshExitsTwoWithTheLine) {
+    const fs::path scene = mesh_scene(m_dir, "bad.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+    for (const char* command : {"info --meshes ", "info ", "render "}) {
+        const Outcome r = run(command + scene.string() + (std::string(command) == "render " ? " -o " + (m_dir / "out").string() : ""));
+        EXPECT_EQ(r.status, 2) << command;
+        EXPECT_NE(r.err.find("objects[0].file: mesh file '" + (m_dir / "bad.off").string() + "', line 6: face 1 refers to vertex 3, but the file has "
+                             "3 vertices"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+    EXPECT_FALSE(fs::exists(m_dir / "out"));
+}
+
 TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
     // The same gates through `tprf sensor` on a plain render and through the scene's own sensor block.
     const std::string gates = R"({"type": "gates", "start": 0.0, "width": 0.3, "step": 0.3, "count": 5})";

@@ -1,3 +1,4 @@
+#include "mesh_files.h"
 #include "tprf/scene/mesh_io.h"
 
 #include "tprf/core/error.h"
@@ -10,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <string>
+#include <vector>
 #include <unistd.h>
 
 namespace {
@@ -17,29 +19,19 @@ namespace {
 namespace fs = std::filesystem;
 using tprf::Vec3;
 
-// Each test writes its files into a directory of its own, so that tests may run in parallel.
-class Mesh : public ::testing::Test {
-protected:
-    void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        m_dir = fs::temp_directory_path() /
-                ("tprf_mesh_test_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::create_directories(m_dir);
-    }
-    void TearDown() override { fs::remove_all(m_dir); }
+using Mesh = tprf::test::MeshFiles;
+using tprf::test::expect_input_error;
 
-    fs::path write(const std::string& name, const std::string& text) const {
-        const fs::path file = m_dir / name;
-        std::ofstream(file, std::ios::binary) << text;
-        return file;
-    }
-
-    fs::path m_dir;
-};
+// The faces as lists, for tests that walk them.
+std::vector<std::vector<int>> faces_of(const tprf::PolygonMesh& mesh) {
+    std::vector<std::vector<int>> out;
+    for (std::size_t f = 0; f < mesh.faces(); ++f) out.emplace_back(mesh.face(f).begin(), mesh.face(f).end());
+    return out;
+}
 
 double total_area(const tprf::PolygonMesh& mesh) {
     double area = 0.0;
-    for (const auto& face : mesh.faces) {
+    for (const auto& face : faces_of(mesh)) {
         Vec3 n = Vec3::Zero();
         for (std::size_t i = 0; i < face.size(); ++i)
             n += mesh.vertices[face[i]].cross(mesh.vertices[face[(i + 1) % face.size()]]);
@@ -49,7 +41,7 @@ double total_area(const tprf::PolygonMesh& mesh) {
 }
 
 Vec3 face_normal(const tprf::PolygonMesh& mesh, std::size_t f) {
-    const auto& face = mesh.faces[f];
+    const auto face = mesh.face(f);
     const Vec3& a = mesh.vertices[face[0]];
     return (mesh.vertices[face[1]] - a).cross(mesh.vertices[face[2]] - a).normalized();
 }
@@ -76,8 +68,8 @@ Eigen::Matrix4d scale_rotate_translate() {
 
 void expect_transformed_square(const tprf::PolygonMesh& mesh) {
     ASSERT_EQ(mesh.vertices.size(), 4u);
-    ASSERT_EQ(mesh.faces.size(), 2u);
-    EXPECT_EQ(mesh.dropped_degenerate, 0);
+    ASSERT_EQ(mesh.faces(), 2u);
+    EXPECT_FALSE(mesh.repairs.any()) << tprf::describe(mesh.repairs);
     // Scaling lengths by 2 scales area by 4; the inputs are small integers, exact in float and double.
     EXPECT_NEAR(total_area(mesh), 4.0, 1e-12);
     // (x, y, 0) -> (2x, 2y, 0) -> (-2y, 2x, 0) -> (1 - 2y, 2 + 2x, 3).
@@ -87,7 +79,7 @@ void expect_transformed_square(const tprf::PolygonMesh& mesh) {
         EXPECT_TRUE(found) << expected.transpose();
     }
     // A rotation about z keeps the file's counter-clockwise front facing +z.
-    for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    for (std::size_t f = 0; f < mesh.faces(); ++f)
         EXPECT_NEAR(face_normal(mesh, f).z(), 1.0, 1e-12);
 }
 
@@ -127,13 +119,15 @@ std::string binary_stl(const std::vector<std::array<float, 9>>& triangles) {
 }
 
 TEST_F(Mesh, ReadsBinaryStlAndCountsCollapsedTriangles) {
-    // The third triangle has two equal corners; OpenMesh's STL reader skips it without telling.
+    // The third triangle has two equal corners: dropped and counted.
     const auto file = write("square.stl", binary_stl({{0, 0, 0, 1, 0, 0, 1, 1, 0},
                                                       {0, 0, 0, 1, 1, 0, 0, 1, 0},
                                                       {0, 0, 0, 1, 0, 0, 1, 0, 0}}));
     const auto mesh = tprf::load_mesh(file, scale_rotate_translate(), "scene.json", "objects[0].file");
-    expect_transformed_square({mesh.vertices, mesh.faces, 0});
-    EXPECT_EQ(mesh.dropped_degenerate, 1);
+    EXPECT_EQ(mesh.repairs.zero_area_faces, 1u);
+    tprf::PolygonMesh kept = mesh;
+    kept.repairs = {};
+    expect_transformed_square(kept);
 }
 
 // Valid square plus a collinear (zero-area) triangle and a triangle with a repeated vertex.
@@ -156,11 +150,13 @@ TEST_F(Mesh, DropsAndCountsDegenerateFacesInEveryFormat) {
         SCOPED_TRACE(name);
         const auto mesh = tprf::load_mesh(write(name, text), Eigen::Matrix4d::Identity(), "scene.json",
                                           "objects[0].file");
-        EXPECT_EQ(mesh.faces.size(), 2u);
-        EXPECT_EQ(mesh.dropped_degenerate, 2);
+        EXPECT_EQ(mesh.faces(), 2u);
+        EXPECT_EQ(mesh.repairs.zero_area_faces, 2u);
         EXPECT_NEAR(total_area(mesh), 1.0, 1e-12);
         // Only vertices of kept faces remain (vertex 5 belonged to the collinear triangle alone).
         EXPECT_EQ(mesh.vertices.size(), 4u);
+        EXPECT_EQ(mesh.repairs.unreferenced_vertices, 1u);
+        EXPECT_EQ(tprf::describe(mesh.repairs), "2 zero-area faces and 1 unreferenced vertex");
     }
 }
 
@@ -168,8 +164,8 @@ TEST_F(Mesh, DropsFacesWithCoincidentPositions) {
     // Vertices 2 and 5 are distinct indices at the same position: the quad 1 2 5 3 is degenerate.
     const auto file = write("c.obj", std::string(kSquareObj) + "v 1 0 0\nf 1 2 5 3\n");
     const auto mesh = tprf::load_mesh(file, Eigen::Matrix4d::Identity(), "scene.json", "objects[0].file");
-    EXPECT_EQ(mesh.faces.size(), 2u);
-    EXPECT_EQ(mesh.dropped_degenerate, 1);
+    EXPECT_EQ(mesh.faces(), 2u);
+    EXPECT_EQ(mesh.repairs.zero_area_faces, 1u);
 }
 
 TEST_F(Mesh, MirroringTransformKeepsTheFrontSide) {
@@ -178,15 +174,15 @@ TEST_F(Mesh, MirroringTransformKeepsTheFrontSide) {
     const auto mesh =
         tprf::load_mesh(write("square.obj", kSquareObj), mirror, "scene.json", "objects[0].file");
     // The file's front faces +z; a mirror in x leaves that direction alone, so the front must too.
-    for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    for (std::size_t f = 0; f < mesh.faces(); ++f)
         EXPECT_NEAR(face_normal(mesh, f).z(), 1.0, 1e-12);
 }
 
 TEST_F(Mesh, KeepsPolygonsWhole) {
     const auto mesh = tprf::load_mesh(write("quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n"),
                                       Eigen::Matrix4d::Identity(), "scene.json", "objects[0].file");
-    ASSERT_EQ(mesh.faces.size(), 1u);
-    EXPECT_EQ(mesh.faces[0].size(), 4u);
+    ASSERT_EQ(mesh.faces(), 1u);
+    EXPECT_EQ(mesh.face(0).size(), 4u);
     EXPECT_NEAR(total_area(mesh), 1.0, 1e-12);
 }
 
@@ -199,13 +195,13 @@ TEST_F(Mesh, SampleTetrahedraAgreeAcrossFormats) {
         const auto mesh = tprf::load_mesh(fs::path(TPRF_SOURCE_DIR) / "meshes" / name,
                                           Eigen::Matrix4d::Identity(), "scene.json", "objects[0].file");
         EXPECT_EQ(mesh.vertices.size(), 4u);
-        ASSERT_EQ(mesh.faces.size(), 4u);
+        ASSERT_EQ(mesh.faces(), 4u);
         // The files store 6 decimals (float precision for STL): 1e-5 relative covers both.
         EXPECT_NEAR(total_area(mesh), area, 1e-5 * area);
         Vec3 centre = Vec3::Zero();
         for (const Vec3& v : mesh.vertices) centre += v / 4.0;
-        for (std::size_t f = 0; f < mesh.faces.size(); ++f)
-            EXPECT_GT(face_normal(mesh, f).dot(mesh.vertices[mesh.faces[f][0]] - centre), 0.0);
+        for (std::size_t f = 0; f < mesh.faces(); ++f)
+            EXPECT_GT(face_normal(mesh, f).dot(mesh.vertices[mesh.face(f)[0]] - centre), 0.0);
     }
 }
 
@@ -213,30 +209,19 @@ TEST_F(Mesh, SampleIcosphereIsClosedAndOutward) {
     const auto mesh = tprf::load_mesh(fs::path(TPRF_SOURCE_DIR) / "meshes" / "icosphere.obj",
                                       Eigen::Matrix4d::Identity(), "scene.json", "objects[0].file");
     // Two subdivisions of the icosahedron: 20 * 4^2 faces, 10 * 4^2 + 2 vertices.
-    EXPECT_EQ(mesh.faces.size(), 320u);
+    EXPECT_EQ(mesh.faces(), 320u);
     ASSERT_EQ(mesh.vertices.size(), 162u);
     for (const Vec3& v : mesh.vertices) EXPECT_NEAR(v.norm(), 1.0, 1e-6);  // 6 decimals in the file
     // Closed and consistently wound: every directed edge occurs once, and its reverse once.
     std::map<std::pair<int, int>, int> edges;
-    for (std::size_t f = 0; f < mesh.faces.size(); ++f) {
-        const auto& face = mesh.faces[f];
+    for (std::size_t f = 0; f < mesh.faces(); ++f) {
+        const auto face = mesh.face(f);
         for (std::size_t i = 0; i < face.size(); ++i) ++edges[{face[i], face[(i + 1) % face.size()]}];
         EXPECT_GT(face_normal(mesh, f).dot(mesh.vertices[face[0]]), 0.0) << "face " << f;
     }
     for (const auto& [edge, count] : edges) {
         EXPECT_EQ(count, 1);
         EXPECT_EQ(edges.count({edge.second, edge.first}), 1u);
-    }
-}
-
-void expect_input_error(const fs::path& file, const std::string& needle) {
-    try {
-        tprf::load_mesh(file, Eigen::Matrix4d::Identity(), "scene.json", "objects[4].file");
-        ADD_FAILURE() << "no error for " << file;
-    } catch (const tprf::Error& e) {
-        const std::string what = e.what();
-        EXPECT_NE(what.find("scene.json: objects[4].file: "), std::string::npos) << what;
-        EXPECT_NE(what.find(needle), std::string::npos) << what;
     }
 }
 
@@ -263,9 +248,9 @@ TEST_F(Mesh, UnreadableFileNamesTheJsonPath) {
 }
 
 TEST_F(Mesh, GarbageNamesTheJsonPath) {
-    expect_input_error(write("garbage.ply", "this is not a mesh\n"), "not a valid ply file");
-    // OpenMesh's OBJ reader skips unknown lines and reports success: nothing is left.
-    expect_input_error(write("garbage.obj", "this is not a mesh\n"), "empty");
+    expect_input_error(write("garbage.ply", "this is not a mesh\n"), "line 1: not a PLY file");
+    // OBJ skips statements it does not know, as the format asks: nothing is left.
+    expect_input_error(write("garbage.obj", "this is not a mesh\n"), "has no vertices and no faces");
     expect_input_error(write("garbage.xyz", "1 2 3\n"), "unknown mesh format");
 }
 
@@ -281,9 +266,9 @@ TEST_F(Mesh, OffWithCommentsBlankLinesAndCountsOnTheHeaderLineLoads) {
     const auto mesh = tprf::load_mesh(write("commented.off", off), Eigen::Matrix4d::Identity(), "scene.json",
                                       "objects[0].file");
     EXPECT_EQ(mesh.vertices.size(), 4u);
-    ASSERT_EQ(mesh.faces.size(), 2u);
-    EXPECT_EQ(mesh.dropped_degenerate, 0);
-    for (const auto& face : mesh.faces) EXPECT_EQ(face.size(), 3u);
+    ASSERT_EQ(mesh.faces(), 2u);
+    EXPECT_FALSE(mesh.repairs.any());
+    for (const auto& face : faces_of(mesh)) EXPECT_EQ(face.size(), 3u);
 }
 
 TEST_F(Mesh, PointCloudsAreNamedAsSuch) {
@@ -298,7 +283,7 @@ TEST_F(Mesh, PointCloudsAreNamedAsSuch) {
 
 TEST_F(Mesh, AllDegenerateIsEmpty) {
     expect_input_error(write("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 2 2\n"),
-                       "empty: no faces left after dropping 2 degenerate");
+                       "empty: no faces left after dropping 2 zero-area faces and 3 unreferenced vertices");
 }
 
 }  // namespace

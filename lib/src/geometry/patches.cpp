@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <string>
 
 namespace tprf {
@@ -36,7 +37,7 @@ Grid rectangle_grid(const RectangleShape& r, double max_edge) {
 using Triangle = std::array<Vec3, 3>;
 
 // Whether the polygon turns the same way (about its Newell normal n) at every corner.
-bool is_convex(const std::vector<Vec3>& v, const std::vector<int>& face, const Vec3& n) {
+bool is_convex(const std::vector<Vec3>& v, std::span<const int> face, const Vec3& n) {
     const std::size_t m = face.size();
     for (std::size_t k = 0; k < m; ++k) {
         const Vec3& a = v[face[(k + m - 1) % m]];
@@ -50,8 +51,8 @@ bool is_convex(const std::vector<Vec3>& v, const std::vector<int>& face, const V
 // Ear clipping of a simple planar polygon that is not convex, counter-clockwise about its Newell normal
 // n: a corner whose triangle with its neighbours turns the polygon's way and holds no other corner is
 // cut off, until three are left. A polygon with no ear (it crosses itself) is fanned from what is left.
-void ear_clip(const std::vector<Vec3>& v, const std::vector<int>& face, const Vec3& n, std::vector<Triangle>& out) {
-    std::vector<int> left(face);
+void ear_clip(const std::vector<Vec3>& v, std::span<const int> face, const Vec3& n, std::vector<Triangle>& out) {
+    std::vector<int> left(face.begin(), face.end());
     const auto turn = [&](const Vec3& a, const Vec3& b, const Vec3& c) { return (b - a).cross(c - b).dot(n); };
     const auto inside = [&](const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
         return turn(a, b, p) >= 0.0 && turn(b, c, p) >= 0.0 && turn(c, a, p) >= 0.0;
@@ -84,7 +85,8 @@ void ear_clip(const std::vector<Vec3>& v, const std::vector<int>& face, const Ve
 void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
     const std::vector<Vec3>& v = mesh.vertices;
     std::vector<Triangle> pieces;
-    for (const auto& face : mesh.faces) {
+    for (std::size_t f = 0; f < mesh.faces(); ++f) {
+        const std::span<const int> face = mesh.face(f);
         Vec3 n = Vec3::Zero();
         for (std::size_t k = 0; k < face.size(); ++k) n += v[face[k]].cross(v[face[(k + 1) % face.size()]]);
         pieces.clear();
@@ -139,7 +141,25 @@ struct LoadedObjects {
     std::vector<PolygonMesh> meshes;
     std::vector<Eigen::AlignedBox3d> bounds;
     int dropped_degenerate = 0;
+    std::vector<MeshReport> reports;  // their triangles counted once cut
 };
+
+MeshReport report(std::size_t object, const std::filesystem::path& file, const PolygonMesh& mesh) {
+    MeshReport r;
+    r.object = object;
+    r.file = file.string();
+    r.vertices = mesh.vertices.size();
+    r.faces = mesh.faces();
+    r.bounds = mesh.bounds;
+    r.repairs = mesh.repairs;
+    return r;
+}
+
+// The triangles of object k's mesh, now that it is cut, in its report.
+void count_triangles(LoadedObjects& loaded, std::size_t k, const Source& s) {
+    for (MeshReport& r : loaded.reports)
+        if (r.object == k) r.triangles = s.triangles.size();
+}
 
 LoadedObjects load_objects(const Scene& scene) {
     LoadedObjects out;
@@ -157,8 +177,9 @@ LoadedObjects load_objects(const Scene& scene) {
         } else {
             const auto& m = std::get<MeshShape>(object.shape);
             out.meshes[k] = load_mesh(m.file, m.transform, scene.file, path + ".file");
-            out.dropped_degenerate += out.meshes[k].dropped_degenerate;
-            for (const Vec3& p : out.meshes[k].vertices) box.extend(p);
+            out.dropped_degenerate += int(out.meshes[k].repairs.dropped_faces());
+            out.reports.push_back(report(k, m.file, out.meshes[k]));
+            box = out.meshes[k].bounds;
         }
     }
     return out;
@@ -291,11 +312,13 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     std::size_t corner_total = 0;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
         sources.push_back(cut(scene.objects[k], loaded.meshes[k], st.max_edge));
+        count_triangles(loaded, k, sources.back());
         loaded.meshes[k] = PolygonMesh{};
         const Source& s = sources.back();
         total += s.patch_count * s.sides();
         corner_total += s.corners() * s.patch_count * s.sides();
     }
+    st.meshes = std::move(loaded.reports);
     patches.vertices.reserve(corner_total);
     patches.first.reserve(total + 1);
     patches.centroid.reserve(total);
@@ -371,10 +394,10 @@ void draw_samples(const std::vector<Source>& sources, std::size_t samples, std::
 
 PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t seed) {
     PatchCensus census;
-    const LoadedObjects loaded = load_objects(scene);
+    LoadedObjects loaded = load_objects(scene);
     census.bounds = loaded.bounds;
     census.dropped_degenerate = loaded.dropped_degenerate;
-    for (const PolygonMesh& m : loaded.meshes) census.mesh_faces += m.faces.size();
+    for (const PolygonMesh& m : loaded.meshes) census.mesh_faces += m.faces();
     if (scene.objects.empty()) return census;
     const Eigen::AlignedBox3d box = scene_box(loaded);
     census.diagonal = box.diagonal().norm();
@@ -382,12 +405,14 @@ PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t
     std::vector<Source> sources;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
         sources.push_back(cut(scene.objects[k], loaded.meshes[k], census.max_edge));
+        count_triangles(loaded, k, sources.back());
         const Source& c = sources.back();
         census.patches += c.patch_count * c.sides();
         census.object_patches.push_back(c.patch_count * c.sides());
         census.corners += c.corners() * c.patch_count * c.sides();
         if ((scene.objects[k].emission > 0.0).any()) census.emissive += c.patch_count * c.sides();
     }
+    census.meshes = std::move(loaded.reports);
     if (samples > 0 && census.patches > 0) draw_samples(sources, samples, seed, census);
     return census;
 }

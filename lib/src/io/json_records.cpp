@@ -64,6 +64,18 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
     if (r.sensor) j["sensor"] = {{"exposure", exposure_name(*r.sensor)}, {"measurements", r.measurements}};
     j["peak_rss_mb"] = r.peak_rss_mb;
     j["dropped_degenerate_faces"] = r.dropped_degenerate;
+    j["meshes"] = nlohmann::json::array();
+    for (const MeshReport& m : r.meshes)
+        j["meshes"].push_back({{"object", m.object},
+                               {"file", m.file},
+                               {"vertices", m.vertices},
+                               {"faces", m.faces},
+                               {"triangles", m.triangles},
+                               {"bounds", {{m.bounds.min().x(), m.bounds.min().y(), m.bounds.min().z()},
+                                           {m.bounds.max().x(), m.bounds.max().y(), m.bounds.max().z()}}},
+                               {"repairs", {{"zero_area_faces", m.repairs.zero_area_faces},
+                                            {"duplicate_faces", m.repairs.duplicate_faces},
+                                            {"unreferenced_vertices", m.repairs.unreferenced_vertices}}}});
     write_text_file(path, j.dump(2) + "\n");
 }
 

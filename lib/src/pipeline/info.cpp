@@ -22,6 +22,8 @@
 
 namespace tprf {
 
+std::vector<MeshReport> describe_meshes(const Scene& scene) { return count_patches(scene).meshes; }
+
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) {
     SceneSummary s;
     auto t0 = std::chrono::steady_clock::now();
@@ -72,7 +74,8 @@ constexpr double kGB = 1e9;
 constexpr double kBaseBytes = 16 * kMB;          // the process before any stage: code, libraries, threads
 constexpr double kPatchBytes = 108;              // a patch's arrays besides its corners (centroid ... object)
 constexpr double kCornerBytes = 24;              // one corner (a Vec3)
-constexpr double kMeshBytesPerFace = 150;        // a mesh file while it is loaded and triangulated (54k faces: 65)
+constexpr double kMeshBytesPerFace = 150;        // a mesh file while it is loaded and triangulated (1M faces:
+                                                 // 84 binary PLY, 87 OBJ, 183 binary STL; bench/RESULTS.md)
 constexpr double kEmbreeBytesPerPatch = 180;     // Embree's quads and BVH (RTC_BUILD_QUALITY_HIGH), at its peak
 constexpr double kLinkBytes = 12;                // a link: source u32, form factor f32, distance f32
 constexpr double kRowBytes = 8;                  // a CSR row offset per receiver
@@ -103,7 +106,8 @@ double hierarchical_ring_share(double n) { return std::min(1.0, std::cbrt(16000.
 
 // Seconds on 2 threads.
 constexpr double kPatchSeconds = 4e-7;               // per patch (110k patches in 0.04 s)
-constexpr double kMeshSecondsPerFace = 1.5e-6;       // reading a mesh file and cutting it (54k faces: 0.08 s)
+constexpr double kMeshSecondsPerFace = 4.5e-7;       // reading a mesh file and cutting it (1M faces: 0.14 s
+                                                     // binary PLY to 0.42 s ASCII OFF, bench/RESULTS.md)
 constexpr double kEmbreeSeconds = 1.2e-6;            // per patch (110k patches in 0.12 s)
 constexpr double kPairsPerSecond = 4.2e6;            // flat links: unordered pairs considered (4.1-4.4 M/s)
 /// Hierarchical link stage: s N^0.74 sqrt(0.003 / tolerance) (the Cornell box: 3.7 s at 4k patches, 42 s at
@@ -382,6 +386,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     const double n = double(census.patches);
     e.patches = census.patches;
     e.max_edge = census.max_edge;
+    e.meshes = census.meshes;
     e.base_bytes = to_size(kBaseBytes);
     e.mesh_bytes = to_size(kMeshBytesPerFace * double(census.mesh_faces));
     e.patch_bytes = to_size(kPatchBytes * n + kCornerBytes * double(census.corners));

@@ -1,5 +1,6 @@
 #include "tprf/scene/mesh_io.h"
 
+#include "mesh_readers.h"
 #include "tprf/core/error.h"
 
 #include <Eigen/Geometry>
@@ -11,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <fstream>
 #include <sstream>
@@ -107,105 +109,198 @@ std::string readable_extensions() {
     return known;
 }
 
-std::size_t count_lines_starting_with(std::istream& in, std::string_view keyword) {
-    std::size_t count = 0;
-    std::string line;
-    std::string token;
-    while (std::getline(in, line)) {
-        std::istringstream words(line);
-        if (words >> token && token == keyword) ++count;
-    }
-    return count;
-}
-
-// OpenMesh's OBJ and STL readers silently skip faces with fewer than three distinct vertices before they
-// reach the importer, and OpenMesh has no counter for them. The faces the file holds are counted here
-// (without parsing them) so that the difference to what arrived is reported as dropped. OFF and PLY
-// declare their face count in a header, which the importer receives through reserve().
-std::size_t faces_in_file(const std::filesystem::path& file, const std::string& ext) {
+// The whole file, for the readers to parse in place.
+std::string file_bytes(const std::filesystem::path& file) {
     std::ifstream in(file, std::ios::binary);
-    if (ext == ".obj") return count_lines_starting_with(in, "f");
-    if (ext.starts_with(".stl")) {  // .stla and .stlb too
-        // Binary STL: 80-byte header, uint32 triangle count, 50 bytes per triangle (the test OpenMesh uses).
-        std::array<char, 84> header{};
-        in.read(header.data(), header.size());
-        if (in.gcount() == static_cast<std::streamsize>(header.size())) {
-            std::uint32_t n = 0;
-            for (int b = 3; b >= 0; --b)
-                n = (n << 8) | static_cast<unsigned char>(header[80 + static_cast<std::size_t>(b)]);
-            std::error_code ec;
-            const auto size = std::filesystem::file_size(file, ec);
-            if (!ec && size == 84 + 50 * static_cast<std::uintmax_t>(n)) return n;
-        }
-        in.clear();
+    std::string bytes;
+    in.seekg(0, std::ios::end);
+    const std::streamoff size = in.tellg();
+    if (size > 0) {
+        bytes.resize(static_cast<std::size_t>(size));
         in.seekg(0);
-        return count_lines_starting_with(in, "facet");
+        in.read(bytes.data(), size);
+        bytes.resize(static_cast<std::size_t>(in.gcount()));
     }
-    return 0;
+    return bytes;
 }
 
-// An ASCII OFF file as OpenMesh's reader takes it: '#' comments (whole lines and the rest of a line)
-// and blank lines removed, which tools write and the reader refuses (or misreads), and counts written
-// on the header line ("OFF 8 6 12") moved to a line of their own. Empty for binary OFF ("OFF BINARY"),
-// which is left to OpenMesh as it is.
-std::string off_text(const std::filesystem::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    std::string out, line;
-    bool header = true;
-    while (std::getline(in, line)) {
-        if (const auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
-        std::istringstream words(line);
-        std::string first;
-        if (!(words >> first)) continue;  // blank
-        if (header) {
-            header = false;
-            std::string rest;
-            std::getline(words, rest);
-            if (first.ends_with("OFF") && rest.find("BINARY") != std::string::npos) return {};
-            if (first.ends_with("OFF") && rest.find_first_not_of(" \t\r") != std::string::npos) {
-                out += first + "\n" + rest + "\n";
-                continue;
-            }
-        }
-        out += line;
-        out += '\n';
-    }
-    return out;
-}
-
-// Reads `file` (extension `ext`) into `importer` with OpenMesh's readers, silenced; returns what is
-// wrong (to follow the file's name), or nothing.
-std::string read_file(const std::filesystem::path& file, const std::string& ext, RecordingImporter& importer) {
+// Any other format, and binary OFF, through OpenMesh's readers (silenced): no line numbers there, and
+// faces OpenMesh skips (fewer than three distinct corners) are counted from the file's declared count.
+mesh_read::RawMesh read_with_openmesh(const std::filesystem::path& file, const std::string& ext) {
     OpenMeshSilencer silencer;
     if (const std::string known = readable_extensions(); known.find("*" + ext + " ") == std::string::npos)
-        return ": unknown mesh format '" + ext + "' (OpenMesh reads " + known + ")";
+        throw mesh_read::MeshFileError("unknown mesh format '" + ext + "' (tprf reads *.obj *.off *.ply *.stl " +
+                                       "and what OpenMesh reads: " + known + ")");
+    OmMesh om;
+    RecordingImporter importer(om);
     OpenMesh::IO::Options options;
-    bool read = false;
-    if (const std::string text = ext == ".off" ? off_text(file) : std::string(); !text.empty()) {
-        std::istringstream stream(text);
-        read = OpenMesh::IO::IOManager().read(stream, ext, importer, options);
-    } else {
-        read = OpenMesh::IO::IOManager().read(file.string(), importer, options);
+    if (!OpenMesh::IO::IOManager().read(file.string(), importer, options))
+        throw mesh_read::MeshFileError("OpenMesh cannot read it as a " + ext.substr(1) + " file");
+    mesh_read::RawMesh raw;
+    raw.vertices.resize(importer.file_vertices);
+    for (std::size_t i = 0; i < raw.vertices.size(); ++i) {
+        const auto& p = om.point(OpenMesh::VertexHandle(static_cast<int>(i)));
+        raw.vertices[i] = Vec3(p[0], p[1], p[2]);
+        mesh_read::check_finite(raw.vertices[i], i, {mesh_read::Where::Byte, 0});
     }
-    return read ? std::string() : " is not a valid " + ext.substr(1) + " file";
+    for (const auto& face : importer.faces) {
+        for (int v : face) {
+            if (v < 0 || std::size_t(v) >= raw.vertices.size())
+                throw mesh_read::MeshFileError("face " + mesh_read::count(raw.faces() + 1) + " refers to vertex " +
+                                               std::to_string(v) + ", but the file has " +
+                                               mesh_read::count(raw.vertices.size(), "vertex", "vertices"));
+            raw.indices.push_back(v);
+        }
+        raw.end_face();
+    }
+    // Faces OpenMesh skipped stay as empty faces, which count as degenerate.
+    for (std::size_t f = importer.faces.size(); f < importer.declared_faces; ++f) raw.end_face();
+    return raw;
 }
 
-Vec3 newell(const std::vector<Vec3>& vertices, const std::vector<int>& face) {
-    Vec3 n = Vec3::Zero();
-    for (std::size_t i = 0; i < face.size(); ++i) {
-        const Vec3& a = vertices[face[i]];
-        const Vec3& b = vertices[face[(i + 1) % face.size()]];
-        n += a.cross(b);
+mesh_read::RawMesh read_raw(const std::filesystem::path& file) {
+    const std::string ext = lower_extension(file);
+    if (ext == ".obj") return mesh_read::read_obj(file_bytes(file));
+    if (ext == ".ply") return mesh_read::read_ply(file_bytes(file));
+    if (ext == ".stl") return mesh_read::read_stl(file_bytes(file));
+    if (ext == ".off") {
+        const std::string bytes = file_bytes(file);
+        if (!mesh_read::is_binary_off(bytes)) return mesh_read::read_off(bytes);
     }
+    return read_with_openmesh(file, ext);
+}
+
+std::span<const int> face_of(const mesh_read::RawMesh& raw, std::size_t f) {
+    return {raw.indices.data() + raw.first[f], raw.indices.data() + raw.first[f + 1]};
+}
+
+Vec3 newell(const std::vector<Vec3>& vertices, std::span<const int> face) {
+    Vec3 n = Vec3::Zero();
+    for (std::size_t i = 0; i < face.size(); ++i) n += vertices[face[i]].cross(vertices[face[(i + 1) % face.size()]]);
     return n;
 }
 
-bool is_degenerate(const std::vector<Vec3>& vertices, const std::vector<int>& face, double min_area) {
+bool is_degenerate(const std::vector<Vec3>& vertices, std::span<const int> face, double min_area) {
     if (face.size() < 3) return true;
     for (std::size_t i = 0; i < face.size(); ++i)
         for (std::size_t j = i + 1; j < face.size(); ++j)
             if (face[i] == face[j] || vertices[face[i]] == vertices[face[j]]) return true;
     return 0.5 * newell(vertices, face).norm() < min_area;
+}
+
+// Lexicographic order of positions: where a face's canonical rotation starts.
+bool before(const Vec3& a, const Vec3& b) {
+    return a.x() != b.x() ? a.x() < b.x() : a.y() != b.y() ? a.y() < b.y() : a.z() < b.z();
+}
+
+// The corner a face's canonical rotation starts at: its lexicographically smallest position (distinct
+// in a face that is not degenerate).
+std::size_t canonical_start(const std::vector<Vec3>& p, std::span<const int> face) {
+    std::size_t s = 0;
+    for (std::size_t k = 1; k < face.size(); ++k)
+        if (before(p[face[k]], p[face[s]])) s = k;
+    return s;
+}
+
+std::uint64_t face_hash(const std::vector<Vec3>& p, std::span<const int> face) {
+    const std::size_t s = canonical_start(p, face);
+    std::uint64_t h = face.size();
+    for (std::size_t k = 0; k < face.size(); ++k)
+        for (int c = 0; c < 3; ++c)
+            h = (h ^ std::bit_cast<std::uint64_t>(p[face[(s + k) % face.size()]][c] + 0.0)) * 0x100000001B3ull;
+    return h ^ (h >> 31);
+}
+
+// Whether faces a and b have the same positions in the same cyclic order (the same side in front).
+bool same_face(const std::vector<Vec3>& p, std::span<const int> a, std::span<const int> b) {
+    if (a.size() != b.size()) return false;
+    const std::size_t sa = canonical_start(p, a), sb = canonical_start(p, b);
+    for (std::size_t k = 0; k < a.size(); ++k)
+        if (p[a[(sa + k) % a.size()]] != p[b[(sb + k) % b.size()]]) return false;
+    return true;
+}
+
+// Marks faces that repeat an earlier one (by position, so that the unshared corners of STL and of
+// meshes written with repeated vertices are caught too). Two faces over the same corners in opposite
+// order are the two sides of a sheet and both stay.
+std::size_t mark_duplicates(const mesh_read::RawMesh& raw, const std::vector<Vec3>& p, std::vector<char>& drop) {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keys;
+    keys.reserve(raw.faces());
+    for (std::size_t f = 0; f < raw.faces(); ++f)
+        if (!drop[f]) keys.emplace_back(face_hash(p, face_of(raw, f)), std::uint32_t(f));
+    std::sort(keys.begin(), keys.end());
+    std::size_t duplicates = 0;
+    for (std::size_t g = 0; g < keys.size();) {
+        std::size_t end = g + 1;
+        while (end < keys.size() && keys[end].first == keys[g].first) ++end;
+        for (std::size_t i = g + 1; i < end; ++i)
+            for (std::size_t j = g; j < i; ++j)
+                if (!drop[keys[j].second] &&
+                    same_face(p, face_of(raw, keys[i].second), face_of(raw, keys[j].second))) {
+                    drop[keys[i].second] = 1;
+                    ++duplicates;
+                    break;
+                }
+        g = end;
+    }
+    return duplicates;
+}
+
+}  // namespace
+
+std::string describe(const MeshRepairs& r) {
+    std::vector<std::string> parts;
+    if (r.zero_area_faces > 0) parts.push_back(mesh_read::count(r.zero_area_faces, "zero-area face", "zero-area faces"));
+    if (r.duplicate_faces > 0) parts.push_back(mesh_read::count(r.duplicate_faces, "duplicate face", "duplicate faces"));
+    if (r.unreferenced_vertices > 0)
+        parts.push_back(mesh_read::count(r.unreferenced_vertices, "unreferenced vertex", "unreferenced vertices"));
+    std::string out;
+    for (std::size_t k = 0; k < parts.size(); ++k)
+        out += (k == 0 ? "" : k + 1 == parts.size() ? " and " : ", ") + parts[k];
+    return out;
+}
+
+namespace {
+
+// The kept faces of `raw` over the transformed positions `p`: degenerate and duplicate faces dropped,
+// vertices renumbered in order of first use, windings reversed when the transform mirrors.
+PolygonMesh keep_faces(const mesh_read::RawMesh& raw, const std::vector<Vec3>& p, bool mirror) {
+    Eigen::AlignedBox3d box;
+    for (int v : raw.indices) box.extend(p[std::size_t(v)]);
+    const double diag = box.isEmpty() ? 0.0 : box.diagonal().norm();
+    // Relative to the mesh's size so that the test means the same in millimetres and in kilometres.
+    const double min_area = 1e-12 * diag * diag;
+    PolygonMesh mesh;
+    mesh.file_vertices = p.size();
+    mesh.file_faces = raw.faces();
+    std::vector<char> drop(raw.faces(), 0);
+    for (std::size_t f = 0; f < raw.faces(); ++f)
+        if (is_degenerate(p, face_of(raw, f), min_area)) {
+            drop[f] = 1;
+            ++mesh.repairs.zero_area_faces;
+        }
+    mesh.repairs.duplicate_faces = mark_duplicates(raw, p, drop);
+
+    std::vector<int> remap(p.size(), -1);
+    mesh.indices.reserve(raw.indices.size());
+    mesh.first.reserve(raw.faces() + 1);
+    for (std::size_t f = 0; f < raw.faces(); ++f) {
+        if (drop[f]) continue;
+        const std::size_t begin = mesh.indices.size();
+        for (int v : face_of(raw, f)) {
+            if (remap[std::size_t(v)] < 0) {
+                remap[std::size_t(v)] = static_cast<int>(mesh.vertices.size());
+                mesh.vertices.push_back(p[std::size_t(v)]);
+                mesh.bounds.extend(p[std::size_t(v)]);
+            }
+            mesh.indices.push_back(remap[std::size_t(v)]);
+        }
+        // A mirroring transform turns counter-clockwise into clockwise; reversing keeps the front side.
+        if (mirror) std::reverse(mesh.indices.begin() + std::ptrdiff_t(begin), mesh.indices.end());
+        mesh.first.push_back(static_cast<std::uint32_t>(mesh.indices.size()));
+    }
+    mesh.repairs.unreferenced_vertices = p.size() - mesh.vertices.size();
+    return mesh;
 }
 
 }  // namespace
@@ -219,64 +314,33 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
         fail_input(scene_file, json_path, name + " is not a regular file");
     if (!std::ifstream(file).good()) fail_input(scene_file, json_path, name + " cannot be opened");
 
-    const std::string ext = lower_extension(file);
-    OmMesh om;
-    RecordingImporter importer(om);
-    if (const std::string problem = read_file(file, ext, importer); !problem.empty())
-        fail_input(scene_file, json_path, name + problem);
-    for (const auto& face : importer.faces)
-        for (int v : face)
-            if (v < 0 || static_cast<std::size_t>(v) >= importer.file_vertices)
-                fail_input(scene_file, json_path,
-                           name + ": a face refers to vertex " + std::to_string(v + 1) +
-                               " but the file has " + std::to_string(importer.file_vertices) + " vertices");
+    mesh_read::RawMesh raw;
+    try {
+        raw = read_raw(file);
+    } catch (const mesh_read::MeshFileError& e) {
+        fail_input(scene_file, json_path, name + ", " + e.what());
+    } catch (const std::length_error& e) {
+        fail_input(scene_file, json_path, name + " is too large for tprf to read (" + e.what() + ")");
+    } catch (const std::bad_alloc&) {
+        fail_input(scene_file, json_path, name + " needs more memory than there is to read");
+    }
+    if (raw.faces() == 0)
+        fail_input(scene_file, json_path,
+                   raw.vertices.empty()
+                       ? name + " has no vertices and no faces"
+                       : name + " has " + mesh_read::count(raw.vertices.size(), "vertex", "vertices") +
+                             " and no faces: a point cloud, not a surface (tprf renders surfaces; mesh it first, "
+                             "e.g. by Poisson reconstruction)");
 
-    std::vector<Vec3> positions(importer.file_vertices);
     const Eigen::Matrix3d linear = transform.topLeftCorner<3, 3>();
     const Vec3 offset = transform.topRightCorner<3, 1>();
-    Eigen::AlignedBox3d box;
-    for (std::size_t i = 0; i < positions.size(); ++i) {
-        const auto& p = om.point(OpenMesh::VertexHandle(static_cast<int>(i)));
-        positions[i] = linear * Vec3(p[0], p[1], p[2]) + offset;
-    }
-    for (const auto& face : importer.faces)
-        for (int v : face) box.extend(positions[v]);
-    const double diag = box.isEmpty() ? 0.0 : box.diagonal().norm();
-    // Relative to the mesh's size so that the test means the same in millimetres and in kilometres.
-    const double min_area = 1e-12 * diag * diag;
-    // A mirroring transform turns counter-clockwise into clockwise; reversing keeps the file's front side.
-    const bool mirror = linear.determinant() < 0.0;
-
-    const std::size_t in_file =
-        std::max({faces_in_file(file, ext), importer.declared_faces, importer.faces.size()});
-    if (in_file == 0 && importer.file_vertices > 0)
+    std::vector<Vec3> positions(raw.vertices.size());
+    for (std::size_t i = 0; i < positions.size(); ++i) positions[i] = linear * raw.vertices[i] + offset;
+    raw.vertices = {};
+    PolygonMesh mesh = keep_faces(raw, positions, linear.determinant() < 0.0);
+    if (mesh.faces() == 0)
         fail_input(scene_file, json_path,
-                   name + " has " + std::to_string(importer.file_vertices) +
-                       " vertices and no faces: a point cloud, not a surface (tprf renders surfaces; "
-                       "mesh it first, e.g. by Poisson reconstruction)");
-    PolygonMesh mesh;
-    mesh.dropped_degenerate = static_cast<int>(in_file - importer.faces.size());
-    std::vector<int> remap(positions.size(), -1);
-    mesh.faces.reserve(importer.faces.size());
-    for (auto& face : importer.faces) {
-        if (is_degenerate(positions, face, min_area)) {
-            ++mesh.dropped_degenerate;
-            continue;
-        }
-        if (mirror) std::reverse(face.begin(), face.end());
-        for (int& v : face) {
-            if (remap[v] < 0) {
-                remap[v] = static_cast<int>(mesh.vertices.size());
-                mesh.vertices.push_back(positions[v]);
-            }
-            v = remap[v];
-        }
-        mesh.faces.push_back(std::move(face));
-    }
-    if (mesh.faces.empty())
-        fail_input(scene_file, json_path,
-                   name + " is empty: no faces left after dropping " +
-                       std::to_string(mesh.dropped_degenerate) + " degenerate ones");
+                   name + " is empty: no faces left after dropping " + describe(mesh.repairs));
     return mesh;
 }
 

@@ -3,8 +3,10 @@
 
 #include "tprf/core/types.h"
 #include "tprf/core/progress.h"
+#include "tprf/scene/mesh_io.h"
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace tprf {
@@ -31,10 +33,22 @@ struct PatchSet {
     const Vec3* polygon(std::size_t i) const { return vertices.data() + first[i]; }
 };
 
+/// One mesh file of a scene as it was loaded.
+struct MeshReport {
+    std::size_t object = 0;            ///< index into Scene::objects
+    std::string file;                  ///< the file, as resolved from the scene
+    std::size_t vertices = 0;          ///< vertices the kept faces use
+    std::size_t faces = 0;             ///< polygons kept
+    std::size_t triangles = 0;         ///< the triangles they were cut into (before refinement to max_edge)
+    Eigen::AlignedBox3d bounds;        ///< metres, the transform applied
+    MeshRepairs repairs;               ///< what was dropped, and how much
+};
+
 /// What build_patches saw besides the patches.
 struct PatchStats {
-    int dropped_degenerate = 0;        ///< faces of mesh files dropped (zero area, repeated vertices)
+    int dropped_degenerate = 0;        ///< faces of mesh files dropped (zero area, duplicates)
     double max_edge = 0.0;             ///< the patch size used, metres
+    std::vector<MeshReport> meshes;    ///< one per mesh object, in the scene's order
 };
 
 /// Options of the patch stage.
@@ -83,6 +97,7 @@ struct PatchCensus {
     double max_edge = 0.0;             ///< the patch size build_patches would use, metres
     double diagonal = 0.0;             ///< bounding-box diagonal of every object, metres
     int dropped_degenerate = 0;        ///< mesh faces dropped, as build_patches counts them
+    std::vector<MeshReport> meshes;    ///< one per mesh object, as build_patches reports them
     std::vector<Eigen::AlignedBox3d> bounds;  ///< per object: its bounding box, metres
     std::vector<std::size_t> object_patches;  ///< per object: its patches, both sides counted
     /// About `samples` patches drawn uniformly from all N (each object gets its share by its patch

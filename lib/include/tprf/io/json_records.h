@@ -5,6 +5,7 @@
 /// atomically under their final name. The JSON library stays inside this file's source.
 
 #include "tprf/core/time_axis.h"
+#include "tprf/geometry/patches.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/scene/scene.h"
 #include "tprf/scene/sensor_settings.h"
@@ -15,6 +16,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace tprf {
 
@@ -39,6 +41,7 @@ struct RenderRecord {
     int measurements = 0;                 ///< the sensor's measurements per pixel and channel
     double peak_rss_mb = 0.0;
     int dropped_degenerate = 0;
+    std::vector<MeshReport> meshes;       ///< one per mesh object
 };
 
 /// Writes render.json.

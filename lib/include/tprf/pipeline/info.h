@@ -3,11 +3,13 @@
 
 #include "tprf/core/progress.h"
 #include "tprf/core/time_axis.h"
+#include "tprf/geometry/patches.h"
 #include "tprf/io/json_records.h"
 #include "tprf/scene/scene.h"
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace tprf {
 
@@ -39,6 +41,10 @@ struct SceneSummary {
     double seconds_patches = 0.0;
     double seconds_links = 0.0;
 };
+
+/// Loads the scene's mesh files and nothing else: per mesh its size, bounds and repairs (`tprf info
+/// --meshes`).
+std::vector<MeshReport> describe_meshes(const Scene& scene);
 
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
@@ -76,6 +82,7 @@ struct ResourceEstimate {
     std::string peak_stage;              ///< where the peak is: "patches", "links", "gather", "solve" or "write"
 
     PhaseSeconds seconds;                ///< load, patches, links, solve, gather, write, total
+    std::vector<MeshReport> meshes;      ///< the mesh files, as loaded to count their triangles
 };
 
 /// Estimates the peak memory and the seconds of a render of `scene` (`patch_profiles`: with

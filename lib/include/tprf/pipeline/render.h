@@ -34,6 +34,7 @@ struct RenderReport {
     int width = 0;
     int height = 0;
     int dropped_degenerate = 0;
+    std::vector<MeshReport> meshes;    ///< one per mesh object: size and repairs
     PhaseSeconds seconds;
     double peak_rss_mb = 0.0;
     std::uint64_t link_bin_updates = 0;
