@@ -292,33 +292,21 @@ T load(const char* p, bool swap) {
     return std::bit_cast<T>(bits);
 }
 
-double load_real(const char* p, Type t, bool swap) {
+// The value at `p` of PLY type `t`, as an R. Lengths and indices are read as long long, which the
+// header allows only for integer types.
+template <typename R>
+R load_as(const char* p, Type t, bool swap) {
     switch (t) {
-    case Type::Int8: return load<std::int8_t>(p, swap);
-    case Type::UInt8: return load<std::uint8_t>(p, swap);
-    case Type::Int16: return load<std::int16_t>(p, swap);
-    case Type::UInt16: return load<std::uint16_t>(p, swap);
-    case Type::Int32: return load<std::int32_t>(p, swap);
-    case Type::UInt32: return load<std::uint32_t>(p, swap);
-    case Type::Float32: return load<float>(p, swap);
-    case Type::Float64: return load<double>(p, swap);
+    case Type::Int8: return static_cast<R>(load<std::int8_t>(p, swap));
+    case Type::UInt8: return static_cast<R>(load<std::uint8_t>(p, swap));
+    case Type::Int16: return static_cast<R>(load<std::int16_t>(p, swap));
+    case Type::UInt16: return static_cast<R>(load<std::uint16_t>(p, swap));
+    case Type::Int32: return static_cast<R>(load<std::int32_t>(p, swap));
+    case Type::UInt32: return static_cast<R>(load<std::uint32_t>(p, swap));
+    case Type::Float32: return static_cast<R>(load<float>(p, swap));
+    case Type::Float64: return static_cast<R>(load<double>(p, swap));
     }
-    return 0.0;
-}
-
-// Only for integer types (the header refuses floating-point lengths and indices).
-long long load_integer(const char* p, Type t, bool swap) {
-    switch (t) {
-    case Type::Int8: return load<std::int8_t>(p, swap);
-    case Type::UInt8: return load<std::uint8_t>(p, swap);
-    case Type::Int16: return load<std::int16_t>(p, swap);
-    case Type::UInt16: return load<std::uint16_t>(p, swap);
-    case Type::Int32: return load<std::int32_t>(p, swap);
-    case Type::UInt32: return load<std::uint32_t>(p, swap);
-    case Type::Float32:
-    case Type::Float64: break;
-    }
-    return 0;
+    return R{};
 }
 
 class BinaryData {
@@ -361,11 +349,11 @@ private:
         for (const Property& prop : e.properties) {
             if (!prop.list) {
                 const char* at = take(size_of(prop.type), e, i);
-                if (prop.slot != Slot::Skip) p[axis(prop.slot)] = load_real(at, prop.type, m_swap);
+                if (prop.slot != Slot::Skip) p[axis(prop.slot)] = load_as<double>(at, prop.type, m_swap);
                 continue;
             }
             const Where length_at = here();
-            const long long n = load_integer(take(size_of(prop.count_type), e, i), prop.count_type, m_swap);
+            const long long n = load_as<long long>(take(size_of(prop.count_type), e, i), prop.count_type, m_swap);
             if (n < 0) fail_negative_length(length_at, e, i, prop, n);
             const std::size_t item = size_of(prop.type);
             if (static_cast<unsigned long long>(n) > left() / item) fail_end({Where::Byte, m_bytes.size()}, e, i);
@@ -383,7 +371,7 @@ private:
     void corners(const char* items, std::size_t n, Type t, std::size_t face, RawMesh& mesh) {
         const std::size_t item = size_of(t);
         for (std::size_t k = 0; k < n; ++k) {
-            const long long v = load_integer(items + k * item, t, m_swap);
+            const long long v = load_as<long long>(items + k * item, t, m_swap);
             const std::size_t offset = static_cast<std::size_t>(items - m_bytes.data()) + k * item;
             check_corner(v, m_vertices, face, {Where::Byte, offset});
             mesh.indices.push_back(static_cast<int>(v));

@@ -76,27 +76,30 @@ std::string quoted(std::string_view token) {
     return "'" + s + (token.size() > kShown ? "...'" : "'");
 }
 
-double to_double(std::string_view token, Where where) {
+namespace {
+
+// `token` as a T; the words name what went wrong when it is out of T's range or not a T at all.
+template <typename T>
+T parse(std::string_view token, Where where, std::string_view too_large, std::string_view not_one) {
     const std::string_view t = without_plus(token);
-    double value = 0.0;
+    T value{};
     const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
     // Out of range ("1e999") is reported as such rather than read as infinity or zero.
     if (ec == std::errc::result_out_of_range)
-        throw MeshFileError(where.str() + ": " + quoted(token) + " is out of the range of a double");
+        throw MeshFileError(where.str() + ": " + quoted(token) + " " + std::string(too_large));
     if (ec != std::errc() || end != t.data() + t.size())
-        throw MeshFileError(where.str() + ": " + quoted(token) + " is not a number");
+        throw MeshFileError(where.str() + ": " + quoted(token) + " " + std::string(not_one));
     return value;
 }
 
+}  // namespace
+
+double to_double(std::string_view token, Where where) {
+    return parse<double>(token, where, "is out of the range of a double", "is not a number");
+}
+
 long long to_integer(std::string_view token, Where where) {
-    const std::string_view t = without_plus(token);
-    long long value = 0;
-    const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
-    if (ec == std::errc::result_out_of_range)
-        throw MeshFileError(where.str() + ": " + quoted(token) + " is too large");
-    if (ec != std::errc() || end != t.data() + t.size())
-        throw MeshFileError(where.str() + ": " + quoted(token) + " is not a whole number");
-    return value;
+    return parse<long long>(token, where, "is too large", "is not a whole number");
 }
 
 }  // namespace tprf::mesh_read
