@@ -98,9 +98,9 @@ void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
         const Eigen::Vector3d& lo = m.bounds.min();
         const Eigen::Vector3d& hi = m.bounds.max();
         const std::string repairs = tprf::describe(m.repairs);
-        std::printf("mesh     objects[%zu] '%s': %zu vertices, %zu faces, %zu triangles; box (%.6g, %.6g, %.6g) to "
-                    "(%.6g, %.6g, %.6g) m; %s%s\n",
-                    m.object, m.file.c_str(), m.vertices, m.faces, m.triangles, lo.x(), lo.y(), lo.z(), hi.x(),
+        std::printf("mesh     objects[%zu] '%s': %zu vertices, %zu faces (cut into %zu triangles and %zu quads); box "
+                    "(%.6g, %.6g, %.6g) to (%.6g, %.6g, %.6g) m; %s%s\n",
+                    m.object, m.file.c_str(), m.vertices, m.faces, m.triangles, m.quads, lo.x(), lo.y(), lo.z(), hi.x(),
                     hi.y(), hi.z(), repairs.empty() ? "nothing dropped" : "dropped ", repairs.c_str());
     }
 }

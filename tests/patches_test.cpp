@@ -54,8 +54,14 @@ void expect_well_formed(const tprf::PatchSet& p, double max_edge) {
             mean += a / static_cast<double>(n);
         }
         EXPECT_NEAR(p.normal[i].norm(), 1.0, kTol);
-        // Triangles and parallelograms have their area centroid at the corners' mean.
-        EXPECT_LT((p.centroid[i] - mean).norm(), kTol);
+        // The area centroid: the corners' mean for triangles and parallelograms; for another convex quad
+        // the area-weighted centroids of the two triangles either side of the diagonal 0-2.
+        Vec3 centroid = mean;
+        if (n == 4) {
+            const double a1 = (c[1] - c[0]).cross(c[2] - c[0]).norm(), a2 = (c[2] - c[0]).cross(c[3] - c[0]).norm();
+            centroid = (a1 * (c[0] + c[1] + c[2]) + a2 * (c[0] + c[2] + c[3])) / (3.0 * (a1 + a2));
+        }
+        EXPECT_LT((p.centroid[i] - centroid).norm(), kTol);
     }
 }
 
@@ -130,13 +136,47 @@ TEST_F(PatchesMesh, TriangleIsRefinedUniformly) {
     expect_well_formed(p, 0.3);
 }
 
-TEST_F(PatchesMesh, QuadIsSplitIntoTriangles) {
+TEST_F(PatchesMesh, PlanarQuadStaysAQuad) {
     tprf::Scene scene;
     scene.objects.push_back(mesh("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4\n"));
     scene.max_edge = 10.0;
+    auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 1u);
+    EXPECT_EQ(p.corners(0), 4u);
+    EXPECT_NEAR(total_area(p), 2.0, kTol);
+    expect_well_formed(p, 10.0);
+    // Cut to 0.5: a grid of 4 x 2 quads, as a rectangle would be.
+    scene.max_edge = 0.5;
+    p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 8u);
+    for (std::size_t i = 0; i < p.size(); ++i) EXPECT_NEAR(p.area[i], 0.25, kTol);
+    expect_well_formed(p, 0.5);
+}
+
+TEST_F(PatchesMesh, PlanarTrapezoidIsCutIntoConvexQuads) {
+    // Bottom edge 3, top edge 1, height 1: area 2. Its longer u edge (3) and v edges (sqrt 2) give a grid
+    // of ceil(3 / 0.5) x ceil(1.414 / 0.5) = 6 x 3 planar convex quads (expect_well_formed checks each).
+    tprf::Scene scene;
+    scene.objects.push_back(mesh("v 0 0 0\nv 3 0 0\nv 2 1 0\nv 1 1 0\nf 1 2 3 4\n"));
+    scene.max_edge = 0.5;
+    const auto p = tprf::build_patches(scene);
+    ASSERT_EQ(p.size(), 18u);
+    EXPECT_NEAR(total_area(p), 2.0, kTol);
+    expect_well_formed(p, 0.5);
+}
+
+TEST_F(PatchesMesh, NonPlanarQuadIsSplitIntoTriangles) {
+    // One corner lifted by 0.1 (of a size of 2): no plane holds the quad, so it is two triangles.
+    tprf::Scene scene;
+    scene.objects.push_back(mesh("v 0 0 0\nv 2 0 0\nv 2 1 0.1\nv 0 1 0\nf 1 2 3 4\n"));
+    scene.max_edge = 10.0;
     const auto p = tprf::build_patches(scene);
     ASSERT_EQ(p.size(), 2u);
-    EXPECT_NEAR(total_area(p), 2.0, kTol);
+    EXPECT_EQ(p.corners(0), 3u);
+    // The fan from corner 1: triangles (0,0,0) (2,0,0) (2,1,0.1) and (0,0,0) (2,1,0.1) (0,1,0).
+    const double a1 = 0.5 * Vec3(2, 0, 0).cross(Vec3(2, 1, 0.1)).norm();
+    const double a2 = 0.5 * Vec3(2, 1, 0.1).cross(Vec3(0, 1, 0)).norm();
+    EXPECT_NEAR(total_area(p), a1 + a2, kTol);
     expect_well_formed(p, 10.0);
 }
 

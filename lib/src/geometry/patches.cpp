@@ -36,6 +36,13 @@ Grid rectangle_grid(const RectangleShape& r, double max_edge) {
 
 using Triangle = std::array<Vec3, 3>;
 
+// A piece of a mesh face before refinement to max_edge: a triangle, or a planar convex quad kept
+// whole (a grid of quads then, as rectangles are cut).
+struct Cell {
+    std::array<Vec3, 4> p;
+    std::size_t corners = 3;
+};
+
 // Whether the polygon turns the same way (about its Newell normal n) at every corner.
 bool is_convex(const std::vector<Vec3>& v, std::span<const int> face, const Vec3& n) {
     const std::size_t m = face.size();
@@ -78,17 +85,38 @@ void ear_clip(const std::vector<Vec3>& v, std::span<const int> face, const Vec3&
     for (std::size_t i = 1; i + 1 < left.size(); ++i) out.push_back({v[left[0]], v[left[i]], v[left[i + 1]]});
 }
 
-// Convex polygons (what mesh files hold in practice) are fanned from their first corner; the others
-// are ear-clipped. Pieces without area (a corner lying on an edge of the polygon) are left out: they
+// Whether a quad's corners lie in one plane: within 1e-6 of its size (float coordinates are exact to
+// about 1e-7 of it), and whether it turns the same way, strictly, at every corner.
+bool planar_convex_quad(const std::vector<Vec3>& v, std::span<const int> face, const Vec3& n) {
+    if (face.size() != 4) return false;
+    const Vec3 normal = n.normalized();
+    const double size = std::max((v[face[2]] - v[face[0]]).norm(), (v[face[3]] - v[face[1]]).norm());
+    for (int k : face)
+        if (std::abs((v[k] - v[face[0]]).dot(normal)) > 1e-6 * size) return false;
+    for (std::size_t k = 0; k < 4; ++k) {
+        const Vec3& a = v[face[(k + 3) % 4]];
+        const Vec3& b = v[face[k]];
+        const Vec3& c = v[face[(k + 1) % 4]];
+        if (!((b - a).cross(c - b).dot(normal) > 0.0)) return false;
+    }
+    return true;
+}
+
+// Planar convex quads stay whole. Other convex polygons (what mesh files hold in practice) are fanned
+// from their first corner; the others are ear-clipped. Pieces without area (a corner lying on an edge of the polygon) are left out: they
 // carry no energy and have no normal. "Without area" is relative to the polygon, which load_mesh
 // guarantees is not degenerate itself.
-void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
+void cut_faces(const PolygonMesh& mesh, std::vector<Cell>& out) {
     const std::vector<Vec3>& v = mesh.vertices;
     std::vector<Triangle> pieces;
     for (std::size_t f = 0; f < mesh.faces(); ++f) {
         const std::span<const int> face = mesh.face(f);
         Vec3 n = Vec3::Zero();
         for (std::size_t k = 0; k < face.size(); ++k) n += v[face[k]].cross(v[face[(k + 1) % face.size()]]);
+        if (planar_convex_quad(v, face, n)) {
+            out.push_back({{v[face[0]], v[face[1]], v[face[2]], v[face[3]]}, 4});
+            continue;
+        }
         pieces.clear();
         if (is_convex(v, face, n))
             for (std::size_t i = 1; i + 1 < face.size(); ++i) pieces.push_back({v[face[0]], v[face[i]], v[face[i + 1]]});
@@ -97,40 +125,53 @@ void triangulate(const PolygonMesh& mesh, std::vector<Triangle>& out) {
         double polygon = 0.0;
         for (const Triangle& t : pieces) polygon += (t[1] - t[0]).cross(t[2] - t[0]).norm();
         for (const Triangle& t : pieces)
-            if ((t[1] - t[0]).cross(t[2] - t[0]).norm() > 1e-12 * polygon) out.push_back(t);
+            if ((t[1] - t[0]).cross(t[2] - t[0]).norm() > 1e-12 * polygon) out.push_back({{t[0], t[1], t[2], t[2]}, 3});
     }
 }
 
-double longest_edge(const Triangle& t) {
-    return std::max({(t[1] - t[0]).norm(), (t[2] - t[1]).norm(), (t[0] - t[2]).norm()});
+// A cell's cut: n x n similar triangles (nu = nv = n) for a triangle, nu x nv quads of a bilinear grid
+// for a quad, each edge at most max_edge.
+Grid cell_grid(const Cell& c, double max_edge) {
+    const auto& p = c.p;
+    if (c.corners == 3) {
+        const std::size_t n =
+            pieces(std::max({(p[1] - p[0]).norm(), (p[2] - p[1]).norm(), (p[0] - p[2]).norm()}), max_edge);
+        return {n, n};
+    }
+    // The grid's u lines run between edges p0p1 and p3p2, so a piece of either is at most the longer / nu.
+    return {pieces(std::max((p[1] - p[0]).norm(), (p[2] - p[3]).norm()), max_edge),
+            pieces(std::max((p[3] - p[0]).norm(), (p[2] - p[1]).norm()), max_edge)};
 }
 
-// One object's geometry before subdivision: a rectangle, or a mesh already triangulated, with the
+// One object's geometry before subdivision: a rectangle, or a mesh already cut into cells, with the
 // patches each side will have.
 struct Source {
     const Object* object = nullptr;
-    std::vector<Triangle> triangles;  // empty for a rectangle
-    std::vector<std::size_t> running; // patches per side of triangles 0..t
+    std::vector<Cell> cells;          // empty for a rectangle
+    std::vector<std::size_t> running; // patches per side of cells 0..c
     std::size_t patch_count = 0;      // per side
+    std::size_t corner_count = 0;     // corners of those patches, per side
 
     std::size_t sides() const { return object->two_sided ? 2 : 1; }
-    std::size_t corners() const { return std::holds_alternative<RectangleShape>(object->shape) ? 4 : 3; }
 };
 
-// Object `object` cut into patches of at most `max_edge`, counted (the mesh is triangulated, not cut).
+// Object `object` cut into patches of at most `max_edge`, counted (the mesh is cut into cells, not
+// refined).
 Source cut(const Object& object, const PolygonMesh& mesh, double max_edge) {
     Source s;
     s.object = &object;
     if (const auto* r = std::get_if<RectangleShape>(&object.shape)) {
         const Grid g = rectangle_grid(*r, max_edge);
         s.patch_count = g.nu * g.nv;
+        s.corner_count = 4 * s.patch_count;
         return s;
     }
-    triangulate(mesh, s.triangles);
-    s.running.reserve(s.triangles.size());
-    for (const Triangle& t : s.triangles) {
-        const std::size_t n = pieces(longest_edge(t), max_edge);
-        s.patch_count += n * n;
+    cut_faces(mesh, s.cells);
+    s.running.reserve(s.cells.size());
+    for (const Cell& c : s.cells) {
+        const Grid g = cell_grid(c, max_edge);
+        s.patch_count += g.nu * g.nv;
+        s.corner_count += c.corners * g.nu * g.nv;
         s.running.push_back(s.patch_count);
     }
     return s;
@@ -155,10 +196,11 @@ MeshReport report(std::size_t object, const std::filesystem::path& file, const P
     return r;
 }
 
-// The triangles of object k's mesh, now that it is cut, in its report.
-void count_triangles(LoadedObjects& loaded, std::size_t k, const Source& s) {
+// The cells of object k's mesh, now that it is cut, in its report.
+void count_cells(LoadedObjects& loaded, std::size_t k, const Source& s) {
     for (MeshReport& r : loaded.reports)
-        if (r.object == k) r.triangles = s.triangles.size();
+        if (r.object == k)
+            for (const Cell& c : s.cells) ++(c.corners == 3 ? r.triangles : r.quads);
 }
 
 LoadedObjects load_objects(const Scene& scene) {
@@ -211,13 +253,9 @@ void emit(PatchSet& patches, const Vec3* corners, std::size_t count, const Objec
     add_patch(patches, reversed.data(), count, object.albedo, object.emission, id);
 }
 
-void emit_rectangle(PatchSet& patches, const RectangleShape& r, const Grid& grid, const Object& object,
-                    std::uint32_t id) {
-    const double nu = static_cast<double>(grid.nu);
-    const double nv = static_cast<double>(grid.nv);
-    auto point = [&](std::size_t i, std::size_t j) {
-        return Vec3(r.origin + (static_cast<double>(i) / nu) * r.u + (static_cast<double>(j) / nv) * r.v);
-    };
+// The quads of a grid whose node (i, j) is point(i, j), counter-clockwise as i, then j, grow.
+template <class Point>
+void emit_grid(PatchSet& patches, const Grid& grid, Point point, const Object& object, std::uint32_t id) {
     for (std::size_t j = 0; j < grid.nv; ++j)
         for (std::size_t i = 0; i < grid.nu; ++i) {
             const std::array<Vec3, 4> quad{point(i, j), point(i + 1, j), point(i + 1, j + 1),
@@ -226,9 +264,27 @@ void emit_rectangle(PatchSet& patches, const RectangleShape& r, const Grid& grid
         }
 }
 
+void emit_rectangle(PatchSet& patches, const RectangleShape& r, const Grid& grid, const Object& object,
+                    std::uint32_t id) {
+    const double nu = static_cast<double>(grid.nu);
+    const double nv = static_cast<double>(grid.nv);
+    emit_grid(patches, grid, [&](std::size_t i, std::size_t j) {
+        return Vec3(r.origin + (static_cast<double>(i) / nu) * r.u + (static_cast<double>(j) / nv) * r.v);
+    }, object, id);
+}
+
+// A planar convex quad as a bilinear grid: its sub-quads lie in its plane and are convex.
+void emit_quad(PatchSet& patches, const Cell& c, const Grid& grid, const Object& object, std::uint32_t id) {
+    const double nu = static_cast<double>(grid.nu);
+    const double nv = static_cast<double>(grid.nv);
+    emit_grid(patches, grid, [&](std::size_t i, std::size_t j) {
+        return polygon_point(c.p.data(), 4, static_cast<double>(i) / nu, static_cast<double>(j) / nv);
+    }, object, id);
+}
+
 // Uniform subdivision into n^2 similar triangles: every sub-edge is parallel to an edge of `t` and 1/n of
 // its length, and every sub-triangle keeps the winding of `t`.
-void emit_triangle(PatchSet& patches, const Triangle& t, std::size_t n, const Object& object,
+void emit_triangle(PatchSet& patches, const std::array<Vec3, 4>& t, std::size_t n, const Object& object,
                    std::uint32_t id) {
     const double inv = 1.0 / static_cast<double>(n);
     const Vec3 du = (t[1] - t[0]) * inv;
@@ -312,11 +368,11 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     std::size_t corner_total = 0;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
         sources.push_back(cut(scene.objects[k], loaded.meshes[k], st.max_edge));
-        count_triangles(loaded, k, sources.back());
+        count_cells(loaded, k, sources.back());
         loaded.meshes[k] = PolygonMesh{};
         const Source& s = sources.back();
         total += s.patch_count * s.sides();
-        corner_total += s.corners() * s.patch_count * s.sides();
+        corner_total += s.corner_count * s.sides();
     }
     st.meshes = std::move(loaded.reports);
     patches.vertices.reserve(corner_total);
@@ -334,8 +390,13 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
         if (const auto* r = std::get_if<RectangleShape>(&s.object->shape)) {
             emit_rectangle(patches, *r, rectangle_grid(*r, st.max_edge), *s.object, id);
         } else {
-            for (const Triangle& t : s.triangles)
-                emit_triangle(patches, t, pieces(longest_edge(t), st.max_edge), *s.object, id);
+            for (const Cell& c : s.cells) {
+                const Grid g = cell_grid(c, st.max_edge);
+                if (c.corners == 3)
+                    emit_triangle(patches, c.p, g.nu, *s.object, id);
+                else
+                    emit_quad(patches, c, g, *s.object, id);
+            }
         }
         if (options.progress)
             options.progress("patches", static_cast<double>(k + 1) / static_cast<double>(sources.size()));
@@ -361,10 +422,9 @@ PatchSample census_sample(const Source& c, double max_edge, std::size_t local, S
         return s;
     }
     const auto at = std::upper_bound(c.running.begin(), c.running.end(), local);
-    const Triangle& t = c.triangles[std::size_t(at - c.running.begin())];
-    const double su = std::sqrt(a);
-    s.point = (1 - su) * t[0] + su * (1 - b) * t[1] + su * b * t[2];
-    s.normal = (t[1] - t[0]).cross(t[2] - t[0]).normalized();
+    const Cell& cell = c.cells[std::size_t(at - c.running.begin())];
+    s.point = polygon_point(cell.p.data(), cell.corners, a, b);
+    s.normal = (cell.p[1] - cell.p[0]).cross(cell.p[2] - cell.p[0]).normalized();
     return s;
 }
 
@@ -405,11 +465,11 @@ PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t
     std::vector<Source> sources;
     for (std::size_t k = 0; k < scene.objects.size(); ++k) {
         sources.push_back(cut(scene.objects[k], loaded.meshes[k], census.max_edge));
-        count_triangles(loaded, k, sources.back());
+        count_cells(loaded, k, sources.back());
         const Source& c = sources.back();
         census.patches += c.patch_count * c.sides();
         census.object_patches.push_back(c.patch_count * c.sides());
-        census.corners += c.corners() * c.patch_count * c.sides();
+        census.corners += c.corner_count * c.sides();
         if ((scene.objects[k].emission > 0.0).any()) census.emissive += c.patch_count * c.sides();
     }
     census.meshes = std::move(loaded.reports);

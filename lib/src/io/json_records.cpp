@@ -71,6 +71,7 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
                                {"vertices", m.vertices},
                                {"faces", m.faces},
                                {"triangles", m.triangles},
+                               {"quads", m.quads},
                                {"bounds", {{m.bounds.min().x(), m.bounds.min().y(), m.bounds.min().z()},
                                            {m.bounds.max().x(), m.bounds.max().y(), m.bounds.max().z()}}},
                                {"repairs", {{"zero_area_faces", m.repairs.zero_area_faces},

@@ -40,6 +40,7 @@ struct MeshReport {
     std::size_t vertices = 0;          ///< vertices the kept faces use
     std::size_t faces = 0;             ///< polygons kept
     std::size_t triangles = 0;         ///< the triangles they were cut into (before refinement to max_edge)
+    std::size_t quads = 0;             ///< planar convex quads kept whole (cut into grids of quads)
     Eigen::AlignedBox3d bounds;        ///< metres, the transform applied
     MeshRepairs repairs;               ///< what was dropped, and how much
 };
@@ -56,8 +57,9 @@ struct PatchOptions {
     ProgressFn progress;               ///< may be empty
 };
 
-/// Subdivides every object of the scene into patches: rectangles into grids of quads, mesh faces into
-/// triangles refined until no patch edge exceeds the scene's max_edge (bounding-box diagonal / 16 when
+/// Subdivides every object of the scene into patches: rectangles and the planar convex quads of meshes
+/// into grids of quads, other mesh faces into triangles refined until no patch edge exceeds the
+/// scene's max_edge (bounding-box diagonal / 16 when
 /// the scene gives none). A two-sided object yields each patch twice, once per side.
 PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
 
