@@ -94,15 +94,7 @@ void print_mesh_repairs(const std::vector<tprf::MeshReport>& meshes) {
 
 // One line per mesh file: its size, its bounding box after the transform and what was dropped.
 void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
-    for (const tprf::MeshReport& m : meshes) {
-        const Eigen::Vector3d& lo = m.bounds.min();
-        const Eigen::Vector3d& hi = m.bounds.max();
-        const std::string repairs = tprf::describe(m.repairs);
-        std::printf("mesh     objects[%zu] '%s': %zu vertices, %zu faces (cut into %zu triangles and %zu quads); box "
-                    "(%.6g, %.6g, %.6g) to (%.6g, %.6g, %.6g) m; %s%s\n",
-                    m.object, m.file.c_str(), m.vertices, m.faces, m.triangles, m.quads, lo.x(), lo.y(), lo.z(), hi.x(),
-                    hi.y(), hi.z(), repairs.empty() ? "nothing dropped" : "dropped ", repairs.c_str());
-    }
+    for (const tprf::MeshReport& m : meshes) std::printf("mesh     %s\n", tprf::describe(m).c_str());
 }
 
 int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool meshes_only, bool quiet) {

@@ -158,7 +158,7 @@ TEST_F(Cli, InfoMeshesPrintsEachMeshAndWhatWasDroppedWithoutLinks) {
     int status = -1;
     const std::string out = run_stdout("info --meshes " + scene.string(), status);
     ASSERT_EQ(status, 0) << out;
-    EXPECT_NE(out.find("sq.obj': 4 vertices, 2 faces (cut into 2 triangles and 0 quads); box (1, 0, 0) to (3, 2, 0) m; "
+    EXPECT_NE(out.find("sq.obj': 4 vertices, 2 faces (cut into 2 triangles); box (1, 0, 0) to (3, 2, 0) m; "
                        "dropped 1 zero-area face, 1 duplicate face and 2 unreferenced vertices"),
               std::string::npos)
         << out;

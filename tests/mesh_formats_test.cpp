@@ -76,6 +76,8 @@ TEST_F(MeshFormats, OffFaceColoursPolygonsAndNoKeyword) {
 }
 
 TEST_F(MeshFormats, OffCountsOnTheNextLineAfterComments) {
+    // No space between the keyword and the counts, as some writers leave it out.
+    expect_square(load("glued.off", "OFF4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n"));
     expect_square(load("c.off", "OFF # the header\n# counts follow\n\n  4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
                                 "3 0 1 2 # first\n3 0 2 3\n# trailing comment\n"));
     // CRLF line ends, as Windows tools write them.
@@ -241,15 +243,16 @@ TEST_F(MeshFormats, BinaryPlyEitherEndianWithExtraPropertiesAndElements) {
 }
 
 TEST_F(MeshFormats, AsciiPlyWithExtraPropertiesAndElements) {
-    // Properties in a writer's order (normals and colours first), int coordinates, records spread over
-    // lines and two on one line, an edge element between vertices and faces, CRLF line ends.
+    // Properties in a writer's order (normals and colours first), int coordinates, a record spread over
+    // lines, values after a record on its line (ignored: MeshLab writes them), an edge element between
+    // vertices and faces, CRLF line ends.
     const std::string ply = "ply\r\nformat ascii 1.0\r\ncomment x\r\nobj_info y\r\nelement vertex 4\r\n"
                             "property float nx\r\nproperty float ny\r\nproperty float nz\r\nproperty int x\r\n"
                             "property uchar red\r\nproperty int y\r\nproperty int z\r\nelement edge 1\r\n"
                             "property int vertex1\r\nproperty int vertex2\r\nelement face 2\r\n"
                             "property list int int vertex_indices\r\nproperty float quality\r\nend_header\r\n"
-                            "0 0 1 0 255 0 0\r\n0 0 1 1 255\r\n 0 0\r\n0 0 1 1 255 1 0  0 0 1 0 255 1 0\r\n"
-                            "0 1\r\n3 0 1 2 0.5\r\n3 0 2 3 0.5\r\n";
+                            "0 0 1 0 255 0 0\r\n0 0 1 1 255\r\n 0 0\r\n0 0 1 1 255 1 0  9 9 9\r\n0 0 1 0 255 1 0\r\n"
+                            "0 1\r\n3 0 1 2 0.5 6 1 1 1 1 1 1\r\n3 0 2 3 0.5\r\n";
     expect_square(load("a.ply", ply));
 }
 

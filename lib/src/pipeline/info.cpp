@@ -24,6 +24,20 @@ namespace tprf {
 
 std::vector<MeshReport> describe_meshes(const Scene& scene) { return count_patches(scene).meshes; }
 
+std::string describe(const MeshReport& m) {
+    std::string cells = counted(m.triangles, "triangle", "triangles");
+    if (m.quads > 0) cells += (m.triangles > 0 ? " and " : "") + counted(m.quads, "quad", "quads");
+    if (m.triangles == 0 && m.quads > 0) cells = counted(m.quads, "quad", "quads");
+    char box[160];
+    const Vec3 lo = m.bounds.min(), hi = m.bounds.max();
+    std::snprintf(box, sizeof box, "box (%.6g, %.6g, %.6g) to (%.6g, %.6g, %.6g) m", lo.x(), lo.y(), lo.z(), hi.x(),
+                  hi.y(), hi.z());
+    const std::string repairs = describe(m.repairs);
+    return "objects[" + std::to_string(m.object) + "] '" + m.file + "': " +
+           counted(m.vertices, "vertex", "vertices") + ", " + counted(m.faces, "face", "faces") + " (cut into " +
+           cells + "); " + box + "; " + (repairs.empty() ? "nothing dropped" : "dropped " + repairs);
+}
+
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) {
     SceneSummary s;
     auto t0 = std::chrono::steady_clock::now();

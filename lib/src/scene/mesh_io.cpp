@@ -248,6 +248,10 @@ std::size_t mark_duplicates(const mesh_read::RawMesh& raw, const std::vector<Vec
 
 }  // namespace
 
+std::string counted(std::size_t n, std::string_view singular, std::string_view plural) {
+    return mesh_read::count(n, singular, plural);
+}
+
 std::string describe(const MeshRepairs& r) {
     std::vector<std::string> parts;
     if (r.zero_area_faces > 0) parts.push_back(mesh_read::count(r.zero_area_faces, "zero-area face", "zero-area faces"));

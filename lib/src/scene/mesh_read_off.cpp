@@ -49,9 +49,12 @@ OffHeader read_header(Lines& lines) {
     while (numbers.size() < wanted() && lines.next(line, '#')) {
         std::string_view rest = line;
         for (std::string_view token = next_token(rest); !token.empty(); token = next_token(rest)) {
-            if (!keyword_seen && numbers.empty() && parse_keyword(token, h.layout)) {
+            if (const std::size_t off = token.find("OFF"); !keyword_seen && numbers.empty() &&
+                                                         off != token.npos &&
+                                                         parse_keyword(token.substr(0, off + 3), h.layout)) {
                 keyword_seen = true;
-                continue;
+                token.remove_prefix(off + 3);  // "OFF8 6 12": some writers leave out the space
+                if (token.empty()) continue;
             }
             if (numbers.size() == wanted() + 1) break;  // the edge count, which nothing needs
             if (!keyword_seen && numbers.empty() && token.find_first_not_of("+0123456789") != token.npos)

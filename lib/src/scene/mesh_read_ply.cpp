@@ -384,7 +384,9 @@ private:
     bool m_swap;
 };
 
-// The data of an ascii file, token by token: a record need not be one line.
+// The data of an ascii file, token by token. A record may go on over lines, but the next one starts
+// on a new line: what follows a record on its line is ignored, as writers put extra values there
+// (MeshLab's VCG library writes more per face than its header declares).
 class AsciiData {
 public:
     AsciiData(std::string_view text, const Header& h) : m_lines(text), m_before(h.lines), m_vertices(h.vertices) {}
@@ -430,6 +432,7 @@ private:
         } else if (e.role == Role::Face) {
             end_face(mesh, here());
         }
+        m_rest = {};
     }
 
     Lines m_lines;

@@ -46,6 +46,10 @@ struct SceneSummary {
 /// --meshes`).
 std::vector<MeshReport> describe_meshes(const Scene& scene);
 
+/// One line about a mesh file: "objects[2] 'bunny.ply': 35,947 vertices, 69,451 faces (cut into
+/// 69,451 triangles); box (x, y, z) to (x, y, z) m; nothing dropped".
+std::string describe(const MeshReport& mesh);
+
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
 

@@ -28,6 +28,9 @@ struct MeshRepairs {
 /// when nothing was dropped.
 std::string describe(const MeshRepairs& repairs);
 
+/// "1 vertex", "5,210 vertices": a count with thousands separators and its noun.
+std::string counted(std::size_t n, std::string_view singular, std::string_view plural);
+
 /// Polygons (triangles, quads, n-gons) with the file's winding (counter-clockwise seen from the front).
 struct PolygonMesh {
     std::vector<Vec3> vertices;              ///< V, metres (transform applied), each used by a face
