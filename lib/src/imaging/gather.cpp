@@ -65,7 +65,7 @@ void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patche
     pairs.clear();
     double total = arrive_area(a, sp.point, n, vis, area_sampling(a, sp.point, bin_m, options.emitter_rays,
                                                                   options.penumbra_rays), pairs);
-    if (!(total > 0.0) && !(total = arrive_area_centroid(a, sp.point, n, vis, pairs))) return;
+    if (!(total > 0.0) && (total = arrive_area_centroid(a, sp.point, n, vis, pairs)) == 0.0) return;
     const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
     if (options.time) pairs = merge_pairs_by_bin(pairs, bin_m, options.time->start_m() - sp.leg);
     for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});

@@ -23,7 +23,6 @@ namespace tprf {
 
 namespace {
 
-constexpr double kMaxReachInWindows = 64.0;
 constexpr double kMaxPoissonMean = 1e15;
 
 

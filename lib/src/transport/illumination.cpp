@@ -90,7 +90,7 @@ void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t
     pairs.clear();
     double total = 0.0;  // the weight of every pair, blocked or not
     for (int s = 0; s < g * g; ++s) total += arrive_area(a, sample_patch(patches, i, s, g), ni, vis, sampling, pairs);
-    if (!(total > 0.0) && !(total = arrive_area_centroid(a, patches.centroid[i], ni, vis, pairs))) return;
+    if (!(total > 0.0) && (total = arrive_area_centroid(a, patches.centroid[i], ni, vis, pairs)) == 0.0) return;
     const Rgb scale = energy / total;
     if (options.merge_bins) pairs = merge_pairs_by_bin(pairs, bin_m, options.merge_bins->start_m());
     for (const AreaPair& q : pairs) out.push_back(area_pulse(q.path, scale * q.weight, source));

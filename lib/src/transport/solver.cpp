@@ -522,8 +522,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
 // of one OpenMP parallel region and share their loops among them.
 class March {
 public:
-    March(const PatchSet& patches, const Illumination& illumination, const SolvePlan& plan)
-        : m_patches(patches), m_links(*plan.links), m_illumination(illumination), m_plan(plan),
+    March(const Illumination& illumination, const SolvePlan& plan)
+        : m_links(*plan.links), m_illumination(illumination), m_plan(plan),
           m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
           m_recent(std::size_t(plan.L),
@@ -591,7 +591,6 @@ private:
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
 
-    const PatchSet& m_patches;
     const Links& m_links;
     const Illumination& m_illumination;
     const SolvePlan& m_plan;
@@ -1002,7 +1001,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
     TPRF_CHECK_EQ(links.receivers(), set.nodes());
     TPRF_CHECK_EQ(illumination.row.size(), patches.size() + 1);
     const SolvePlan plan = make_plan(patches, set, illumination, time, options);
-    March march(patches, illumination, plan);
+    March march(illumination, plan);
     SolveStats stats;
     stats.block_bins = plan.bt;
     stats.ring_bins = plan.ring;

@@ -61,7 +61,6 @@ private:
     void* m_map = nullptr;
     std::size_t m_map_bytes = 0;
     float* m_data = nullptr;
-    int m_fd = -1;
 };
 
 /// A float32 array read from a .npy file.

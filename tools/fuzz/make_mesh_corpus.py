@@ -1,0 +1,67 @@
+#!/usr/bin/env python3
+"""Writes the seed corpus of tprf_fuzz_mesh into tools/fuzz/corpus/mesh/: the small sample meshes of
+meshes/ and a few hand-made variants per format. Each seed is one byte choosing the format (0 .obj,
+1 .off, 2 .ply, 3 .stl; mesh_fuzz.cpp) followed by the file. Standard library only; rerun it to
+reproduce the corpus."""
+import pathlib
+import struct
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+OUT = ROOT / "tools" / "fuzz" / "corpus" / "mesh"
+FORMAT = {".obj": 0, ".off": 1, ".ply": 2, ".stl": 3}
+LARGEST = 20_000  # bytes: larger sample meshes only slow the fuzzer down
+
+
+def binary_ply(endian):
+    order = "<" if endian == "little" else ">"
+    head = (f"ply\nformat binary_{endian}_endian 1.0\nelement vertex 4\nproperty uchar red\nproperty double x\n"
+            "property float y\nproperty float z\nelement face 2\nproperty list uchar float texcoord\n"
+            "property list ushort uint vertex_index\nelement edge 1\nproperty int a\nproperty int b\n"
+            "end_header\n").encode()
+    body = b"".join(struct.pack(order + "Bdff", 9, x, y, 0.0) for x, y in [(0, 0), (1, 0), (1, 1), (0, 1)])
+    for f in [(0, 1, 2), (0, 2, 3)]:
+        body += struct.pack(order + "Bff", 2, 0.5, 0.5) + struct.pack(order + "H3I", 3, *f)
+    return head + body + struct.pack(order + "ii", 0, 1)
+
+
+def binary_stl(header):
+    tris = [(0, 0, 0, 1, 0, 0, 1, 1, 0), (0, 0, 0, 1, 1, 0, 0, 1, 0)]
+    out = header.ljust(80, b" ") + struct.pack("<I", len(tris))
+    for t in tris:
+        out += struct.pack("<12fH", 0, 0, 1, *t, 0)
+    return out
+
+
+HAND_MADE = {
+    "square_coff.off": b"COFF\n4 2 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n1 1 0 0 0 255 255\n0 1 0 9 9 9 255\n"
+                       b"3 0 1 2 255 0 0\n3 0 2 3\n",
+    "square_comments.off": b"# tool\n\nOFF 4 1 0 # counts\n0 0 0\n1 0 0 # c\n\n1 1 0\n0 1 0\n4 0 1 2 3\n",
+    "square_4noff.off": b"4nOFF\n3\n4 1\n0 0 0 1\n2 0 0 2\n3 3 0 3\n0 1 0 1\n4 0 1 2 3\n",
+    "square_forms.obj": b"mtllib none.mtl\no a\nv 0 0 0 1\nv 1 0 0 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+                        b"f 1/1 2/1 3/1\nf -4//1 -2//1 -1//1\nl 1 2\ng b\nf 1/1/1 3/1/1 \\\n 4/1/1\n",
+    "square_ascii.ply": b"ply\nformat ascii 1.0\ncomment c\nelement vertex 4\nproperty float nx\nproperty int x\n"
+                        b"property int y\nproperty int z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                        b"property float q\nend_header\n0 0 0 0\n0 1 0 0\n0 1 1 0\n0 0 1 0\n4 0 1 2 3 0.5 7 7\n",
+    "square_le.ply": binary_ply("little"),
+    "square_be.ply": binary_ply("big"),
+    "square_solid_header.stl": binary_stl(b"solid but binary"),
+    "square_ascii.stl": b"solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 1 1 0\n"
+                        b"endloop\nendfacet\nendsolid s\nsolid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
+                        b"vertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
+}
+
+
+def main():
+    OUT.mkdir(parents=True, exist_ok=True)
+    for old in OUT.iterdir():
+        old.unlink()
+    seeds = {p.name: p.read_bytes() for p in sorted((ROOT / "meshes").iterdir())
+             if p.suffix.lower() in FORMAT and p.stat().st_size <= LARGEST}
+    seeds.update(HAND_MADE)
+    for name, data in seeds.items():
+        (OUT / name).write_bytes(bytes([FORMAT[pathlib.Path(name).suffix.lower()]]) + data)
+    print(f"{len(seeds)} seeds, {sum(len(d) + 1 for d in seeds.values())} bytes in {OUT}")
+
+
+if __name__ == "__main__":
+    main()
