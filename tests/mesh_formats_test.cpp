@@ -306,6 +306,21 @@ TEST_F(MeshFormats, DuplicateFacesAndUnreferencedVerticesAreCounted) {
     EXPECT_DOUBLE_EQ(area(mesh), 1.5);
 }
 
+TEST_F(MeshFormats, SizesOutsideWhatTprfComputesWithAreRefused) {
+    // 1e-300 m and 1e300 m: a triangle's area would underflow to 0 or overflow to infinity.
+    expect_input_error(write("tiny.obj", "v 0 0 0\nv 1e-300 0 0\nv 0 1e-300 0\nf 1 2 3\n"),
+                       "spans 1.41e-300 m after the transform, outside the 1e-9 m to 1e9 m");
+    expect_input_error(write("huge.obj", "v 0 0 0\nv 1e300 0 0\nv 0 1e300 0\nf 1 2 3\n"),
+                       "spans 1.41e+300 m after the transform");
+    // A transform can overflow what the file holds within range.
+    Eigen::Matrix4d scale = Eigen::Matrix4d::Identity() * 1e300;
+    scale(3, 3) = 1.0;
+    const auto file = write("ok.obj", "v 0 0 0\nv 1e10 0 0\nv 0 1e10 0\nf 1 2 3\n");
+    EXPECT_THROW(tprf::load_mesh(file, scale, "scene.json", "objects[0].file"), tprf::Error);
+    // All corners at one point: nothing spans, every face has no area.
+    expect_input_error(write("point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n"), "is empty: no faces left");
+}
+
 TEST_F(MeshFormats, EmptyFilesSayWhatIsMissing) {
     expect_input_error(write("empty.obj", ""), "has no vertices and no faces");
     expect_input_error(write("cloud.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 1\nv 2 2 2\n"),

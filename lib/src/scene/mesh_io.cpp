@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstdio>
 #include <cstdint>
 #include <fstream>
 #include <sstream>
@@ -185,7 +186,7 @@ bool is_degenerate(const std::vector<Vec3>& vertices, std::span<const int> face,
     for (std::size_t i = 0; i < face.size(); ++i)
         for (std::size_t j = i + 1; j < face.size(); ++j)
             if (face[i] == face[j] || vertices[face[i]] == vertices[face[j]]) return true;
-    return 0.5 * newell(vertices, face).norm() < min_area;
+    return !(0.5 * newell(vertices, face).norm() > min_area);
 }
 
 // Lexicographic order of positions: where a face's canonical rotation starts.
@@ -268,12 +269,7 @@ namespace {
 
 // The kept faces of `raw` over the transformed positions `p`: degenerate and duplicate faces dropped,
 // vertices renumbered in order of first use, windings reversed when the transform mirrors.
-PolygonMesh keep_faces(const mesh_read::RawMesh& raw, const std::vector<Vec3>& p, bool mirror) {
-    Eigen::AlignedBox3d box;
-    for (int v : raw.indices) box.extend(p[std::size_t(v)]);
-    const double diag = box.isEmpty() ? 0.0 : box.diagonal().norm();
-    // Relative to the mesh's size so that the test means the same in millimetres and in kilometres.
-    const double min_area = 1e-12 * diag * diag;
+PolygonMesh keep_faces(const mesh_read::RawMesh& raw, const std::vector<Vec3>& p, bool mirror, double min_area) {
     PolygonMesh mesh;
     mesh.file_vertices = p.size();
     mesh.file_faces = raw.faces();
@@ -341,7 +337,20 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
     std::vector<Vec3> positions(raw.vertices.size());
     for (std::size_t i = 0; i < positions.size(); ++i) positions[i] = linear * raw.vertices[i] + offset;
     raw.vertices = {};
-    PolygonMesh mesh = keep_faces(raw, positions, linear.determinant() < 0.0);
+    Eigen::AlignedBox3d box;
+    for (int v : raw.indices) box.extend(positions[std::size_t(v)]);
+    const double diag = box.diagonal().stableNorm();  // no overflow or underflow on the way
+    // Sizes far outside these are a wrong unit or scale, and their areas would overflow or underflow.
+    constexpr double kSmallest = 1e-9, kLargest = 1e9;  // metres: a nanometre, a million kilometres
+    if (!(diag <= kLargest) || (diag > 0.0 && diag < kSmallest)) {
+        char size[32];
+        std::snprintf(size, sizeof size, "%.3g", diag);
+        fail_input(scene_file, json_path,
+                   name + " spans " + size + " m after the transform, outside the 1e-9 m to 1e9 m that tprf " +
+                       "computes with: check the file's unit and the transform's scale");
+    }
+    // Relative to the mesh's size so that the test means the same in millimetres and in kilometres.
+    PolygonMesh mesh = keep_faces(raw, positions, linear.determinant() < 0.0, 1e-12 * diag * diag);
     if (mesh.faces() == 0)
         fail_input(scene_file, json_path,
                    name + " is empty: no faces left after dropping " + describe(mesh.repairs));
