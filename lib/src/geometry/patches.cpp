@@ -419,11 +419,16 @@ PatchSample census_sample(const Source& c, double max_edge, std::size_t local, S
         const double i = double(local % g.nu), j = double(local / g.nu);
         s.point = r->origin + (i + a) / double(g.nu) * r->u + (j + b) / double(g.nv) * r->v;
         s.normal = r->u.cross(r->v).normalized();
+        s.area = r->u.cross(r->v).norm() / double(g.nu * g.nv);
         return s;
     }
     const auto at = std::upper_bound(c.running.begin(), c.running.end(), local);
     const Cell& cell = c.cells[std::size_t(at - c.running.begin())];
     s.point = polygon_point(cell.p.data(), cell.corners, a, b);
+    const Grid g = cell_grid(cell, max_edge);
+    // A quad's or a triangle's area (its diagonals' cross product; for a triangle two edges from p2),
+    // shared by the grid's pieces (a quad's bilinear pieces only on average).
+    s.area = 0.5 * (cell.p[2] - cell.p[0]).cross(cell.p[cell.corners - 1] - cell.p[1]).norm() / double(g.nu * g.nv);
     s.normal = (cell.p[1] - cell.p[0]).cross(cell.p[2] - cell.p[0]).normalized();
     return s;
 }
@@ -470,6 +475,7 @@ PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t
         census.patches += c.patch_count * c.sides();
         census.object_patches.push_back(c.patch_count * c.sides());
         census.corners += c.corner_count * c.sides();
+
         if ((scene.objects[k].emission > 0.0).any()) census.emissive += c.patch_count * c.sides();
     }
     census.meshes = std::move(loaded.reports);

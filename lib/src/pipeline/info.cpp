@@ -94,6 +94,8 @@ constexpr double kEmbreeBytesPerPatch = 180;     // Embree's quads and BVH (RTC_
 constexpr double kLinkBytes = 12;                // a link: source u32, form factor f32, distance f32
 constexpr double kRowBytes = 8;                  // a CSR row offset per receiver
 constexpr double kLinkBuildBytes = 4;            // the link builder's pair lists, per link (8 bytes a pair)
+constexpr double kHierarchicalLinkBuildBytes = 16;  // the hierarchical builder's records (16 bytes a link;
+                                                    // a wavy sheet at 99k patches: 15 measured)
 constexpr double kTreeBytesPerNode = 100;        // a cluster tree node (bounds, cone, ranges, levels)
 constexpr double kPulseBytes = 64;               // a pulse (40 bytes) and the per-patch lists it was built in
 constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lists, taps before and after assembly
@@ -139,6 +141,9 @@ constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin
 /// The hierarchical solve per patch and bin: 2.6e-7 to 1.4e-6 s on the Cornell box from 4k to 1M patches
 /// (3 channels), 4.3e-7 on the statue (1 channel).
 constexpr double kHierarchicalPatchBinSeconds = 5e-7;
+/// Hierarchical links in the near field (single patches, all of them refined to): a wavy sheet of 99k
+/// patches under 10 cm bins, 159M links in 88 s.
+constexpr double kNearLinkSeconds = 5.5e-7;
 constexpr double kWriteSeconds = 0.2;                // the images and render.json
 constexpr double kCubeBytesPerSecond = 0.7e9;        // writing back the memory-mapped cubes
 constexpr double kSteadySecondsPerLink = 3e-8;       // the steady state (BiCGSTAB on the links, 3 channels)
@@ -162,14 +167,19 @@ bool scene_grey(const Scene& scene) {
 }
 
 // What the sampled patch pairs say: the share that face each other, the same among pairs with an
-// emitter, and among the facing ones the share shorter than a block and within one bin.
+// emitter, and among the facing ones the share shorter than a block, within one bin, and in the near
+// field of a hierarchical set (near_gap_m).
+// A patch's circumradius from its area: about 0.75 sqrt(area) for the squares and near-equilateral
+// triangles patches are cut into (0.71 for a square, 0.88 for an equilateral triangle).
+double patch_size(double area) { return 0.75 * std::sqrt(area); }
+
 struct PairShares {
-    double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0;
+    double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0, near = 0.0;
 };
 
-PairShares pair_shares(const Scene& scene, const PatchCensus& census, double block_m, double bin_m) {
+PairShares pair_shares(const Scene& scene, const PatchCensus& census, double block_m, double bin_m, double gap_m) {
     PairShares s;
-    std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0;
+    std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0, near = 0;
     const auto& v = census.samples;
     for (std::size_t i = 0; i < v.size(); ++i) {
         const bool emits_i = (scene.objects[v[i].object].emission > 0.0).any();
@@ -185,6 +195,7 @@ PairShares pair_shares(const Scene& scene, const PatchCensus& census, double blo
             emitter_facing += emits;
             shorter += r < block_m;
             same += r < bin_m;
+            near += r < gap_m + patch_size(v[i].area) + patch_size(v[j].area);
         }
     }
     if (pairs > 0) s.facing = double(facing) / double(pairs);
@@ -192,8 +203,22 @@ PairShares pair_shares(const Scene& scene, const PatchCensus& census, double blo
     if (facing > 0) {
         s.shorter_than_block = double(shorter) / double(facing);
         s.same_bin = double(same) / double(facing);
+        s.near = double(near) / double(facing);
     }
     return s;
+}
+
+// The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
+// cluster link (hierarchy.cpp min_lag: four median patch sizes in bins, 1 to 8 bins) are refined, so
+// every facing pair of patches whose gap is shorter is a link of its own. The sampled patches' median
+// size stands for the set's.
+double near_gap_m(const PatchCensus& census, double bin_m) {
+    if (census.samples.empty() || !(bin_m > 0.0)) return 0.0;
+    std::vector<double> areas;
+    for (const PatchSample& s : census.samples) areas.push_back(s.area);
+    std::nth_element(areas.begin(), areas.begin() + std::ptrdiff_t(areas.size() / 2), areas.end());
+    const double size = 2.0 * patch_size(areas[areas.size() / 2]);
+    return std::clamp(std::floor(4.0 * size / bin_m), 1.0, 8.0) * bin_m;
 }
 
 // Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver.cpp
@@ -253,18 +278,27 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
     const double n = double(census.patches), others = std::max(n - 1.0, 0.0);
     const double flat = shares.facing * n * others;  // facing pairs, both directions (visibility not removed)
     double links = flat, rows = n, tree = 0.0, seconds = 0.5 * n * others / kPairsPerSecond;
+    double build_bytes = kLinkBuildBytes;
     e.nodes = census.patches;
     if (scene.links.method == LinkMethod::Hierarchical) {
         const double tolerance_factor = std::sqrt(0.003 / scene.links.tolerance);
-        links = std::min(flat, kHierarchicalLinksScale * std::pow(n, kHierarchicalLinksExponent) * tolerance_factor);
+        // The fit holds where the near field is a small part; where coarse bins make it large (every pair
+        // of patches within a bin of each other is a link), its facing pairs are the count.
+        const double near = shares.near * flat;
+        e.near_links = to_size(near);
+        e.near_gap_m = near_gap_m(census, scene.time.bin_width_m());
+        links = std::min(flat, std::max(near, kHierarchicalLinksScale * std::pow(n, kHierarchicalLinksExponent) *
+                                                  tolerance_factor));
+        build_bytes = kHierarchicalLinkBuildBytes;
         e.nodes = census.patches > 0 ? 2 * census.patches - 1 : 0;
         rows = double(e.nodes);
         tree = kTreeBytesPerNode * rows;
-        seconds = kHierarchicalLinkSecondsScale * std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor;
+        seconds = std::max(near * kNearLinkSeconds, kHierarchicalLinkSecondsScale *
+                                                        std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor);
     }
     e.links = to_size(links);
     e.link_bytes = to_size(kLinkBytes * links + kRowBytes * (rows + n) + tree);
-    e.link_build_bytes = to_size(kLinkBuildBytes * links);
+    e.link_build_bytes = to_size(build_bytes * links);
     e.seconds.links = kEmbreeSeconds * n + seconds;
 }
 
@@ -407,7 +441,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     e.visibility_bytes = to_size(kEmbreeBytesPerPatch * n);
     e.seconds.patches = kPatchSeconds * n + kMeshSecondsPerFace * double(census.mesh_faces);
     const double bin_m = scene.time.bin_width_m();
-    const PairShares shares = pair_shares(scene, census, kBlockBins * bin_m, bin_m);
+    const PairShares shares = pair_shares(scene, census, kBlockBins * bin_m, bin_m, near_gap_m(census, bin_m));
     e.facing_fraction = shares.facing;
     estimate_links(scene, census, shares, e);
     estimate_camera(scene, census, shares, e);
@@ -443,6 +477,13 @@ void check_memory(const Scene& scene, const PipelineOptions& options, bool patch
             "camera.height, "
          << (scene.links.method == LinkMethod::Flat ? "set links.method to \"hierarchical\" or " : "")
          << "raise links.tolerance";
+    if (scene.links.method == LinkMethod::Hierarchical && e.near_links > e.links / 2) {
+        char gap[32];
+        std::snprintf(gap, sizeof gap, "%.3g", e.near_gap_m);
+        what << ". Most of the links join single patches less than " << gap
+             << " m apart (a bin or more: a cluster link is never shorter), which patches much smaller than a "
+                "bin make many: a smaller time.bin_width shortens that reach";
+    }
     fail_input(scene.file, "", what.str());
 }
 

@@ -86,6 +86,7 @@ struct PatchSample {
     Vec3 point = Vec3::Zero();
     Vec3 normal = Vec3::UnitZ();
     std::uint32_t object = 0;          ///< index into Scene::objects
+    double area = 0.0;                 ///< the patch's area, m^2
 };
 
 /// What build_patches would make, counted by the same rules without making it (the resource estimate,
