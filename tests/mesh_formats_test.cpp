@@ -325,6 +325,8 @@ TEST_F(MeshFormats, EmptyFilesSayWhatIsMissing) {
     expect_input_error(write("empty.obj", ""), "has no vertices and no faces");
     expect_input_error(write("cloud.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 1\nv 2 2 2\n"),
                        "has 5 vertices and no faces: a point cloud, not a surface");
+    expect_input_error(write("wire.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nl 2 3 1\n"),
+                       "has 3 vertices and 2 lines but no faces: a wireframe, not a surface");
 }
 
 }  // namespace

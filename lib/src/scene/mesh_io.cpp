@@ -326,8 +326,11 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
     }
     if (raw.faces() == 0)
         fail_input(scene_file, json_path,
-                   raw.vertices.empty()
-                       ? name + " has no vertices and no faces"
+                   raw.vertices.empty() ? name + " has no vertices and no faces"
+                   : raw.lines > 0
+                       ? name + " has " + mesh_read::count(raw.vertices.size(), "vertex", "vertices") + " and " +
+                             mesh_read::count(raw.lines, "line", "lines") +
+                             " but no faces: a wireframe, not a surface (tprf renders surfaces)"
                        : name + " has " + mesh_read::count(raw.vertices.size(), "vertex", "vertices") +
                              " and no faces: a point cloud, not a surface (tprf renders surfaces; mesh it first, "
                              "e.g. by Poisson reconstruction)");

@@ -24,6 +24,8 @@ public:
             vertex(line, where);
         else if (keyword == "f" || keyword == "fo")  // "fo" is the old name of "f"
             face(line, where);
+        else if (keyword == "l")
+            ++m_mesh.lines;
     }
 
     RawMesh finish() {

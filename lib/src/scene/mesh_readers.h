@@ -20,6 +20,7 @@ struct RawMesh {
     std::vector<Vec3> vertices;         ///< V, as written (finite: the readers check)
     std::vector<int> indices;           ///< the corners of every face, face after face
     std::vector<std::uint32_t> first{0};///< F + 1 offsets into `indices`
+    std::size_t lines = 0;              ///< polylines (OBJ `l`), which tprf does not render
 
     std::size_t faces() const { return first.size() - 1; }
     /// Ends the face whose corners were pushed onto `indices` since the last call.
