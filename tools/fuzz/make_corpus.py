@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
-"""Writes the seed corpus of tprf_fuzz_mesh into tools/fuzz/corpus/mesh/: the small sample meshes of
-meshes/ and a few hand-made variants per format. Each seed is one byte choosing the format (0 .obj,
-1 .off, 2 .ply, 3 .stl; mesh_fuzz.cpp) followed by the file. Standard library only; rerun it to
-reproduce the corpus."""
+"""Writes the seed corpora of the fuzz targets into tools/fuzz/corpus/: mesh/ (tprf_fuzz_mesh) holds
+the small sample meshes of meshes/ and a few hand-made variants per format, each seed one byte
+choosing the format (0 .obj, 1 .off, 2 .ply, 3 .stl; mesh_fuzz.cpp) followed by the file; scene/ the
+sample scenes; sensor/ the sample sensor blocks and those inside the sample scenes. Standard library
+only; rerun it to reproduce the corpora."""
+import json
 import pathlib
 import struct
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-OUT = ROOT / "tools" / "fuzz" / "corpus" / "mesh"
+CORPUS = ROOT / "tools" / "fuzz" / "corpus"
 FORMAT = {".obj": 0, ".off": 1, ".ply": 2, ".stl": 3}
 LARGEST = 20_000  # bytes: larger sample meshes only slow the fuzzer down
 
@@ -51,16 +53,34 @@ HAND_MADE = {
 }
 
 
-def main():
-    OUT.mkdir(parents=True, exist_ok=True)
-    for old in OUT.iterdir():
+def mesh_files(scene):
+    return [o["file"] for o in json.loads(scene.read_bytes()).get("objects", []) if o.get("type") == "mesh"]
+
+
+def write(folder, seeds):
+    out = CORPUS / folder
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.iterdir():
         old.unlink()
-    seeds = {p.name: p.read_bytes() for p in sorted((ROOT / "meshes").iterdir())
-             if p.suffix.lower() in FORMAT and p.stat().st_size <= LARGEST}
-    seeds.update(HAND_MADE)
     for name, data in seeds.items():
-        (OUT / name).write_bytes(bytes([FORMAT[pathlib.Path(name).suffix.lower()]]) + data)
-    print(f"{len(seeds)} seeds, {sum(len(d) + 1 for d in seeds.values())} bytes in {OUT}")
+        (out / name).write_bytes(data)
+    print(f"{len(seeds)} seeds, {sum(len(d) for d in seeds.values())} bytes in {out}")
+
+
+def main():
+    samples = sorted((ROOT / "meshes").iterdir())
+    meshes = {p.name: p.read_bytes() for p in samples if p.suffix.lower() in FORMAT and p.stat().st_size <= LARGEST}
+    meshes.update(HAND_MADE)
+    write("mesh", {name: bytes([FORMAT[pathlib.Path(name).suffix.lower()]]) + data for name, data in meshes.items()})
+    # Scenes whose mesh files are small: every execution loads them (the statue's 54k faces take 50 ms).
+    scenes = {p.name: p.read_bytes() for p in samples if p.suffix == ".json" and not p.name.startswith("sensor-")
+              and all((ROOT / "meshes" / m).stat().st_size <= LARGEST for m in mesh_files(p))}
+    write("scene", scenes)
+    sensors = {p.name: p.read_bytes() for p in samples if p.name.startswith("sensor-")}
+    for name, data in scenes.items():
+        if "sensor" in json.loads(data):
+            sensors["in-" + name] = json.dumps(json.loads(data)["sensor"], indent=1).encode()
+    write("sensor", sensors)
 
 
 if __name__ == "__main__":
