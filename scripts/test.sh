@@ -1,6 +1,12 @@
 #!/usr/bin/env bash
-# Quick start, step 2: the same set-up, then the whole test suite through CTest.
+# Quick start, step 2: the same set-up, then the whole test suite through CTest, the same suite again
+# under AddressSanitizer + UndefinedBehaviorSanitizer (build-asan), and each fuzz target for a fixed
+# number of executions (build-fuzz, clang).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh build
+TPRF_TEST_PACKAGES=1 scripts/setup.sh build
 ctest --test-dir build --output-on-failure -j"$(nproc)"
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTPRF_SANITIZE=ON -DTPRF_BUILD_BENCH=OFF >/dev/null
+cmake --build build-asan -j"$(nproc)"
+ctest --test-dir build-asan --output-on-failure -j"$(nproc)"
+scripts/fuzz_smoke.sh 20000
