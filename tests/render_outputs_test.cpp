@@ -434,12 +434,18 @@ TEST_F(RenderOutputs, FramesAndStreaksAreSlicesOfTheCubeWithRowZeroAtTheTop) {
     EXPECT_GT(checked, W * H * 9 / 10);
 }
 
+// Every kind of source (point light, laser, emissive rectangle), a mesh file (quads and triangles),
+// supersampling by the R2 sequence (spp 3), bounce terms, patch profiles, frames, streaks and a sensor
+// with a pulse and seeded noise: README, "--threads N: results are identical for any N", and from
+// run to run (issue 17). Only render.json's timings and peak memory may differ.
+void expect_identical_renders(const fs::path& one, const fs::path& two);
+
 TEST_F(RenderOutputs, OneAndTwoThreadsWriteIdenticalFiles) {
-    // Every kind of source (point light, laser, emissive rectangle), supersampling by the R2 sequence
-    // (spp 3), bounce terms, patch profiles, frames, streaks and a sensor with a pulse and seeded noise:
-    // README, "--threads N: results are identical for any N". Only render.json's timings and peak
-    // memory may differ.
     json scene = corner(48, 0.05);
+    scene["objects"].push_back({{"type", "mesh"}, {"file", std::string(TPRF_SOURCE_DIR) + "/meshes/block.obj"},
+                                {"albedo", 0.7}, {"transform", {{"scale", 0.2}, {"translate", {0.5, 0.5, 0}}}}});
+    scene["objects"].push_back({{"type", "mesh"}, {"file", std::string(TPRF_SOURCE_DIR) + "/meshes/tetra.ply"},
+                                {"albedo", 0.4}, {"transform", {{"scale", 0.1}, {"translate", {0.3, 0.2, 0.15}}}}});
     scene["camera"]["width"] = 16;
     scene["camera"]["height"] = 12;
     scene["camera"]["spp"] = 3;
@@ -454,8 +460,21 @@ TEST_F(RenderOutputs, OneAndTwoThreadsWriteIdenticalFiles) {
     const std::string flags = "--frames --streaks --patch-profiles";
     const fs::path one = render("one", scene, flags, 1);
     const fs::path two = render("two", scene, flags, 2);
+    const fs::path again = render("again", scene, flags, 2);
     ASSERT_FALSE(one.empty());
     ASSERT_FALSE(two.empty());
+    ASSERT_FALSE(again.empty());
+    expect_identical_renders(one, two);
+    expect_identical_renders(two, again);
+    // The same with hierarchical links (cluster links, push and pull in the solver).
+    scene["links"] = {{"method", "hierarchical"}, {"tolerance", 0.01}};
+    const fs::path h1 = render("h1", scene, flags, 1), h2 = render("h2", scene, flags, 2);
+    ASSERT_FALSE(h1.empty());
+    ASSERT_FALSE(h2.empty());
+    expect_identical_renders(h1, h2);
+}
+
+void expect_identical_renders(const fs::path& one, const fs::path& two) {
     const auto listing = [](const fs::path& root) {
         std::set<std::string> names;
         for (const auto& e : fs::recursive_directory_iterator(root))
@@ -476,12 +495,12 @@ TEST_F(RenderOutputs, OneAndTwoThreadsWriteIdenticalFiles) {
             for (json* j : {&a, &b}) {
                 j->erase("seconds");
                 j->erase("peak_rss_mb");
-                j->erase("scene");  // one.json and two.json: the same scene under two names
+                j->erase("scene");  // the same scene under two names
             }
             EXPECT_EQ(a, b);
             continue;
         }
-        EXPECT_TRUE(read_bytes(one / f) == read_bytes(two / f)) << f << " differs between --threads 1 and --threads 2";
+        EXPECT_TRUE(read_bytes(one / f) == read_bytes(two / f)) << f << " differs between " << one << " and " << two;
     }
 }
 
