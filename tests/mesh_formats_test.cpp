@@ -103,6 +103,17 @@ TEST_F(MeshFormats, OffErrorsNameTheLine) {
     expect_input_error(write("nohead.off", "# only a comment\n"), "the file ends before the header gives");
 }
 
+TEST_F(MeshFormats, BinaryOffGoesThroughOpenMesh) {
+    // OpenMesh's layout: "OFF BINARY", then little-endian int32 counts, float32 corners, and per face
+    // its corner count and indices.
+    std::string off = "OFF BINARY\n";
+    const auto put = [&](auto v) { off.append(reinterpret_cast<const char*>(&v), sizeof v); };
+    for (std::int32_t n : {4, 2, 0}) put(n);
+    for (float c : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 0.f, 0.f, 1.f, 0.f}) put(c);
+    for (std::int32_t i : {3, 0, 1, 2, 3, 0, 2, 3}) put(i);
+    expect_square(load("binary.off", off));
+}
+
 // ---- OBJ ----
 
 TEST_F(MeshFormats, ObjVertexExtrasFaceFormsAndIgnoredStatements) {
