@@ -9,9 +9,11 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <system_error>
 
 #include <unistd.h>
 
@@ -27,6 +29,11 @@ const fs::path& folder() {
         fs::create_directories(d);
         return d;
     }();
+    // libFuzzer ends a run with exit(); without this every run leaves a folder in /dev/shm (memory).
+    [[maybe_unused]] static const int removed_at_exit = std::atexit([] {
+        std::error_code ignored;
+        fs::remove_all(dir, ignored);
+    });
     return dir;
 }
 
