@@ -72,7 +72,7 @@ TEST(Patches, RectangleBecomesGridOfQuads) {
     tprf::PatchStats stats;
     const auto p = tprf::build_patches(scene, {}, &stats);
     EXPECT_DOUBLE_EQ(stats.max_edge, 0.1);
-    EXPECT_EQ(stats.dropped_degenerate, 0);
+    EXPECT_EQ(tprf::dropped_faces(stats.meshes), 0u);
     ASSERT_EQ(p.size(), 50u);  // ceil(1 / 0.1) x ceil(0.5 / 0.1)
     EXPECT_NEAR(total_area(p), 0.5, kTol);
     for (std::size_t i = 0; i < p.size(); ++i) {
@@ -249,7 +249,7 @@ TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverSixteenAndDropsAreSummed) {
     tprf::PatchStats stats;
     const auto p = tprf::build_patches(scene, {}, &stats);
     EXPECT_DOUBLE_EQ(stats.max_edge, 5.0 / 16.0);  // box 3 x 4 x 0
-    EXPECT_EQ(stats.dropped_degenerate, 1);
+    EXPECT_EQ(tprf::dropped_faces(stats.meshes), 1u);
     EXPECT_EQ(p.size(), std::size_t{10 * 13 + 16});  // ceil(3 / 0.3125) x ceil(4 / 0.3125), n = 4
     expect_well_formed(p, stats.max_edge);
 }

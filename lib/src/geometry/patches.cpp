@@ -103,9 +103,9 @@ bool planar_convex_quad(const std::vector<Vec3>& v, std::span<const int> face, c
 }
 
 // Planar convex quads stay whole. Other convex polygons (what mesh files hold in practice) are fanned
-// from their first corner; the others are ear-clipped. Pieces without area (a corner lying on an edge of the polygon) are left out: they
-// carry no energy and have no normal. "Without area" is relative to the polygon, which load_mesh
-// guarantees is not degenerate itself.
+// from their first corner; the others are ear-clipped. Pieces without area (a corner lying on an edge
+// of the polygon) are left out: they carry no energy and have no normal. "Without area" is relative to
+// the polygon, which load_mesh guarantees is not degenerate itself.
 void cut_faces(const PolygonMesh& mesh, std::vector<Cell>& out) {
     const std::vector<Vec3>& v = mesh.vertices;
     std::vector<Triangle> pieces;
@@ -181,7 +181,6 @@ Source cut(const Object& object, const PolygonMesh& mesh, double max_edge) {
 struct LoadedObjects {
     std::vector<PolygonMesh> meshes;
     std::vector<Eigen::AlignedBox3d> bounds;
-    int dropped_degenerate = 0;
     std::vector<MeshReport> reports;  // their triangles counted once cut
 };
 
@@ -219,7 +218,6 @@ LoadedObjects load_objects(const Scene& scene) {
         } else {
             const auto& m = std::get<MeshShape>(object.shape);
             out.meshes[k] = load_mesh(m.file, m.transform, scene.file, path + ".file");
-            out.dropped_degenerate += int(out.meshes[k].repairs.dropped_faces());
             out.reports.push_back(report(k, m.file, out.meshes[k]));
             box = out.meshes[k].bounds;
         }
@@ -349,6 +347,12 @@ void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const 
     patches.object.push_back(object);
 }
 
+std::size_t dropped_faces(const std::vector<MeshReport>& meshes) {
+    std::size_t n = 0;
+    for (const MeshReport& m : meshes) n += m.repairs.dropped_faces();
+    return n;
+}
+
 PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchStats* stats) {
     PatchStats local;
     PatchStats& st = stats ? *stats : local;
@@ -356,7 +360,6 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
 
     // Meshes are loaded first: the default patch size depends on the bounding box of every object.
     LoadedObjects loaded = load_objects(scene);
-    st.dropped_degenerate = loaded.dropped_degenerate;
     PatchSet patches;
     patches.first.push_back(0);
     if (scene.objects.empty()) return patches;
@@ -461,7 +464,6 @@ PatchCensus count_patches(const Scene& scene, std::size_t samples, std::uint64_t
     PatchCensus census;
     LoadedObjects loaded = load_objects(scene);
     census.bounds = loaded.bounds;
-    census.dropped_degenerate = loaded.dropped_degenerate;
     for (const PolygonMesh& m : loaded.meshes) census.mesh_faces += m.faces();
     if (scene.objects.empty()) return census;
     const Eigen::AlignedBox3d box = scene_box(loaded);

@@ -63,7 +63,7 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
     j["seconds"]["gather_phases"] = {{"illumination", r.seconds.illumination}};
     if (r.sensor) j["sensor"] = {{"exposure", exposure_name(*r.sensor)}, {"measurements", r.measurements}};
     j["peak_rss_mb"] = r.peak_rss_mb;
-    j["dropped_degenerate_faces"] = r.dropped_degenerate;
+    j["dropped_degenerate_faces"] = dropped_faces(r.meshes);
     j["meshes"] = nlohmann::json::array();
     for (const MeshReport& m : r.meshes)
         j["meshes"].push_back({{"object", m.object},

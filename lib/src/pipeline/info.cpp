@@ -44,7 +44,6 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     PatchStats patch_stats;
     const PatchSet patches = build_patches(scene, {options.progress}, &patch_stats);
     s.patches = patches.size();
-    s.dropped_degenerate = patch_stats.dropped_degenerate;
     s.max_edge = patch_stats.max_edge;
     s.seconds_patches = seconds_since(t0);
 
@@ -166,19 +165,21 @@ bool scene_grey(const Scene& scene) {
     return true;
 }
 
-// What the sampled patch pairs say: the share that face each other, the same among pairs with an
-// emitter, and among the facing ones the share shorter than a block, within one bin, and in the near
-// field of a hierarchical set (near_gap_m).
 // A patch's circumradius from its area: about 0.75 sqrt(area) for the squares and near-equilateral
 // triangles patches are cut into (0.71 for a square, 0.88 for an equilateral triangle).
 double patch_size(double area) { return 0.75 * std::sqrt(area); }
 
+// What the sampled patch pairs say: the share that face each other, the same among pairs with an
+// emitter, and among the facing ones the share shorter than a block, within one bin, and in the near
+// field of a hierarchical set (gaps under near_gap_m, which is kept with them).
 struct PairShares {
     double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0, near = 0.0;
+    double near_gap_m = 0.0;
 };
 
 PairShares pair_shares(const Scene& scene, const PatchCensus& census, double block_m, double bin_m, double gap_m) {
     PairShares s;
+    s.near_gap_m = gap_m;
     std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0, near = 0;
     const auto& v = census.samples;
     for (std::size_t i = 0; i < v.size(); ++i) {
@@ -286,7 +287,7 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
         // of patches within a bin of each other is a link), its facing pairs are the count.
         const double near = shares.near * flat;
         e.near_links = to_size(near);
-        e.near_gap_m = near_gap_m(census, scene.time.bin_width_m());
+        e.near_gap_m = shares.near_gap_m;
         links = std::min(flat, std::max(near, kHierarchicalLinksScale * std::pow(n, kHierarchicalLinksExponent) *
                                                   tolerance_factor));
         build_bytes = kHierarchicalLinkBuildBytes;

@@ -62,7 +62,6 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     PatchStats patch_stats;
     t.patches = build_patches(scene, {options.progress}, &patch_stats);
     report.patches = t.patches.size();
-    report.dropped_degenerate = patch_stats.dropped_degenerate;
     report.meshes = std::move(patch_stats.meshes);
     report.seconds.patches = seconds_since(start);
 
@@ -206,7 +205,6 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     if (scene.sensor) r.sensor = scene.sensor->exposure.type;
     r.measurements = report.measurements;
     r.peak_rss_mb = report.peak_rss_mb;
-    r.dropped_degenerate = report.dropped_degenerate;
     r.meshes = report.meshes;
     return r;
 }

@@ -142,7 +142,9 @@ mesh_read::RawMesh read_with_openmesh(const std::filesystem::path& file, const s
     for (std::size_t i = 0; i < raw.vertices.size(); ++i) {
         const auto& p = om.point(OpenMesh::VertexHandle(static_cast<int>(i)));
         raw.vertices[i] = Vec3(p[0], p[1], p[2]);
-        mesh_read::check_finite(raw.vertices[i], i, {mesh_read::Where::Byte, 0});
+        if (!raw.vertices[i].allFinite())  // OpenMesh gives no place to name
+            throw mesh_read::MeshFileError("vertex " + mesh_read::count(i + 1) +
+                                           " has a coordinate that is not a finite number (NaN or infinite)");
     }
     for (const auto& face : importer.faces) {
         for (int v : face) {

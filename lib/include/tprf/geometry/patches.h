@@ -45,9 +45,12 @@ struct MeshReport {
     MeshRepairs repairs;               ///< what was dropped, and how much
 };
 
+/// The faces dropped from all of `meshes` (zero area, duplicates): render.json's
+/// dropped_degenerate_faces.
+std::size_t dropped_faces(const std::vector<MeshReport>& meshes);
+
 /// What build_patches saw besides the patches.
 struct PatchStats {
-    int dropped_degenerate = 0;        ///< faces of mesh files dropped (zero area, duplicates)
     double max_edge = 0.0;             ///< the patch size used, metres
     std::vector<MeshReport> meshes;    ///< one per mesh object, in the scene's order
 };
@@ -99,7 +102,6 @@ struct PatchCensus {
     std::size_t mesh_faces = 0;        ///< polygons read from mesh files
     double max_edge = 0.0;             ///< the patch size build_patches would use, metres
     double diagonal = 0.0;             ///< bounding-box diagonal of every object, metres
-    int dropped_degenerate = 0;        ///< mesh faces dropped, as build_patches counts them
     std::vector<MeshReport> meshes;    ///< one per mesh object, as build_patches reports them
     std::vector<Eigen::AlignedBox3d> bounds;  ///< per object: its bounding box, metres
     std::vector<std::size_t> object_patches;  ///< per object: its patches, both sides counted

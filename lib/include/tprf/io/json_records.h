@@ -40,7 +40,6 @@ struct RenderRecord {
     std::optional<ExposureType> sensor;   ///< the sensor block's exposure, if the scene has one
     int measurements = 0;                 ///< the sensor's measurements per pixel and channel
     double peak_rss_mb = 0.0;
-    int dropped_degenerate = 0;
     std::vector<MeshReport> meshes;       ///< one per mesh object
 };
 

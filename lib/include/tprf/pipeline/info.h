@@ -29,7 +29,6 @@ struct PipelineOptions {
 /// What `tprf info` prints: the scene's size without rendering it.
 struct SceneSummary {
     std::size_t patches = 0;
-    int dropped_degenerate = 0;     ///< mesh faces dropped (zero area, repeated vertices)
     double max_edge = 0.0;          ///< patch size used, metres
     std::size_t links = 0;
     std::size_t link_bytes = 0;

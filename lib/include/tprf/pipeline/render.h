@@ -33,7 +33,6 @@ struct RenderReport {
     int bins = 0;
     int width = 0;
     int height = 0;
-    int dropped_degenerate = 0;
     std::vector<MeshReport> meshes;    ///< one per mesh object: size and repairs
     PhaseSeconds seconds;
     double peak_rss_mb = 0.0;
