@@ -1,5 +1,6 @@
 // The transient solve on the Cornell box at about 4k patches x 2048 bins, against the machine's FMA
-// peak and memory bandwidth measured in the same run, and a sweep of the time-block length.
+// peak and memory bandwidth measured in the same run, a sweep of the time-block length, and batches of
+// laser illuminations (one march for K of them against K marches).
 #include "bench_util.h"
 #include "machine.h"
 
@@ -14,6 +15,8 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <span>
+#include <vector>
 
 namespace {
 
@@ -31,24 +34,38 @@ struct Problem {
     tprf::Illumination emission;
 };
 
+// The Cornell box of the solver cases; `grey`: every albedo 0.73 and a white emitter, so that the
+// scene is solved on one channel.
+std::unique_ptr<Problem> make_problem(bool grey) {
+    auto out = std::make_unique<Problem>();
+    out->scene = tprf::bench::cornell_box(kPatches);
+    if (grey)
+        for (tprf::Object& o : out->scene.objects) {
+            o.albedo = tprf::Rgb::Constant(0.73);
+            if (o.emission.maxCoeff() > 0.0) o.emission = tprf::Rgb::Constant(12.0);
+        }
+    out->scene.time.bins = kBins;
+    out->scene.time.bin_width = kBinWidth;
+    out->scene.time.start = 0.0;
+    out->scene.time.unit = tprf::TimeUnit::Metres;
+    out->patches = tprf::build_patches(out->scene);
+    const tprf::Visibility visibility(out->patches);
+    tprf::LinkOptions link_options;
+    link_options.threads = kThreads;
+    out->links = tprf::flat_link_set(out->patches, visibility, link_options);
+    tprf::IlluminationOptions emitter_options;
+    emitter_options.threads = kThreads;
+    out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, visibility, emitter_options);
+    return out;
+}
+
 const Problem& problem() {
-    static const std::unique_ptr<Problem> p = [] {
-        auto out = std::make_unique<Problem>();
-        out->scene = tprf::bench::cornell_box(kPatches);
-        out->scene.time.bins = kBins;
-        out->scene.time.bin_width = kBinWidth;
-        out->scene.time.start = 0.0;
-        out->scene.time.unit = tprf::TimeUnit::Metres;
-        out->patches = tprf::build_patches(out->scene);
-        const tprf::Visibility visibility(out->patches);
-        tprf::LinkOptions link_options;
-        link_options.threads = kThreads;
-        out->links = tprf::flat_link_set(out->patches, visibility, link_options);
-        tprf::IlluminationOptions emitter_options;
-        emitter_options.threads = kThreads;
-        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, visibility), out->patches, visibility, emitter_options);
-        return out;
-    }();
+    static const std::unique_ptr<Problem> p = make_problem(false);
+    return *p;
+}
+
+const Problem& grey_problem() {
+    static const std::unique_ptr<Problem> p = make_problem(true);
     return *p;
 }
 
@@ -64,8 +81,7 @@ const Ceilings& ceilings() {
     return c;
 }
 
-void run_solve(benchmark::State& state, const tprf::SolverOptions& options) {
-    const Problem& p = problem();
+void run_solve(benchmark::State& state, const tprf::SolverOptions& options, const Problem& p = problem()) {
     const Ceilings& machine = ceilings();
     tprf::SolveStats stats;
     double seconds = 0.0, cpu_seconds = 0.0;
@@ -79,7 +95,7 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options) {
     }
     // The long-link kernel is a[e] += w0 * h[e + C] + w1 * h[e] per bin and channel: two FMAs with
     // linear delays, one (w1 = 0) with nearest.
-    const double fma_per_update = (options.delay == tprf::DelayMode::Linear ? 2.0 : 1.0) * double(stats.channels);
+    const double fma_per_update = (options.delay == tprf::DelayMode::Linear ? 2.0 : 1.0) * double(stats.lanes);
     const double updates_per_s = double(stats.link_bin_updates) / seconds;
     const double gflops = updates_per_s * fma_per_update / 1e9;
     // Links shorter than a block are applied bin by bin from scattered history, not by the kernel above.
@@ -120,6 +136,14 @@ void BM_TransientSolve(benchmark::State& state) {
 }
 BENCHMARK(BM_TransientSolve)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
+// The same on the grey Cornell box: one channel.
+void BM_TransientSolveGrey(benchmark::State& state) {
+    tprf::SolverOptions options;
+    options.threads = kThreads;
+    run_solve(state, options, grey_problem());
+}
+BENCHMARK(BM_TransientSolveGrey)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
 // The same solve with block_bins = range(0): the block length that the default should take.
 void BM_TransientSolveBlockBins(benchmark::State& state) {
     tprf::SolverOptions options;
@@ -133,6 +157,77 @@ BENCHMARK(BM_TransientSolveBlockBins)
     ->Arg(32)
     ->Arg(64)
     ->Arg(128)
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime();
+
+// Laser illuminations of the Cornell box (its emitter off): a laser at the camera aimed at a 4 x 4 grid
+// of points on the back wall, as an NLOS capture scans a relay wall.
+struct LaserBatch {
+    const Problem* problem = nullptr;
+    std::vector<tprf::Illumination> illuminations;
+};
+
+LaserBatch make_lasers(const Problem& p) {
+    LaserBatch out;
+    out.problem = &p;
+    const tprf::Visibility visibility(p.patches);
+    tprf::IlluminationOptions options;
+    options.threads = kThreads;
+    for (int k = 0; k < tprf::kMaxBatch; ++k) {
+        tprf::Scene scene = p.scene;
+        for (tprf::Object& o : scene.objects) o.emission = tprf::Rgb::Zero();
+        tprf::Laser laser;
+        laser.origin = tprf::Vec3(0.5, -1.35, 0.5);
+        const tprf::Vec3 target(0.2 + 0.2 * (k % 4), 1.0, 0.2 + 0.2 * (k / 4));
+        laser.direction = (target - laser.origin).normalized();
+        laser.power = tprf::Rgb::Constant(1.0);
+        scene.lights = {laser};
+        out.illuminations.push_back(
+            tprf::illuminate(tprf::light_sources(scene, p.patches, visibility), p.patches, visibility, options));
+    }
+    return out;
+}
+
+const LaserBatch& lasers(bool grey) {
+    static const LaserBatch grey_batch = make_lasers(grey_problem()), coloured_batch = make_lasers(problem());
+    return grey ? grey_batch : coloured_batch;
+}
+
+// K = range(0) laser illuminations in one march, on the grey (range(1) = 1: K lanes) or the coloured
+// Cornell box (3 K lanes). seconds_per_illumination against the K = 1 case's seconds is the batch's gain.
+void BM_TransientSolveBatch(benchmark::State& state) {
+    const int K = int(state.range(0));
+    const LaserBatch& batch = lasers(state.range(1) != 0);
+    const Problem& p = *batch.problem;
+    std::vector<const tprf::Illumination*> pointers;
+    for (int k = 0; k < K; ++k) pointers.push_back(&batch.illuminations[std::size_t(k)]);
+    tprf::SolverOptions options;
+    options.threads = kThreads;
+    tprf::SolveStats stats;
+    double seconds = 0.0, cpu_seconds = 0.0;
+    for (auto _ : state) {
+        const double cpu0 = tprf::bench::process_cpu_seconds();
+        const auto t0 = std::chrono::steady_clock::now();
+        stats = tprf::solve_transient(p.patches, p.links, std::span<const tprf::Illumination* const>(pointers),
+                                      p.scene.time, options, [](const tprf::SolveBlock&) {});
+        seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        cpu_seconds = tprf::bench::process_cpu_seconds() - cpu0;
+    }
+    const double fma = 2.0 * double(stats.lanes) * double(stats.link_bin_updates);
+    state.counters["illuminations"] = double(K);
+    state.counters["lanes"] = double(stats.lanes);
+    state.counters["seconds"] = seconds;
+    state.counters["seconds_per_illumination"] = seconds / double(K);
+    state.counters["seconds_long"] = stats.seconds_long;
+    state.counters["seconds_short"] = stats.seconds_short;
+    state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
+    state.counters["achieved_GFMA_s"] = fma / seconds / 1e9;
+    state.counters["working_MB"] = double(stats.working_bytes) / 1e6;
+}
+BENCHMARK(BM_TransientSolveBatch)
+    ->ArgsProduct({{1, 8, 16}, {1, 0}})
+    ->ArgNames({"K", "grey"})
     ->Unit(benchmark::kSecond)
     ->Iterations(1)
     ->UseRealTime();

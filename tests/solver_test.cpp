@@ -8,10 +8,14 @@
 
 #include "test_scenes.h"
 
+#include "tprf/core/error.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <numeric>
+#include <string>
+#include <utility>
 
 namespace tprf {
 namespace {
@@ -47,12 +51,13 @@ struct Profiles {
     }
 };
 
-Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = {}) {
+Profiles solve(const PatchSet& patches, const LinkSet& links, const Illumination& emission, const TimeAxis& time,
+               const SolverOptions& options = {}) {
     Profiles out;
-    out.n = p.patches.size();
+    out.n = patches.size();
     out.bins = time.bins;
     out.total.assign(out.n * std::size_t(time.bins) * 3, 0.0f);
-    out.stats = solve_transient(p.patches, p.links, p.emission, time, options, [&](const SolveBlock& b) {
+    out.stats = solve_transient(patches, links, emission, time, options, [&](const SolveBlock& b) {
         out.term_count = b.terms;
         if (b.terms > 0 && out.terms.empty()) out.terms.assign(std::size_t(b.terms) * out.total.size(), 0.0f);
         for (std::size_t i = 0; i < b.patches; ++i)
@@ -66,6 +71,10 @@ Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = 
                 }
     });
     return out;
+}
+
+Profiles solve(const Prepared& p, const TimeAxis& time, SolverOptions options = {}) {
+    return solve(p.patches, p.links, p.emission, time, options);
 }
 
 using test::time_axis;
@@ -396,6 +405,312 @@ TEST(Solver, WorkingMemoryDoesNotGrowWithBins) {
         bytes.push_back(stats.working_bytes);
     }
     EXPECT_EQ(bytes[0], bytes[1]);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Batches: K illuminations of the same patches and links in one march.
+
+// Every illumination's profiles from one batched solve, each laid out as a single solve's.
+std::vector<Profiles> solve_batch(const PatchSet& patches, const LinkSet& links, const std::vector<Illumination>& batch,
+                                  const TimeAxis& time, const SolverOptions& options) {
+    const std::size_t K = batch.size(), n = patches.size();
+    std::vector<const Illumination*> pointers;
+    for (const Illumination& e : batch) pointers.push_back(&e);
+    std::vector<Profiles> out(K);
+    for (Profiles& pr : out) {
+        pr.n = n;
+        pr.bins = time.bins;
+        pr.total.assign(n * std::size_t(time.bins) * 3, 0.0f);
+    }
+    const SolveStats stats = solve_transient(
+        patches, links, std::span<const Illumination* const>(pointers), time, options, [&](const SolveBlock& b) {
+            EXPECT_EQ(b.illuminations, int(K));
+            const std::size_t term_size = b.patches * std::size_t(b.bins) * K * 3;  // N x bins x K x 3
+            for (std::size_t k = 0; k < K; ++k) {
+                Profiles& pr = out[k];
+                pr.term_count = b.terms;
+                if (b.terms > 0 && pr.terms.empty()) pr.terms.assign(std::size_t(b.terms) * pr.total.size(), 0.0f);
+                for (std::size_t i = 0; i < b.patches; ++i)
+                    for (int t = 0; t < b.bins; ++t)
+                        for (int c = 0; c < 3; ++c) {
+                            const std::size_t src = ((i * std::size_t(b.bins) + std::size_t(t)) * K + k) * 3 + std::size_t(c);
+                            const std::size_t dst =
+                                (i * std::size_t(time.bins) + std::size_t(b.first_bin + t)) * 3 + std::size_t(c);
+                            pr.total[dst] = b.radiosity[src];
+                            for (int term = 0; term < b.terms; ++term)
+                                pr.terms[std::size_t(term) * pr.total.size() + dst] =
+                                    b.per_order[std::size_t(term) * term_size + src];
+                        }
+            }
+        });
+    for (Profiles& pr : out) pr.stats = stats;
+    return out;
+}
+
+// The largest difference between a batched and a single solve of one illumination over every patch's
+// profile (the total, then each per-order term), relative to that profile's peak in the single solve;
+// infinite where the single solve has no light and the batch has some. 0 when they are identical.
+// `tail`: the last term is every order from its index on, computed as the total less the exact orders,
+// so its rounding is the total's: it is measured against the patch's total peak.
+double worst_relative(const Profiles& batch, const Profiles& single, bool tail = false) {
+    EXPECT_EQ(batch.term_count, single.term_count);
+    if (batch.term_count != single.term_count) return INFINITY;
+    auto value = [](const Profiles& pr, int term, std::size_t i, int t, int c) {
+        return term < 0 ? pr.at(i, t, c) : pr.term(term, i, t, c);
+    };
+    double worst = 0.0;
+    for (std::size_t i = 0; i < single.n; ++i) {
+        double total_peak = 0.0;
+        for (int term = -1; term < single.term_count; ++term) {
+            double peak = 0.0, diff = 0.0;
+            for (int t = 0; t < single.bins; ++t)
+                for (int c = 0; c < 3; ++c) {
+                    peak = std::max(peak, std::abs(value(single, term, i, t, c)));
+                    diff = std::max(diff, std::abs(value(batch, term, i, t, c) - value(single, term, i, t, c)));
+                }
+            if (term < 0) total_peak = peak;
+            if (tail && term == single.term_count - 1) peak = total_peak;
+            if (diff > 0.0) worst = std::max(worst, peak > 0.0 ? diff / peak : INFINITY);
+        }
+    }
+    return worst;
+}
+
+// Pulses given by hand, grouped into an illumination's CSR rows.
+struct PulseSpec {
+    std::size_t patch;
+    double path;
+    Rgb energy;
+    int order;
+    bool propagates;
+};
+
+Illumination by_hand(std::size_t n, std::vector<PulseSpec> specs) {
+    std::stable_sort(specs.begin(), specs.end(), [](const PulseSpec& a, const PulseSpec& b) { return a.patch < b.patch; });
+    Illumination e;
+    e.row.assign(n + 1, 0);
+    for (const PulseSpec& s : specs) {
+        Pulse p;
+        p.path = s.path;
+        p.energy = s.energy;
+        p.order = std::uint8_t(s.order);
+        p.propagates = s.propagates;
+        e.pulses.push_back(p);
+        ++e.row[s.patch + 1];
+    }
+    std::partial_sum(e.row.begin(), e.row.end(), e.row.begin());
+    return e;
+}
+
+// Illumination k of a batch: 1 to 3 pulses of orders 0 to 2 on patches, at paths and with energies
+// that differ with k (over four decades, so that each illumination's same-bin sweeps have to stop on
+// its own scale, not on the brightest one's); every third one also a spot that is seen but not
+// propagated. `coloured`: the first pulse of every other illumination is coloured. `early`: illumination
+// 0 also fires 0.3 m before the window opens, so that a batch holding it starts earlier than the other
+// illuminations' single solves.
+Illumination pulses_for(int k, std::size_t n, bool coloured, bool early = true) {
+    std::vector<PulseSpec> specs;
+    const double scale = std::pow(10.0, double(k % 5) - 2.0);
+    for (int j = 0; j <= k % 3; ++j) {
+        PulseSpec s{(std::size_t(k) * 37 + std::size_t(j) * 53 + 5) % n, 0.03 * k + 0.21 * j + 0.013,
+                    Rgb::Constant(scale * (1.0 + 0.5 * j)), (k + j) % 3, true};
+        if (coloured && j == 0 && k % 2 == 1) s.energy = scale * Rgb(1.0, 0.3 + 0.05 * k, 0.1);
+        specs.push_back(s);
+    }
+    if (k % 3 == 2) specs.push_back({(std::size_t(k) * 11 + 3) % n, 0.5 + 0.01 * k, Rgb::Constant(0.8), 1, false});
+    if (k == 0 && early) specs.push_back({7 % n, -0.3, Rgb::Constant(0.5), 1, true});
+    return by_hand(n, std::move(specs));
+}
+
+std::vector<Illumination> batch_of(int K, std::size_t n, bool coloured, bool early = true) {
+    std::vector<Illumination> out;
+    for (int k = 0; k < K; ++k) out.push_back(pulses_for(k, n, coloured, early));
+    return out;
+}
+
+// A corner: a 1 m floor (z = 0, albedo 0.6) and a 1 m wall (x = 0) meeting along the y axis, cut into
+// 8 x 8 squares each (128 patches), with flat links; no light (the tests bring their own pulses).
+Prepared corner(const Rgb& wall_albedo = Rgb::Constant(0.6), double max_edge = 0.125) {
+    Scene scene;
+    scene.max_edge = max_edge;
+    scene.objects.push_back(test::rectangle(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY(), 0.6));  // normal +z
+    scene.objects.push_back(test::rectangle(Vec3::Zero(), Vec3::UnitY(), Vec3::UnitZ(), 0.6));  // normal +x
+    scene.objects[1].albedo = wall_albedo;
+    Prepared p;
+    p.patches = build_patches(scene);
+    const Visibility vis(p.patches);
+    p.links = flat_link_set(p.patches, vis);
+    return p;
+}
+
+// Schedules that run every kernel: on the corner, delays of 4 to 75 bins of 2 cm with blocks of 32
+// (short links and one window of 32) and of 4 (windows of 4 to 32); bins of 10 cm put the squares
+// along the corner's edge (8.8 cm apart) within one bin, which the same-bin sweeps solve.
+struct Schedule {
+    const char* name;
+    TimeAxis time;
+    int block_bins;
+};
+const Schedule kSchedules[] = {
+    {"2 cm bins, blocks of 32", time_axis(250, 0.02), 32},
+    {"2 cm bins, blocks of 4", time_axis(250, 0.02), 4},
+    {"10 cm bins", time_axis(50, 0.1), 32},
+};
+
+// Why 1e-6: a batch's lanes go through the same float operations in the same order as a single
+// solve's channels, in every kernel (the generic one sums a link's window in a local array, as the
+// specialised ones do), so most profiles come out identical. What may differ is where the same-bin
+// sweeps stop: a batch sweeps until its slowest illumination has converged, so the others take a few
+// more sweeps than alone, each moving a value by at most 1e-7 of that illumination's largest value
+// in the bin (the stopping test); over the bins that stays well inside 1e-6 of a profile's peak.
+constexpr double kBatchTolerance = 1e-6;
+
+// Every illumination of batches of `sizes` against its single solve, on every schedule.
+void expect_batches_match_singles(const Prepared& p, const std::vector<Illumination>& all, const std::vector<int>& sizes,
+                                  SolverOptions options, int channels) {
+    for (const Schedule& schedule : kSchedules) {
+        options.block_bins = schedule.block_bins;
+        std::vector<Profiles> singles;
+        for (const Illumination& e : all) singles.push_back(solve(p.patches, p.links, e, schedule.time, options));
+        for (int K : sizes) {
+            const std::vector<Illumination> batch(all.begin(), all.begin() + K);
+            const std::vector<Profiles> out = solve_batch(p.patches, p.links, batch, schedule.time, options);
+            const SolveStats& stats = out[0].stats;
+            EXPECT_EQ(stats.illuminations, K) << schedule.name;
+            EXPECT_EQ(stats.channels, channels) << schedule.name;
+            EXPECT_EQ(stats.lanes, K * channels) << schedule.name;
+            EXPECT_EQ(stats.working_bytes, solve_working_bytes(p.patches, p.links, schedule.time, options, K, channels));
+            if (schedule.time.bin_width > 0.05) {
+                EXPECT_GT(stats.max_jacobi_iterations, 1) << schedule.name;
+            }
+            for (int k = 0; k < K; ++k) {
+                ASSERT_GT(*std::max_element(singles[std::size_t(k)].total.begin(), singles[std::size_t(k)].total.end()), 0.0f);
+                const bool tail = options.max_bounces < 0 && options.bounce_terms > 1;
+                const double worst = worst_relative(out[std::size_t(k)], singles[std::size_t(k)], tail);
+                MEASURED("%s, K = %d, illumination %d: %.3g\n", schedule.name, K, k, worst);
+                EXPECT_LE(worst, kBatchTolerance) << schedule.name << ", K = " << K << ", illumination " << k;
+            }
+        }
+    }
+}
+
+TEST(SolverBatch, GreyBatchesMatchSingleSolves) {
+    // K = 1 and 3 (no specialisation for 3 grey lanes: the generic kernels), 5, 8 and 16 (their own).
+    const Prepared p = corner();
+    ASSERT_EQ(p.patches.size(), 128u);
+    expect_batches_match_singles(p, batch_of(16, p.patches.size(), false), {1, 3, 5, 8, 16}, {}, 1);
+}
+
+TEST(SolverBatch, ColouredBatchesMatchSingleSolves) {
+    // A coloured wall: 3 K lanes (3 with kernels of its own; 6, 15, 24 and 48 generic), with coloured
+    // pulses in some illuminations.
+    const Prepared p = corner(Rgb(0.7, 0.4, 0.2));
+    expect_batches_match_singles(p, batch_of(16, p.patches.size(), true), {1, 2, 5, 8, 16}, {}, 3);
+}
+
+TEST(SolverBatch, OneColouredIlluminationColoursTheWholeBatch) {
+    // Grey patches; illumination 1 (of 4) has a coloured pulse, so the batch marches 12 lanes while the
+    // grey illuminations alone march one: each grey one's three lanes must still equal its grey solve.
+    const Prepared p = corner();
+    std::vector<Illumination> all = batch_of(4, p.patches.size(), false);
+    all[1] = pulses_for(1, p.patches.size(), true);
+    expect_batches_match_singles(p, all, {4}, {}, 3);
+}
+
+TEST(SolverBatch, HierarchicalLinksBatchesMatchSingleSolves) {
+    // 512 patches with cluster links (pushed to and pulled from their patches at every bin), K = 4.
+    const Prepared flat = corner(Rgb::Constant(0.6), 0.0625);
+    const Visibility vis(flat.patches);
+    HierarchyOptions h;
+    h.tolerance = 0.05;
+    h.bin_width_m = 0.02;
+    const LinkSet set = hierarchical_link_set(flat.patches, vis, {}, h);
+    ASSERT_GT(set.nodes(), set.patches());
+    const TimeAxis time = time_axis(200, 0.02);
+    const std::vector<Illumination> all = batch_of(4, flat.patches.size(), false);
+    const std::vector<Profiles> out = solve_batch(flat.patches, set, all, time, {});
+    EXPECT_EQ(out[0].stats.lanes, 4);
+    for (int k = 0; k < 4; ++k) {
+        const Profiles single = solve(flat.patches, set, all[std::size_t(k)], time);
+        const double worst = worst_relative(out[std::size_t(k)], single);
+        MEASURED("hierarchical, illumination %d: %.3g\n", k, worst);
+        EXPECT_LE(worst, kBatchTolerance) << "illumination " << k;
+    }
+}
+
+TEST(SolverBatch, PerOrderTermsMatchSingleSolves) {
+    // Orders 0..3 exactly (max_bounces), and orders 0..3 plus the tail (bounce_terms with every order):
+    // pulses of orders 0 to 2 and spots enter their own layers and terms, per illumination.
+    const Prepared grey = corner(), coloured = corner(Rgb(0.7, 0.4, 0.2));
+    SolverOptions exact, tail;
+    exact.max_bounces = 3;
+    exact.bounce_terms = 1;
+    tail.bounce_terms = 5;
+    for (const SolverOptions& options : {exact, tail}) {
+        expect_batches_match_singles(grey, batch_of(8, grey.patches.size(), false), {5, 8}, options, 1);
+        expect_batches_match_singles(coloured, batch_of(3, coloured.patches.size(), true), {3}, options, 3);
+    }
+}
+
+TEST(SolverBatch, TimeIntegralOfEveryIlluminationIsItsSteadyState) {
+    // A closed 1 m cube (96 patches, a coloured wall in the second case) lit by K illuminations of
+    // pulses within the window: by linearity each one's profiles, summed over the bins, are its own
+    // steady state. Light loses at least half its energy per bounce of at most sqrt(3) m: after 40 m,
+    // below 1e-6.
+    for (const bool colour : {false, true}) {
+        Scene scene;
+        scene.max_edge = 0.25;
+        test::add_closed_cube(scene, 1.0, 0.5);
+        if (colour) scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);
+        const Prepared p = prepare(scene);
+        const int K = colour ? 6 : 8;
+        const std::vector<Illumination> all = batch_of(K, p.patches.size(), colour, false);
+        const std::vector<Profiles> out = solve_batch(p.patches, p.links, all, time_axis(800, 0.05), {});
+        EXPECT_EQ(out[0].stats.lanes, colour ? 3 * K : K);
+        for (int k = 0; k < K; ++k) {
+            const std::vector<Rgb> steady = solve_steady(p.patches, p.links, all[std::size_t(k)]);
+            for (std::size_t i = 0; i < p.patches.size(); ++i)
+                for (int c = 0; c < 3; ++c) {
+                    double sum = 0.0;
+                    for (int t = 0; t < out[std::size_t(k)].bins; ++t) sum += out[std::size_t(k)].at(i, t, c);
+                    // As in Solver.TimeIntegralOfEveryProfileIsTheSteadyState: 1e-4 relative.
+                    EXPECT_NEAR(sum, steady[i][c], 1e-4 * steady[i][c] + 1e-9)
+                        << "illumination " << k << " patch " << i << " channel " << c;
+                }
+        }
+    }
+}
+
+TEST(SolverBatch, WorkingMemoryGrowsWithTheLanes) {
+    // Everything the march keeps per node and bin holds one float per lane, so the working memory is
+    // a + b x lanes for a batch of grey illuminations: the steps from 1 to 2 and from 8 to 16 lanes
+    // are 1 and 8 times one lane's share.
+    const Prepared p = corner();
+    const TimeAxis time = time_axis(250, 0.02);
+    auto bytes = [&](int K) { return double(solve_working_bytes(p.patches, p.links, time, {}, K, 1)); };
+    const double lane = bytes(2) - bytes(1);
+    EXPECT_GT(lane, 0.0);
+    EXPECT_EQ(bytes(16) - bytes(8), 8 * lane);
+    // 4 coloured illuminations march 12 lanes, as 12 grey ones do; only the blocks handed to the sink
+    // (N x 32 bins x K x 3 floats) differ.
+    const std::size_t n = p.patches.size();
+    EXPECT_EQ(solve_working_bytes(p.patches, p.links, time, {}, 12, 1) - solve_working_bytes(p.patches, p.links, time, {}, 4, 3),
+              n * 32 * (12 - 4) * 3 * sizeof(float));
+}
+
+TEST(SolverBatch, RejectsEmptyAndOversizedBatches) {
+    const Prepared p = corner();
+    const Illumination e = pulses_for(1, p.patches.size(), false);
+    std::vector<const Illumination*> batch;
+    const TimeAxis time = time_axis(10, 0.1);
+    EXPECT_THROW(solve_transient(p.patches, p.links, std::span<const Illumination* const>(batch), time, {}, {}),
+                 InternalError);
+    batch.assign(std::size_t(kMaxBatch) + 1, &e);
+    EXPECT_THROW(solve_transient(p.patches, p.links, std::span<const Illumination* const>(batch), time, {}, {}),
+                 InternalError);
+    batch.assign(std::size_t(kMaxBatch), &e);
+    EXPECT_EQ(solve_transient(p.patches, p.links, std::span<const Illumination* const>(batch), time, {}, {}).lanes,
+              kMaxBatch);
 }
 
 }  // namespace

@@ -13,9 +13,13 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <type_traits>
 
 namespace tprf {
 namespace {
+
+// Most values marched per patch and bin: the three colours of kMaxBatch illuminations.
+constexpr int kMaxLanes = 3 * kMaxBatch;
 
 // A link's delay as two taps: B_src[t - lag] * w0 + B_src[t - lag - 1] * w1. Nearest rounds the delay
 // to a whole bin; linear spreads a bin of the source (taken as uniform over the bin) over the two
@@ -77,12 +81,13 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
     return plan;
 }
 
-bool scene_is_grey(const PatchSet& patches, const Illumination& illumination) {
+bool scene_is_grey(const PatchSet& patches, std::span<const Illumination* const> batch) {
     auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
     for (const Rgb& a : patches.albedo)
         if (!grey(a)) return false;
-    for (const Pulse& p : illumination.pulses)
-        if (!grey(p.energy)) return false;
+    for (const Illumination* illumination : batch)
+        for (const Pulse& p : illumination->pulses)
+            if (!grey(p.energy)) return false;
     return true;
 }
 
@@ -140,24 +145,63 @@ void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, s
         for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
 }
 
-// The same for block lengths without a specialisation.
+// The same for any lane count C and windows of BT bins: the sums (C * BT floats) in a local array,
+// each link one contiguous multiply-add over it, which vectorises over bins and lanes alike.
+template <int BT>
+void gather_lanes(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
+                  float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
+                  float* acc, std::size_t stride) {
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
+    const int len = C * BT;
+    float local[kMaxLanes * BT];
+    std::fill_n(local, len, 0.0f);
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        if (k + 2 * kAhead < end) {  // as in gather_long
+            __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
+            const RingSlot& next = slots[source[k + kAhead]];
+            const int lag = int(distance[k + kAhead] * inv_bin);
+            const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * std::size_t(C);
+            for (int line = 0; line < 4; ++line) __builtin_prefetch(at + 16 * line);
+        }
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        if (t.lag < BT) continue;
+        const RingSlot& slot = slots[source[k]];
+        const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * std::size_t(C);
+        for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
+            local[e] += t.w0 * h[e + C];
+            local[e] += t.w1 * h[e];
+        }
+    }
+    if (k == cursor) return;
+    cursor = k;
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+}
+
+// The same for windows longer than kLongestWindow without a specialisation (long blocks): summed
+// straight into the accumulators, a bin's lanes at a time.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
                      float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0,
                      int C, int bt, float* __restrict acc, std::size_t stride) {
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
     const float* __restrict ff = links.ff.data();
-    const int len = C * bt;
     std::uint64_t k = cursor;
     for (; k < end && source[k] < source_end; ++k) {
         const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < bt) continue;
         const float* __restrict h =
             ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);
-        for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
-            float& a = acc[std::size_t(e / C) * stride + std::size_t(e % C)];
-            a += t.w0 * h[e + C];
-            a += t.w1 * h[e];
+        for (int b = 0; b < bt; ++b) {
+            float* __restrict a = acc + std::size_t(b) * stride;
+            const float* __restrict hb = h + std::size_t(b) * std::size_t(C);
+            for (int c = 0; c < C; ++c) {  // two accumulations, as in gather_long
+                a[c] += t.w0 * hb[c + C];
+                a[c] += t.w1 * hb[c];
+            }
         }
     }
     cursor = k;
@@ -165,6 +209,8 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, const RingSlot*, std::int64_t, float*, std::size_t);
+using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
+                            const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
 
 // The long-link kernel for C channels and windows of `bins` bins (the block's and the longer
 // windows up to kLongestWindow), or null for the generic one.
@@ -184,7 +230,43 @@ GatherKernel kernel_for(int bins) {
     }
 }
 
-GatherKernel pick_kernel(int C, int bins) { return C == 1 ? kernel_for<1>(bins) : kernel_for<3>(bins); }
+// Lane counts with kernels of their own: one or three channels of one illumination, a grey batch of 8
+// or 16. Any other count takes the generic kernels (gather_lanes, a run-time lane loop).
+GatherKernel pick_kernel(int C, int bins) {
+    switch (C) {
+        case 1: return kernel_for<1>(bins);
+        case 3: return kernel_for<3>(bins);
+        case 8: return kernel_for<8>(bins);
+        case 16: return kernel_for<16>(bins);
+        default: return nullptr;
+    }
+}
+
+// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
+LaneKernel lane_kernel_for(int bins) {
+    switch (bins) {
+        case 1: return gather_lanes<1>;
+        case 2: return gather_lanes<2>;
+        case 4: return gather_lanes<4>;
+        case 8: return gather_lanes<8>;
+        case 16: return gather_lanes<16>;
+        case 32: return gather_lanes<32>;
+        default: return nullptr;
+    }
+}
+
+// Calls fn with the lane count C as a std::integral_constant where the bin-by-bin passes are
+// specialised for it (as pick_kernel), else with 0: lanes counted at run time.
+template <class Fn>
+void with_lanes(int C, Fn&& fn) {
+    switch (C) {
+        case 1: return fn(std::integral_constant<int, 1>{});
+        case 3: return fn(std::integral_constant<int, 3>{});
+        case 8: return fn(std::integral_constant<int, 8>{});
+        case 16: return fn(std::integral_constant<int, 16>{});
+        default: return fn(std::integral_constant<int, 0>{});
+    }
+}
 
 // Tiles of the long-link pass (March::long_pass): a tile of 256 receivers walks its links in tiles of
 // 64 sources, so that those sources' rings (64 x ring x 3 floats, under 0.5 MB for rings of 512) stay
@@ -225,7 +307,13 @@ struct SolvePlan {
     std::vector<std::uint64_t> segments;
     const Links* links = nullptr;   // the set's links, or `sorted` when their rows were not by octave
     Links sorted;
-    int C = 3;                      // channels marched (1 for a grey scene)
+    // Lanes: every value the march keeps per node and bin (rings, accumulators, recent bins, emission,
+    // sweep state) is C floats, illumination k's colour c in lane k * channels + c.
+    int K = 1;                      // illuminations marched together
+    int channels = 3;               // per illumination: 1 for a grey scene (every albedo and pulse), else 3
+    int C = 3;                      // lanes, K x channels
+    // The lane that holds illumination k's colour c (a grey lane serves all three).
+    int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
     double start_m = 0.0, inv_bin = 0.0;
     float inv_bin_f = 0.0f;
@@ -239,7 +327,7 @@ struct SolvePlan {
     // and keep their state by position in it: short and same-bin links name their source's position.
     std::vector<std::uint32_t> order;     // position -> patch
     std::vector<std::uint32_t> position;  // patch -> position
-    std::vector<float> albedo;            // by position, 3 per patch
+    std::vector<float> albedo;            // by position, C per patch: each lane's colour
     // Where node i's values are kept in arrays over nodes that the bin-by-bin passes read: patches
     // by position, clusters by id.
     std::size_t node_slot(std::size_t i) const { return i < n ? position[i] : i; }
@@ -259,6 +347,7 @@ struct SolvePlan {
     std::int64_t T = 0, b_begin = 0, blocks = 0;
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
+    LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
 
     std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
@@ -340,7 +429,7 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     }
     plan.short_row.assign(plan.n + 1, 0);
     plan.same_row.assign(plan.n + 1, 0);
-    plan.albedo.resize(plan.n * 3);
+    plan.albedo.resize(plan.n * std::size_t(plan.C));
     for (std::size_t q = 0; q < plan.n; ++q) {
         const std::size_t i = plan.order[q];
         plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
@@ -349,7 +438,8 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         std::vector<SameBinLink>().swap(bins.same[i]);
         plan.short_row[q + 1] = plan.short_links.size();
         plan.same_row[q + 1] = plan.same_links.size();
-        for (int c = 0; c < 3; ++c) plan.albedo[q * 3 + std::size_t(c)] = float(patches.albedo[i][c]);
+        for (int c = 0; c < plan.C; ++c)
+            plan.albedo[q * std::size_t(plan.C) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
     }
 }
 
@@ -456,8 +546,39 @@ void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
     std::sort(plan.top.begin(), plan.top.end());  // preorder ids: parents first
 }
 
-SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illumination& illumination,
-                    const TimeAxis& time, const SolverOptions& options) {
+// Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in as many
+// sweeps as there are orders), so they sweep plain Jacobi.
+void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
+    if (plan.L != 1 || plan.layers.source[0] != 0 || plan.same_links.empty()) return;
+    const double rho = same_bin_radius(patches, plan);
+    if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
+    double w = 1.0;
+    for (int k = 1; k <= kMaxSweeps; ++k) {
+        w = k == 1 ? 1.0 : k == 2 ? 1.0 / (1.0 - 0.5 * rho * rho) : 1.0 / (1.0 - 0.25 * rho * rho * w);
+        plan.omega.push_back(float(w));
+    }
+}
+
+// Every node's ring of C lanes per bin: patches' rings in leaf order (the bin-by-bin passes store them
+// in that order), then clusters'.
+void plan_rings(SolvePlan& plan) {
+    plan.slots.resize(plan.m);
+    for (std::size_t at = 0; at < plan.m; ++at) {
+        const std::size_t k = at < plan.n ? plan.order[at] : at;
+        const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
+        const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
+        plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
+        plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
+        plan.ring = std::max(plan.ring, length);
+    }
+    std::vector<int>().swap(plan.send_lag);
+    std::vector<int>().swap(plan.send_window);
+}
+
+// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
+// first block (plan_blocks moves the start to the batch's earliest pulse).
+SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
+                    int illuminations, int channels) {
     const Links& links = set.links;
     SolvePlan plan;
     plan.n = patches.size();
@@ -471,7 +592,12 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
     if (plan.clusters && set.block_bins > 0)
         while (plan.bt > 1 && plan.bt > set.block_bins) plan.bt /= 2;
-    plan.C = scene_is_grey(patches, illumination) ? 1 : 3;
+    plan.K = illuminations;
+    plan.channels = channels;
+    plan.C = illuminations * channels;
+    // A source tile's rings grow with the lanes: fewer sources per tile keep them in L2.
+    if (plan.source_tile == kSourceTile && plan.C > 3)
+        plan.source_tile = std::max<std::size_t>(8, kSourceTile * 3 / std::size_t(plan.C));
     plan.delay = options.delay;
     plan.start_m = time.start_m();
     plan.inv_bin = 1.0 / time.bin_width_m();
@@ -481,40 +607,41 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
     plan_windows(links, plan);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
-    // Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in
-    // as many sweeps as there are orders), so they sweep plain Jacobi.
-    if (plan.L == 1 && plan.layers.source[0] == 0 && !plan.same_links.empty()) {
-        const double rho = same_bin_radius(patches, plan);
-        if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
-        double w = 1.0;
-        for (int k = 1; k <= kMaxSweeps; ++k) {
-            w = k == 1 ? 1.0 : k == 2 ? 1.0 / (1.0 - 0.5 * rho * rho) : 1.0 / (1.0 - 0.25 * rho * rho * w);
-            plan.omega.push_back(float(w));
-        }
-    }
-    plan.slots.resize(plan.m);
-    // Patches' rings in leaf order (the bin-by-bin passes store them in that order), then clusters'.
-    for (std::size_t at = 0; at < plan.m; ++at) {
-        const std::size_t k = at < plan.n ? plan.order[at] : at;
-        const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
-        const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
-        plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
-        plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
-        plan.ring = std::max(plan.ring, length);
-    }
-    std::vector<int>().swap(plan.send_lag);
-    std::vector<int>().swap(plan.send_window);
-    // Light sent before the window opens still travels: march from the earliest pulse, block-aligned.
-    std::int64_t first_pulse_bin = 0;
-    for (const Pulse& p : illumination.pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
+    plan_sweeps(patches, plan);
+    plan_rings(plan);
     plan.T = time.bins;
-    // Aligned to the longest window, so that every window starts at the first block.
+    plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
+    for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
+    for (int s = 0; s < plan.windows; ++s) {
+        plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s));
+        if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s));
+    }
+    return plan;
+}
+
+// Light sent before the window opens still travels: the march starts at the batch's earliest pulse,
+// aligned to the longest window, so that every window starts at the first block.
+void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
+    std::int64_t first_pulse_bin = 0;
+    for (const Illumination* illumination : batch)
+        for (const Pulse& p : illumination->pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
     const std::int64_t align = plan.acc_bins;
     plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + align - 1) / align) * align;
     plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
-    for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
-    for (int s = 0; s < plan.windows; ++s) plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s));
-    return plan;
+}
+
+// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
+std::size_t working_bytes(const SolvePlan& p) {
+    const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
+    const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_iterate, m_previous, m_same
+    const std::size_t states = 2 + (p.same_radius > 0.0 ? 1 : 0) + (p.same_links.empty() ? 0 : 1);
+    const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
+                               L * std::size_t(p.recent_bins) * p.n * C + states * state +
+                               (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
+    return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
+           p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t) +
+           p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() +
+           p.albedo.size() * sizeof(float);
 }
 
 // The march: ring buffers of every layer's recent radiosity, the block's accumulators, and the
@@ -522,8 +649,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const Illuminat
 // of one OpenMP parallel region and share their loops among them.
 class March {
 public:
-    March(const Illumination& illumination, const SolvePlan& plan)
-        : m_links(*plan.links), m_illumination(illumination), m_plan(plan),
+    March(std::span<const Illumination* const> batch, const SolvePlan& plan)
+        : m_links(*plan.links), m_batch(batch), m_plan(plan),
           m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
           m_recent(std::size_t(plan.L),
@@ -533,11 +660,9 @@ public:
           m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_previous(plan.same_radius > 0.0 ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0),
           m_same(plan.same_links.empty() ? 0 : std::size_t(plan.L) * plan.n * std::size_t(plan.C), 0.0f),
-          m_out_total(plan.n * std::size_t(plan.bt) * 3),
-          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * 3) {}
+          m_out_total(plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3),
+          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {}
 
-    // Bytes of the ring buffers, block buffers and short-link lists.
-    std::size_t working_bytes() const;
     // Step 1 (in a region): per receiver, the block's emission and, for every window that starts at
     // this block, each of its links as one contiguous multiply-add over the window, reading history
     // that is already final.
@@ -545,7 +670,9 @@ public:
     // Step 1b (in a region, clusters only): every cluster's long-link sums added into its children's.
     void push_block(std::int64_t b0);
     // Step 2 (in a region): bin by bin, short links, then the same-bin system by Jacobi iteration.
-    void short_pass(std::int64_t b0);
+    void short_pass(std::int64_t b0) {
+        with_lanes(m_plan.C, [&](auto lanes) { short_pass_lanes<decltype(lanes)::value>(b0); });
+    }
     // Step 2b (in a region, clusters only): every cluster's radiosity over the block from its children's.
     void pull_block(std::int64_t b0);
     // Step 3: the block's bins inside the window, handed to the sink.
@@ -567,32 +694,40 @@ private:
     }
     // Node `node`'s value at `bin` into its ring.
     void store(int layer, std::size_t node, std::int64_t bin, const float* v);
-    // The value at `bin` of the patch at position q into the recent bins.
-    void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v) {
+    // The value at `bin` of the patch at position q (its C lanes) into the recent bins.
+    void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v, int C) {
         float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
-        for (int c = 0; c < m_plan.C; ++c) r[c] = v[c];
+        for (int c = 0; c < C; ++c) r[c] = v[c];
     }
     // Layer that a pulse of order `order` enters besides the total (-1: none).
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
+    // The bin-by-bin steps for CT lanes (0: m_plan.C lanes, counted at run time): with the lane count
+    // known at compile time the sums stay in registers.
+    template <int CT>
+    void short_pass_lanes(std::int64_t b0);
+    template <int CT>
     void short_links_of(std::size_t q, std::int64_t b0, int o);
-    // g += the short links (or the same-bin links) of the patch at position q at `bin`, from layer src,
-    // with C known at compile time, so that the sums stay in registers.
-    template <int C>
+    // g += the short links (or the same-bin links) of the patch at position q at `bin`, from layer src.
+    template <int CT>
     void add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const;
-    template <int C>
+    template <int CT>
     void add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const;
     void push_node(std::uint32_t i, std::int64_t b0);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
+    template <int CT>
     bool jacobi_sweep(std::int64_t bin, int iteration);
+    template <int CT>
+    void sweep_patch(std::size_t q, std::int64_t bin, bool extrapolate, float omega, float* change, float* largest);
+    bool sweeps_converged() const;
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
 
     const Links& m_links;
-    const Illumination& m_illumination;
+    std::span<const Illumination* const> m_batch;
     const SolvePlan& m_plan;
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
@@ -602,23 +737,11 @@ private:
     // values, the iterate before the current one (Chebyshev), the last bin's same-bin share.
     std::vector<float> m_base, m_iterate, m_previous, m_same;
     std::vector<float> m_out_total, m_out_terms;
-    float m_change = 0.0f, m_largest = 0.0f;    // the Jacobi sweep's max-reductions
+    // The Jacobi sweep's max-reductions per lane: the largest change and the largest value.
+    float m_change[kMaxLanes] = {}, m_largest[kMaxLanes] = {};
     std::atomic<int> m_worst_iterations{0};
     std::uint64_t m_sweeps = 0;                 // written by one thread (omp single)
 };
-
-std::size_t March::working_bytes() const {
-    const SolvePlan& p = m_plan;
-    std::size_t working = 0;
-    for (const auto& r : m_rings) working += r.size() * sizeof(float);
-    for (const auto& e : m_emit) working += e.size() * sizeof(float);
-    working += std::size_t(p.L) * p.acc_values() * sizeof(float) + 2 * m_base.size() * sizeof(float) +
-               (m_out_total.size() + m_out_terms.size()) * sizeof(float) +
-               p.short_links.size() * sizeof(ShortLink) + p.same_links.size() * sizeof(SameBinLink) +
-               2 * (p.n + 1) * sizeof(std::uint64_t) + p.slots.size() * sizeof(RingSlot) +
-               p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes();
-    return working;
-}
 
 void March::store(int layer, std::size_t node, std::int64_t bin, const float* v) {
     const int C = m_plan.C;
@@ -630,20 +753,24 @@ void March::store(int layer, std::size_t node, std::int64_t bin, const float* v)
         for (int c = 0; c < C; ++c) r[std::size_t((pos + slot.length) * C + c)] = v[c];
 }
 
+// Patch i's pulses of every illumination within the block, each into its illumination's lanes.
 void March::load_emission(std::size_t i, std::int64_t b0) {
-    const int bt = m_plan.bt, C = m_plan.C;
+    const int bt = m_plan.bt, C = m_plan.C, channels = m_plan.channels;
     if (i >= m_plan.n) return;  // clusters emit nothing of their own
     const std::size_t q = m_plan.position[i];
     for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + q * std::size_t(bt * C), bt * C, 0.0f);
-    for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
-        const Pulse& p = m_illumination.pulses[k];
-        const std::int64_t b = m_plan.pulse_bin(p);
-        if (!p.propagates || b < b0 || b >= b0 + bt) continue;
-        const std::size_t at = q * std::size_t(bt * C) + std::size_t((b - b0) * C);
-        const int targets[2] = {m_plan.layers.total, exact_layer(p.order)};
-        for (int l : targets)
-            if (l >= 0)
-                for (int c = 0; c < C; ++c) m_emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
+    for (std::size_t e = 0; e < m_batch.size(); ++e) {
+        const Illumination& illumination = *m_batch[e];
+        for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
+            const Pulse& p = illumination.pulses[k];
+            const std::int64_t b = m_plan.pulse_bin(p);
+            if (!p.propagates || b < b0 || b >= b0 + bt) continue;
+            const std::size_t at = q * std::size_t(bt * C) + std::size_t((b - b0) * C) + std::size_t(m_plan.lane(int(e), 0));
+            const int targets[2] = {m_plan.layers.total, exact_layer(p.order)};
+            for (int l : targets)
+                if (l >= 0)
+                    for (int c = 0; c < channels; ++c) m_emit[std::size_t(l)][at + std::size_t(c)] += float(p.energy[c]);
+        }
     }
 }
 
@@ -675,6 +802,9 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     if (p.kernel[s])
                         p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
                                     p.slots.data(), b0, a, p.acc_stride());
+                    else if (p.lane_kernel[s])
+                        p.lane_kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
+                                         p.slots.data(), b0, p.C, a, p.acc_stride());
                     else
                         gather_long_any(m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
                                         p.slots.data(), b0, p.C, p.window_bins(s), a, p.acc_stride());
@@ -696,10 +826,12 @@ void March::long_pass(std::int64_t b0) {
 
 // The patch at position q at bin b0 + o: the long links' sum (with every cluster's above it) plus its
 // short links, the emission, stored in the recent bins (the rings take it after the same-bin sweeps).
-template <int C>
+template <int CT>
 void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const {
     const SolvePlan& p = m_plan;
-    float sum[C] = {};
+    const int C = CT > 0 ? CT : p.C;
+    float sum[CT > 0 ? CT : kMaxLanes];
+    std::fill_n(sum, C, 0.0f);
     for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
         const ShortLink& s = p.short_links[k];
         const float* h1 = recent(src, s.source, bin - s.lag - 1);
@@ -713,10 +845,12 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
-template <int C>
+template <int CT>
 void March::add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const {
     const SolvePlan& p = m_plan;
-    float sum[C] = {};
+    const int C = CT > 0 ? CT : p.C;
+    float sum[CT > 0 ? CT : kMaxLanes];
+    std::fill_n(sum, C, 0.0f);
     for (std::uint64_t k = p.same_row[q]; k < p.same_row[q + 1]; ++k) {
         const float* h = recent(src, p.same_links[k].source, bin);
         for (int c = 0; c < C; ++c) sum[c] += p.same_links[k].w * h[c];
@@ -724,14 +858,15 @@ void March::add_same_links(int src, std::size_t q, std::int64_t bin, float* g) c
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
+template <int CT>
 void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
     const SolvePlan& p = m_plan;
-    const int C = p.C;
+    const int C = CT > 0 ? CT : p.C;
     const std::int64_t bin = b0 + o;
-    const float* albedo = p.albedo.data() + 3 * q;
+    const float* albedo = p.albedo.data() + std::size_t(C) * q;
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
-        float g[3] = {0, 0, 0};
+        float g[CT > 0 ? CT : kMaxLanes];
         const std::size_t at = q * std::size_t(p.bt * C) + std::size_t(o * C);
         // The long links' sums for this bin, taken (the accumulator ring's slot is free again).
         float* acc = m_acc[std::size_t(l)].data() + p.acc_at_slot(q, bin);
@@ -739,8 +874,8 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
             g[c] = acc[c];
             acc[c] = 0.0f;
         }
-        if (src >= 0) (C == 1 ? add_short_links<1>(src, q, bin, g) : add_short_links<3>(src, q, bin, g));
-        float b[3];
+        if (src >= 0) add_short_links<CT>(src, q, bin, g);
+        float b[CT > 0 ? CT : kMaxLanes];
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
         for (int c = 0; c < C; ++c) keep[c] = b[c];
@@ -750,7 +885,7 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
             const float* last = m_same.data() + state_at(l, q);
             for (int c = 0; c < C; ++c) b[c] += last[c];
         }
-        store_recent(l, q, bin, b);
+        store_recent(l, q, bin, b, C);
     }
 }
 
@@ -779,7 +914,7 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
             const float* va = ring_at(l, a, bin);
             const float* vb = ring_at(l, b, bin);
-            float v[3];
+            float v[kMaxLanes];
             for (int ch = 0; ch < m_plan.C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
             store(l, c, bin, v);
         }
@@ -826,60 +961,89 @@ void March::pull_block(std::int64_t b0) {
 // meaningfully. With SolvePlan::same_radius, Chebyshev's semi-iteration (Golub and Varga 1961):
 // x_{k+1} = omega_{k+1} (J(x_k) - x_{k-1}) + x_{k-1}, which has the same fixed point and, for a
 // spectrum in [-rho, rho], converges at rho / (1 + sqrt(1 - rho^2)) per sweep instead of rho.
+template <int CT>
 bool March::jacobi_sweep(std::int64_t bin, int iteration) {
     const SolvePlan& p = m_plan;
-    const int C = p.C;
+    const int C = CT > 0 ? CT : p.C;
     const bool extrapolate = p.same_radius > 0.0 && iteration > 1;
     const float omega = extrapolate ? p.omega[std::size_t(std::min(iteration, kMaxSweeps) - 1)] : 1.0f;
 #pragma omp single
     {
-        m_change = 0.0f;
-        m_largest = 0.0f;
+        std::fill_n(m_change, C, 0.0f);
+        std::fill_n(m_largest, C, 0.0f);
     }
-    float change = 0.0f, largest = 0.0f;
+    float change[CT > 0 ? CT : kMaxLanes], largest[CT > 0 ? CT : kMaxLanes];
+    std::fill_n(change, C, 0.0f);
+    std::fill_n(largest, C, 0.0f);
 #pragma omp for schedule(static) nowait
-    for (std::size_t q = 0; q < p.n; ++q) {
-        const float* albedo = p.albedo.data() + 3 * q;
-        for (int l = 0; l < p.L; ++l) {
-            const int src = p.layers.source[std::size_t(l)];
-            const float* keep = m_base.data() + state_at(l, q);
-            float* next = m_iterate.data() + state_at(l, q);
-            float g[3] = {0, 0, 0};
-            if (src >= 0) (C == 1 ? add_same_links<1>(src, q, bin, g) : add_same_links<3>(src, q, bin, g));
-            const float* now = recent(l, q, bin);
-            const float* before = extrapolate ? m_previous.data() + state_at(l, q) : nullptr;
-            for (int c = 0; c < C; ++c) {
-                next[c] = keep[c] + albedo[c] * g[c];
-                if (extrapolate) next[c] = before[c] + omega * (next[c] - before[c]);
-                change = std::max(change, std::abs(next[c] - now[c]));
-                largest = std::max(largest, std::abs(next[c]));
-            }
-        }
-    }
+    for (std::size_t q = 0; q < p.n; ++q) sweep_patch<CT>(q, bin, extrapolate, omega, change, largest);
 #pragma omp critical(tprf_jacobi_reduction)
-    {
-        m_change = std::max(m_change, change);
-        m_largest = std::max(m_largest, largest);
+    for (int c = 0; c < C; ++c) {
+        m_change[c] = std::max(m_change[c], change[c]);
+        m_largest[c] = std::max(m_largest[c], largest[c]);
     }
 #pragma omp barrier
     // Read the shared result before the barrier that ends the next loop, so that the next sweep's
     // reset cannot overtake a slow thread.
-    const bool converged = m_change <= 1e-7f * m_largest;
+    const bool converged = sweeps_converged();
 #pragma omp for schedule(static)
     for (std::size_t q = 0; q < p.n; ++q)
         for (int l = 0; l < p.L; ++l) {
             if (p.same_radius > 0.0) std::copy_n(recent(l, q, bin), C, m_previous.data() + state_at(l, q));
-            store_recent(l, q, bin, m_iterate.data() + state_at(l, q));
+            store_recent(l, q, bin, m_iterate.data() + state_at(l, q), C);
         }
     return converged;
 }
 
-void March::short_pass(std::int64_t b0) {
+// The sweep's new values of the patch at position q (m_iterate), and per lane the largest change from
+// the current ones and the largest new value so far.
+template <int CT>
+void March::sweep_patch(std::size_t q, std::int64_t bin, bool extrapolate, float omega, float* change,
+                        float* largest) {
+    const SolvePlan& p = m_plan;
+    const int C = CT > 0 ? CT : p.C;
+    const float* albedo = p.albedo.data() + std::size_t(C) * q;
+    for (int l = 0; l < p.L; ++l) {
+        const int src = p.layers.source[std::size_t(l)];
+        const float* keep = m_base.data() + state_at(l, q);
+        float* next = m_iterate.data() + state_at(l, q);
+        float g[CT > 0 ? CT : kMaxLanes];
+        std::fill_n(g, C, 0.0f);
+        if (src >= 0) add_same_links<CT>(src, q, bin, g);
+        const float* now = recent(l, q, bin);
+        const float* before = extrapolate ? m_previous.data() + state_at(l, q) : nullptr;
+        for (int c = 0; c < C; ++c) {
+            next[c] = keep[c] + albedo[c] * g[c];
+            if (extrapolate) next[c] = before[c] + omega * (next[c] - before[c]);
+            change[c] = std::max(change[c], std::abs(next[c] - now[c]));
+            largest[c] = std::max(largest[c], std::abs(next[c]));
+        }
+    }
+}
+
+// Whether every illumination's same-bin values have converged to float resolution: its largest change
+// at most 1e-7 of its largest value. Each illumination is judged on its own lanes, so that a faint one
+// sweeps as long as it would alone, however bright the others.
+bool March::sweeps_converged() const {
+    const int channels = m_plan.channels;
+    for (int k = 0; k < m_plan.K; ++k) {
+        float change = 0.0f, largest = 0.0f;
+        for (int c = k * channels; c < (k + 1) * channels; ++c) {
+            change = std::max(change, m_change[c]);
+            largest = std::max(largest, m_largest[c]);
+        }
+        if (!(change <= 1e-7f * largest)) return false;
+    }
+    return true;
+}
+
+template <int CT>
+void March::short_pass_lanes(std::int64_t b0) {
     for (int o = 0; o < m_plan.bt; ++o) {
 #pragma omp for schedule(static)
-        for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of(q, b0, o);
+        for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of<CT>(q, b0, o);
         for (int iteration = 1; iteration <= kMaxSweeps && !m_plan.same_links.empty(); ++iteration) {
-            if (!jacobi_sweep(b0 + o, iteration)) continue;
+            if (!jacobi_sweep<CT>(b0 + o, iteration)) continue;
 #pragma omp single
             {
                 if (iteration > m_worst_iterations.load()) m_worst_iterations.store(iteration);
@@ -901,10 +1065,11 @@ void March::short_pass(std::int64_t b0) {
     }
 }
 
-// Patch i's total and per-order terms for the bins [lo, lo + count) of the output block.
+// Patch i's total and per-order terms for the bins [lo, lo + count) of the output block, every
+// illumination's (N x count x K x 3; a grey lane fills all three colours).
 void March::block_totals(std::size_t i, std::int64_t lo, int count) {
     const SolvePlan& p = m_plan;
-    const int C = p.C, L = p.L;
+    const int C = p.C, L = p.L, K = p.K;
     const LayerPlan& plan = p.layers;
     // Short blocks from the recent bins (which hold the whole block; compact, and in cache), long ones
     // from the ring, where a patch's bins are contiguous.
@@ -912,12 +1077,15 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
     auto value = [&](int layer, std::int64_t bin) -> const float* {
         return count <= 4 ? recent(layer, q, bin) : ring_at(layer, i, bin);
     };
-    auto put = [&](float* out, int o, int c, float v) {
-        out[(i * std::size_t(count) + std::size_t(o)) * 3 + std::size_t(c)] = v;
+    auto put = [&](float* out, int o, const float* lanes) {
+        float* at = out + (i * std::size_t(count) + std::size_t(o)) * std::size_t(K) * 3;
+        for (int k = 0; k < K; ++k)
+            for (int c = 0; c < 3; ++c) at[k * 3 + c] = lanes[p.lane(k, c)];
     };
     for (int o = 0; o < count; ++o) {
         const std::int64_t bin = lo + o;
-        float total[3] = {0, 0, 0};
+        float total[kMaxLanes];
+        std::fill_n(total, C, 0.0f);
         if (plan.total >= 0) {
             const float* v = value(plan.total, bin);
             for (int c = 0; c < C; ++c) total[c] = v[c];
@@ -927,10 +1095,10 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
                 for (int c = 0; c < C; ++c) total[c] += v[c];
             }
         }
-        for (int c = 0; c < 3; ++c) put(m_out_total.data(), o, c, total[C == 1 ? 0 : c]);
+        put(m_out_total.data(), o, total);
         for (int k = 0; k < plan.terms; ++k) {
-            float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * 3;
-            float v[3] = {0, 0, 0};
+            float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * std::size_t(K) * 3;
+            float v[kMaxLanes];
             if (k < plan.exact) {
                 const float* r = value(k, bin);
                 for (int c = 0; c < C; ++c) v[c] = r[c];
@@ -941,27 +1109,30 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
                     for (int c = 0; c < C; ++c) v[c] -= r[c];
                 }
             }
-            for (int c = 0; c < 3; ++c) put(term, o, c, v[C == 1 ? 0 : c]);
+            put(term, o, v);
         }
     }
 }
 
-// Pulses seen but not propagated (the laser spot) join the output only.
+// Pulses seen but not propagated (the laser spot) join the output only, each its illumination's.
 void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
     const SolvePlan& p = m_plan;
     const LayerPlan& plan = p.layers;
-    const std::size_t count = std::size_t(hi - lo);
-    for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
-        const Pulse& pulse = m_illumination.pulses[k];
-        const std::int64_t b = p.pulse_bin(pulse);
-        if (pulse.propagates || b < lo || b >= hi) continue;
-        if (plan.total < 0 && pulse.order >= plan.exact) continue;  // beyond max_bounces
-        const std::size_t o = std::size_t(b - lo);
-        for (int c = 0; c < 3; ++c) {
-            m_out_total[(i * count + o) * 3 + std::size_t(c)] += float(pulse.energy[c]);
-            if (plan.terms > 0) {
-                const int term = std::min<int>(pulse.order, plan.terms - 1);
-                m_out_terms[((std::size_t(term) * p.n + i) * count + o) * 3 + std::size_t(c)] += float(pulse.energy[c]);
+    const std::size_t count = std::size_t(hi - lo), K = std::size_t(p.K);
+    for (std::size_t e = 0; e < m_batch.size(); ++e) {
+        const Illumination& illumination = *m_batch[e];
+        for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
+            const Pulse& pulse = illumination.pulses[k];
+            const std::int64_t b = p.pulse_bin(pulse);
+            if (pulse.propagates || b < lo || b >= hi) continue;
+            if (plan.total < 0 && pulse.order >= plan.exact) continue;  // beyond max_bounces
+            const std::size_t at = ((i * count + std::size_t(b - lo)) * K + e) * 3;
+            for (int c = 0; c < 3; ++c) {
+                m_out_total[at + std::size_t(c)] += float(pulse.energy[c]);
+                if (plan.terms > 0) {
+                    const std::size_t term = std::size_t(std::min<int>(pulse.order, plan.terms - 1));
+                    m_out_terms[term * p.n * count * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
+                }
             }
         }
     }
@@ -979,6 +1150,7 @@ void March::emit_block(std::int64_t b0, const BlockSink& sink) {
     block.first_bin = int(lo);
     block.bins = count;
     block.patches = m_plan.n;
+    block.illuminations = m_plan.K;
     block.radiosity = m_out_total.data();
     block.terms = m_plan.layers.terms;
     block.per_order = m_plan.layers.terms > 0 ? m_out_terms.data() : nullptr;
@@ -996,17 +1168,40 @@ double lap(std::chrono::steady_clock::time_point& since) {
 
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Illumination& illumination,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
+    const Illumination* const one[1] = {&illumination};
+    return solve_transient(patches, set, std::span<const Illumination* const>(one), time, options, sink);
+}
+
+std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, const TimeAxis& time,
+                                const SolverOptions& options, int illuminations, int channels) {
+    TPRF_CHECK_LE(1, illuminations);
+    TPRF_CHECK_LE(illuminations, kMaxBatch);
+    TPRF_CHECK(channels == 1 || channels == 3);
+    TPRF_CHECK_EQ(set.patches(), patches.size());
+    return working_bytes(make_plan(patches, set, time, options, illuminations, channels));
+}
+
+SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
+                           const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
     const Links& links = set.links;
     TPRF_CHECK_EQ(set.patches(), patches.size());
     TPRF_CHECK_EQ(links.receivers(), set.nodes());
-    TPRF_CHECK_EQ(illumination.row.size(), patches.size() + 1);
-    const SolvePlan plan = make_plan(patches, set, illumination, time, options);
-    March march(illumination, plan);
+    TPRF_CHECK_LE(std::size_t(1), batch.size());
+    TPRF_CHECK_LE(batch.size(), std::size_t(kMaxBatch));
+    for (const Illumination* illumination : batch) {
+        TPRF_CHECK(illumination != nullptr);
+        TPRF_CHECK_EQ(illumination->row.size(), patches.size() + 1);
+    }
+    SolvePlan plan = make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, batch) ? 1 : 3);
+    plan_blocks(plan, batch);
+    March march(batch, plan);
     SolveStats stats;
     stats.block_bins = plan.bt;
     stats.ring_bins = plan.ring;
-    stats.channels = plan.C;
-    stats.working_bytes = march.working_bytes();
+    stats.channels = plan.channels;
+    stats.illuminations = plan.K;
+    stats.lanes = plan.C;
+    stats.working_bytes = working_bytes(plan);
     for (std::int64_t blk = 0; blk < plan.blocks; ++blk) {
         const std::int64_t b0 = plan.b_begin + blk * plan.bt;
         auto since = std::chrono::steady_clock::now();

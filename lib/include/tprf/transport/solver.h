@@ -8,11 +8,19 @@
 /// is already final, so the block is one contiguous multiply-add over bins per link; shorter links are
 /// applied bin by bin, and zero-delay links (both patches within one bin) by a Jacobi iteration
 /// inside the bin, which neither loses nor invents energy.
+///
+/// A batch of illuminations of the same patches (one per laser point of a capture, say) is marched
+/// together: every link read then serves all of them. The march holds one value per lane per patch
+/// and bin, a lane being one colour of one illumination (one lane per illumination when the scene is
+/// grey), so its working memory grows with the batch; solve_working_bytes() tells how much.
 
 #include "tprf/core/progress.h"
 #include "tprf/scene/scene.h"
 
+#include <cstddef>
+#include <cstdint>
 #include <functional>
+#include <span>
 #include <vector>
 
 namespace tprf {
@@ -20,6 +28,9 @@ namespace tprf {
 struct PatchSet;
 struct LinkSet;
 struct Illumination;
+
+/// Most illuminations one march takes.
+inline constexpr int kMaxBatch = 16;
 
 /// Options of the transient solve.
 struct SolverOptions {
@@ -36,12 +47,14 @@ struct SolveBlock {
     int first_bin = 0;              ///< index of the block's first bin on the scene's time axis
     int bins = 0;                   ///< bins in this block
     std::size_t patches = 0;        ///< N
-    /// N x bins x 3, patch-major: radiosity B_i (W s / m^2 per bin), all orders that were solved.
+    int illuminations = 1;          ///< K: the illuminations of the batch, in the order they were given
+    /// N x bins x K x 3 (patch-major, then bin, then illumination, then RGB): radiosity B_i (W s / m^2
+    /// per bin) of every illumination, all orders that were solved. For one illumination, N x bins x 3.
     const float* radiosity = nullptr;
     /// Number of per-order terms (0 unless asked): term k holds bounce order k; the last term holds
     /// every order >= its index when max_bounces is unlimited.
     int terms = 0;
-    /// terms x N x bins x 3, same layout as `radiosity` per term.
+    /// terms x N x bins x K x 3, same layout as `radiosity` per term.
     const float* per_order = nullptr;
 };
 
@@ -52,9 +65,12 @@ using BlockSink = std::function<void(const SolveBlock&)>;
 struct SolveStats {
     int block_bins = 0;                 ///< block length used
     int ring_bins = 0;                  ///< history kept per patch, bins
-    int channels = 0;                   ///< 1 when the scene is grey, else 3
+    int channels = 0;                   ///< 1 when the scene is grey (albedos and every pulse), else 3
+    int illuminations = 0;              ///< K, illuminations marched together
+    int lanes = 0;                      ///< values marched per patch and bin: channels x illuminations
     std::uint64_t link_bin_updates = 0; ///< links x bins x fed layers
-    std::size_t working_bytes = 0;      ///< ring buffers, block buffers and short-link lists
+    /// Ring buffers, block buffers and short-link lists (all but the link lists grow with the lanes)
+    std::size_t working_bytes = 0;
     int max_jacobi_iterations = 0;      ///< worst zero-delay iteration count in one bin
     std::uint64_t jacobi_sweeps = 0;    ///< zero-delay sweeps over all bins
     std::uint64_t short_links = 0;      ///< links shorter than a block (applied bin by bin)
@@ -68,5 +84,20 @@ struct SolveStats {
 /// radiosity pulled from them at every bin.
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
+
+/// Solves `batch` (1..kMaxBatch illuminations of the same patches, each N + 1 rows) in one march: every
+/// block of every illumination goes to `sink` in one SolveBlock (K = batch.size()), and each
+/// illumination's profiles are those that solving it alone gives (up to float summation order and the
+/// same-bin iteration's stopping point, about 1e-7 of a profile's peak). The scene is marched on K lanes
+/// when every albedo and every pulse of every illumination is grey, else on 3 K.
+SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, std::span<const Illumination* const> batch,
+                           const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
+
+/// Working bytes (SolveStats::working_bytes) of a march of `illuminations` (1..kMaxBatch) illuminations
+/// of `channels` channels each (1 for a grey scene, else 3) over these patches, links and time axis:
+/// the plan is built (the link lists sorted), nothing is marched. For choosing a batch from a memory
+/// budget; the links themselves are not counted.
+std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& links, const TimeAxis& time,
+                                const SolverOptions& options, int illuminations, int channels);
 
 }  // namespace tprf
