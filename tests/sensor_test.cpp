@@ -26,8 +26,10 @@
 #include <cmath>
 #include <cstdint>
 #include <fstream>
+#include <functional>
 #include <numeric>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace tprf {
@@ -522,6 +524,284 @@ TEST(Sensor, SpadCountsBeyondTheBoundAreTheirMean) {
     const std::vector<float> cube(4 * 3, 1.0f);
     const std::vector<float> m = measure(sensor_from({{"exposure", {{"type", "spad"}, {"photons", 1e20}}}}), time, cube, 1, 1);
     for (const float v : m) EXPECT_EQ(v, 1e20f);
+}
+
+
+// ---- A SPAD's detector effects: jitter tail, dead time, afterpulsing, ambient light, crosstalk, dead pixels ----
+
+// A cube (H, W, T, 3) that holds `value` in bin `bin` of every pixel and channel, 0 elsewhere.
+std::vector<float> spike_cube(int h, int w, int t, int bin, float value) {
+    std::vector<float> cube(std::size_t(h * w * t * 3), 0.0f);
+    for (int p = 0; p < h * w; ++p)
+        for (int c = 0; c < 3; ++c) cube[std::size_t((p * t + bin) * 3 + c)] = value;
+    return cube;
+}
+
+json spad(const json& extra) {
+    json e = {{"type", "spad"}, {"photons", 1000}, {"seed", 5}};
+    e.update(extra);
+    return {{"exposure", e}};
+}
+
+std::string error_of(const std::function<void()>& f) {
+    try {
+        f();
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "(no error)";
+}
+
+TEST(SensorSpad, JitterTailKernelHasUnitAreaAndMeanTimeConstantTimesFraction) {
+    // (fwhm, tau, fraction): Gaussian and tail; a tail alone; all counts in the tail.
+    for (const auto& [fwhm, tau, f] : {std::array<double, 3>{0.03, 0.05, 0.3}, {0.0, 0.02, 0.5}, {0.03, 0.05, 1.0},
+                                       {0.002, 0.3, 0.05}}) {
+        Exposure e;
+        e.type = ExposureType::Spad;
+        e.jitter_fwhm = fwhm;
+        e.jitter_tail = {tau, f};
+        const TimeKernel k = jitter_kernel(e, 0.01);
+        double total = 0.0, mean = 0.0;
+        for (std::size_t q = 0; q < k.mass.size(); ++q) {
+            total += k.mass[q];
+            mean += k.mass[q] * (k.first + double(q)) * k.step;
+        }
+        // The Gaussian is symmetric and the exponential's cells sit at their centroids (what lies beyond the
+        // 20 tau cut at its own mean): both exact up to rounding, far inside 1e-6.
+        EXPECT_NEAR(total, 1.0, 1e-12) << "fwhm " << fwhm << " tau " << tau;
+        EXPECT_NEAR(mean, f * tau, 1e-6 * tau) << "fwhm " << fwhm << " tau " << tau;
+    }
+    // Through the histogram: a spike's expected counts keep their total and arrive f tau later on average
+    // (the weights split bins linearly, which keeps the mean; nothing reaches the window's ends).
+    const int T = 400;
+    const TimeAxis time = time_axis(T, 0.01);
+    const std::vector<float> cube = spike_cube(1, 1, T, 100, 1.0f);
+    const SensorSettings s = sensor_from(spad({{"jitter_fwhm", 0.03}, {"jitter_tail", {{"time_constant", 0.05}, {"fraction", 0.3}}}}));
+    validate_sensor(s, time);
+    const std::vector<double> m = spad_expected_counts(s, time, cube.data(), 1, 1, 0, 0);
+    double total = 0.0, mean = 0.0;
+    for (int k = 0; k < T; ++k) total += m[std::size_t(k * 3)], mean += m[std::size_t(k * 3)] * (k + 0.5);
+    EXPECT_NEAR(total, 1000.0, 1e-9);
+    EXPECT_NEAR(mean / total, 100.5 + 0.3 * 0.05 / 0.01, 1e-6);
+}
+
+TEST(SensorSpad, DeadTimeSuppressesLaterBinsByTheSynchronousFactor) {
+    // Three bins, a strong first one: 2000, 500 and 500 expected photons over N = 1000 cycles, so x = 2, 0.5,
+    // 0.5 per cycle and p_k = 1 - exp(-x_k) (delta pulse, no jitter: each bin keeps its own signal).
+    const TimeAxis time = time_axis(3, 0.01);
+    std::vector<float> cube = {2, 2, 2, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f};
+    const double N = 1000, p0 = 1 - std::exp(-2.0), p1 = 1 - std::exp(-0.5), p2 = p1;
+    auto counts = [&](double dead_time) {
+        return spad_expected_counts(sensor_from(spad({{"dead_time", dead_time}, {"cycles", N}})), time, cube.data(), 1, 1, 0, 0);
+    };
+    // No dead time: the counts are the photons themselves.
+    const std::vector<double> none = counts(0.0);
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(none[std::size_t(c)], 2000.0, 1e-9);
+        EXPECT_NEAR(none[std::size_t(3 + c)], 500.0, 1e-9);
+    }
+    // Dead time over the whole window (TCSPC's one detection per cycle): Coates' pile-up, bin k counts when
+    // it holds a photon and no earlier bin did.
+    const std::vector<double> coates = counts(0.05);
+    const std::array<double, 3> expect_coates = {N * p0, N * (1 - p0) * p1, N * (1 - p0) * (1 - p1) * p2};
+    // One bin of dead time: bin 2 is blind only after a detection in bin 1, (1 - p0) p1 of the cycles.
+    const std::vector<double> one = counts(0.01);
+    const std::array<double, 3> expect_one = {N * p0, N * (1 - p0) * p1, N * p2 * (1 - (1 - p0) * p1)};
+    for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) {
+            EXPECT_NEAR(coates[std::size_t(k * 3 + c)], expect_coates[std::size_t(k)], 1e-12 * N) << "bin " << k;
+            EXPECT_NEAR(one[std::size_t(k * 3 + c)], expect_one[std::size_t(k)], 1e-12 * N) << "bin " << k;
+        }
+    // The suppression after the peak is the synchronous model's factor, 1 - p0 = exp(-2) for bin 1.
+    EXPECT_NEAR(coates[3] / (N * p1), std::exp(-2.0), 1e-12);
+}
+
+TEST(SensorSpad, AfterpulsingAddsItsProbabilityTimesTheDetections) {
+    // Detections in bin 10 only; afterpulses after the 5-bin dead time, then exponential with tau = 10 bins:
+    // the mass beyond the window's 400 bins (e^-38) is far below the tolerance.
+    const int T = 400, H = 16, W = 16;
+    const TimeAxis time = time_axis(T, 0.01);
+    const std::vector<float> cube = spike_cube(H, W, T, 10, 1.0f);
+    const double P = 0.1;
+    const json base = {{"dead_time", 0.05}, {"cycles", 1e4}};
+    json with = base;
+    with["afterpulsing"] = {{"probability", P}, {"time_constant", 0.1}};
+    const std::vector<double> d = spad_expected_counts(sensor_from(spad(base)), time, cube.data(), H, W, 0, 0);
+    const std::vector<double> a = spad_expected_counts(sensor_from(spad(with)), time, cube.data(), H, W, 0, 0);
+    double detections = 0.0, total = 0.0, offset = 0.0;
+    for (int k = 0; k < T; ++k) {
+        detections += d[std::size_t(k * 3)];
+        total += a[std::size_t(k * 3)];
+        offset += (a[std::size_t(k * 3)] - d[std::size_t(k * 3)]) * (k - 10);
+    }
+    // 1000 photons over 1e4 cycles: a detection in 1 - exp(-0.1) of them.
+    EXPECT_NEAR(detections, 1e4 * -std::expm1(-0.1), 1e-9);
+    EXPECT_NEAR(total, (1 + P) * detections, 1e-9 * detections);
+    // A detection's place in its bin is uniform, so the afterpulses' mean offset is exactly the delay's mean
+    // in bins: dead time 5 + tau 10.
+    EXPECT_NEAR(offset / (P * detections), 15.0, 1e-6);
+
+    // Drawn: the total over all pixels is Poisson with mean (1 + P) x detections x pixels; 5 sigma.
+    const std::vector<float> m = measure(sensor_from(spad(with)), time, cube, H, W);
+    const double drawn = std::accumulate(m.begin(), m.end(), 0.0);
+    const double expected = (1 + P) * detections * 3 * H * W;
+    EXPECT_NEAR(drawn, expected, 5 * std::sqrt(expected));
+}
+
+TEST(SensorSpad, AmbientAddsRateTimesBinTimeTimesCycles) {
+    const int H = 32, W = 32, T = 64;
+    const TimeAxis time = time_axis(T, 0.01);
+    const std::vector<float> zero(std::size_t(H * W * T * 3), 0.0f);
+    const double rate = 1e5, cycles = 1e6, dark = 3e8;  // ambient: per second on the pixel; dark: per second of bin time
+    const double bin_seconds = 0.01 / kSpeedOfLight;
+    const double per_bin = rate * bin_seconds * cycles + dark * bin_seconds;  // 3.34 + 0.01 counts
+    const SensorSettings s = sensor_from(spad({{"ambient", rate}, {"cycles", cycles}, {"dark_rate", dark}}));
+    for (const double v : spad_expected_counts(s, time, zero.data(), H, W, 3, 4)) EXPECT_NEAR(v, per_bin, 1e-12 * per_bin);
+    const std::vector<float> m = measure(s, time, zero, H, W);
+    const double n = double(m.size()), mean = std::accumulate(m.begin(), m.end(), 0.0) / n;
+    EXPECT_NEAR(mean, per_bin, 5 * std::sqrt(per_bin / n));  // 5 standard errors of a Poisson mean
+}
+
+TEST(SensorSpad, CrosstalkGivesEachNeighbourItsProbabilityTimesThePixelsCounts) {
+    const int H = 5, W = 5, T = 8;
+    const TimeAxis time = time_axis(T, 0.01);
+    std::vector<float> cube(std::size_t(H * W * T * 3), 0.0f);
+    auto at = [&](int row, int column, int bin) { return std::size_t(((row * W + column) * T + bin) * 3); };
+    for (int c = 0; c < 3; ++c) cube[at(2, 2, 3) + std::size_t(c)] = 1.0f;  // only the centre sees light, in bin 3
+    const double x = 0.02;
+    const SensorSettings s = sensor_from(spad({{"crosstalk", x}}));
+    auto counts = [&](int row, int column) { return spad_expected_counts(s, time, cube.data(), H, W, row, column)[3 * 3]; };
+    // First order: the crosstalk the neighbours receive does not come back. (The bin's weight is 1 up to the
+    // rounding of its overlap with itself.)
+    const double centre = counts(2, 2);
+    EXPECT_NEAR(centre, 1000.0, 1e-9);
+    for (const auto& [r, c] : {std::array<int, 2>{1, 2}, {3, 2}, {2, 1}, {2, 3}}) EXPECT_NEAR(counts(r, c), x * centre, 1e-12);
+    for (const auto& [r, c] : {std::array<int, 2>{1, 1}, {0, 2}, {3, 3}, {4, 4}}) EXPECT_EQ(counts(r, c), 0.0);
+    // A dead pixel sends no crosstalk.
+    const SensorSettings dead = sensor_from(spad({{"crosstalk", x}, {"dead_pixels", {{2, 2}}}}));
+    EXPECT_EQ(spad_expected_counts(dead, time, cube.data(), H, W, 1, 2)[3 * 3], 0.0);
+
+    // Drawn: lit pixels on a lattice of pitch 3, so that every other pixel has at most one lit neighbour.
+    const int N = 60;
+    std::vector<float> lattice(std::size_t(N * N * T * 3), 0.0f);
+    for (int r = 1; r < N; r += 3)
+        for (int c = 1; c < N; c += 3)
+            for (int ch = 0; ch < 3; ++ch) lattice[std::size_t(((r * N + c) * T + 3) * 3 + ch)] = 1.0f;
+    const std::vector<float> m = measure(s, time, lattice, N, N);
+    double sum = 0.0, n = 0.0;
+    for (int r = 1; r < N; r += 3)
+        for (int c = 1; c < N; c += 3)
+            for (const auto& [dr, dc] : {std::array<int, 2>{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+                const int rr = r + dr, cc = c + dc;
+                if (rr >= N || cc >= N) continue;
+                for (int ch = 0; ch < 3; ++ch) sum += m[std::size_t(((rr * N + cc) * T + 3) * 3 + ch)], n += 1;
+            }
+    EXPECT_NEAR(sum / n, x * 1000.0, 5 * std::sqrt(x * 1000.0 / n));  // 5 standard errors of a Poisson mean
+}
+
+TEST(SensorSpad, DeadPixelsCountNothing) {
+    const int H = 20, W = 20, T = 16;
+    const TimeAxis time = time_axis(T, 0.01);
+    const std::vector<float> cube(std::size_t(H * W * T * 3), 1.0f);
+    auto dead_set = [&](const json& extra) {
+        // 1000 expected photons in every bin: a live pixel's bin is 0 with probability e^-1000.
+        json block = spad(json::object());
+        block["exposure"].update(extra);
+        const std::vector<float> m = measure(sensor_from(block), time, cube, H, W, nullptr, 3);
+        std::vector<int> dead;
+        for (int p = 0; p < H * W; ++p) {
+            const auto first = m.begin() + p * T * 3, last = first + T * 3;
+            if (std::all_of(first, last, [](float v) { return v == 0.0f; })) {
+                dead.push_back(p);
+            } else {
+                EXPECT_TRUE(std::none_of(first, last, [](float v) { return v == 0.0f; })) << "pixel " << p;
+            }
+        }
+        return dead;
+    };
+    EXPECT_EQ(dead_set({{"dead_pixels", {{0, 1}, {19, 7}}}}), (std::vector<int>{1, 19 * W + 7}));
+    // A fraction: exactly round(0.1 x 400) pixels, the same ones for the same seed, others for another.
+    const std::vector<int> a = dead_set({{"dead_pixels", 0.1}});
+    EXPECT_EQ(a.size(), 40u);
+    EXPECT_EQ(dead_set({{"dead_pixels", 0.1}}), a);
+    EXPECT_NE(dead_set({{"dead_pixels", 0.1}, {"seed", 6}}), a);
+    EXPECT_EQ(dead_set({{"dead_pixels", 1.0}}).size(), std::size_t(H * W));
+    // Outside the image (known only when the sensor is applied): an error that names the entry.
+    const SensorSettings outside = parse_sensor_block(spad({{"dead_pixels", {{3, 4}, {20, 0}}}}).dump(), "s.json", "sensor");
+    EXPECT_EQ(error_of([&] { measure(outside, time, cube, H, W); }),
+              "s.json: sensor.exposure.dead_pixels[1]: row 20 is outside the image's 20 rows (0 to 19)");
+    const SensorSettings right = parse_sensor_block(spad({{"dead_pixels", {{0, 25}}}}).dump(), "s.json", "sensor");
+    EXPECT_EQ(error_of([&] { measure(right, time, cube, H, W); }),
+              "s.json: sensor.exposure.dead_pixels[0]: column 25 is outside the image's 20 columns (0 to 19)");
+}
+
+TEST(SensorSpad, SameSeedGivesTheSameHistogramsForAnyThreadCount) {
+    const int H = 12, W = 10, T = 48;
+    const TimeAxis time = time_axis(T, 0.01);
+    std::vector<float> cube(std::size_t(H * W * T * 3));
+    for (std::size_t i = 0; i < cube.size(); ++i) cube[i] = float((i * 7919) % 101) / 101.0f;  // any fixed values
+    json block = spad({{"jitter_fwhm", 0.02},
+                       {"jitter_tail", {{"time_constant", 0.03}, {"fraction", 0.2}}},
+                       {"dead_time", 0.1},
+                       {"cycles", 2000},
+                       {"afterpulsing", {{"probability", 0.05}, {"time_constant", 0.04}}},
+                       {"ambient", 3e6},
+                       {"dark_rate", 1e10},
+                       {"crosstalk", 0.01},
+                       {"dead_pixels", 0.05}});
+    const std::vector<float> one = measure(sensor_from(block), time, cube, H, W, nullptr, 1);
+    EXPECT_EQ(measure(sensor_from(block), time, cube, H, W, nullptr, 1), one) << "the same run twice";
+    for (const int threads : {2, 3, 7}) EXPECT_EQ(measure(sensor_from(block), time, cube, H, W, nullptr, threads), one) << threads << " threads";
+    block["exposure"]["seed"] = 6;
+    EXPECT_NE(measure(sensor_from(block), time, cube, H, W), one) << "another seed gave the same counts";
+}
+
+TEST(SensorSpad, NeutralValuesOfTheNewKeysChangeNothing) {
+    // Every new key at its neutral value gives the histograms of a block without them, bit for bit (the same
+    // means, the same draws), whatever `cycles` is.
+    const int H = 6, W = 7, T = 40;
+    const TimeAxis time = time_axis(T, 0.01);
+    std::vector<float> cube(std::size_t(H * W * T * 3));
+    for (std::size_t i = 0; i < cube.size(); ++i) cube[i] = float((i * 104729) % 97) / 97.0f;
+    const json plain = spad({{"jitter_fwhm", 0.02}, {"dark_rate", 1e9}});
+    const json neutral = spad({{"jitter_fwhm", 0.02}, {"dark_rate", 1e9},
+                               {"jitter_tail", {{"time_constant", 0.05}, {"fraction", 0}}},
+                               {"dead_time", 0}, {"cycles", 123}, {"ambient", 0}, {"crosstalk", 0},
+                               {"afterpulsing", {{"probability", 0}, {"time_constant", 0}}},
+                               {"dead_pixels", json::array()}});
+    EXPECT_EQ(measure(sensor_from(neutral), time, cube, H, W), measure(sensor_from(plain), time, cube, H, W));
+}
+
+TEST(SensorSpad, BadValuesNameTheirJsonPath) {
+    const TimeAxis time = time_axis(100, 0.01);
+    auto error = [&](const json& extra) {
+        return error_of([&] { validate_sensor(parse_sensor_block(spad(extra).dump(), "s.json", "sensor"), time); });
+    };
+    EXPECT_EQ(error({{"dead_time", -1}}), "s.json: sensor.exposure.dead_time: must be >= 0");
+    EXPECT_EQ(error({{"cycles", 0.5}}), "s.json: sensor.exposure.cycles: must be in [1, 1e15] laser repetitions");
+    EXPECT_EQ(error({{"crosstalk", 1.5}}), "s.json: sensor.exposure.crosstalk: must be in [0, 1]");
+    EXPECT_EQ(error({{"ambient", -2}}), "s.json: sensor.exposure.ambient: must be >= 0");
+    EXPECT_EQ(error({{"afterpulsing", {{"probability", -0.1}, {"time_constant", 1}}}}),
+              "s.json: sensor.exposure.afterpulsing.probability: must be in [0, 1]");
+    EXPECT_EQ(error({{"afterpulsing", {{"probability", 0.1}, {"time_constant", 0}}}}),
+              "s.json: sensor.exposure.afterpulsing.time_constant: must be > 0");
+    EXPECT_EQ(error({{"jitter_tail", {{"time_constant", 0.1}, {"fraction", 2}}}}),
+              "s.json: sensor.exposure.jitter_tail.fraction: must be in [0, 1]");
+    EXPECT_EQ(error({{"dead_pixels", 1.5}}), "s.json: sensor.exposure.dead_pixels: must be in [0, 1]");
+    EXPECT_EQ(error({{"dead_pixels", {{0, -1}}}}), "s.json: sensor.exposure.dead_pixels[0][1]: must be >= 0");
+    EXPECT_EQ(error({{"dead_pixels", {{0, 1, 2}}}}), "s.json: sensor.exposure.dead_pixels[0]: expected [row, column]");
+    EXPECT_EQ(error({{"dead_pixels", "all"}}),
+              "s.json: sensor.exposure.dead_pixels: expected a fraction of the pixels (a number in [0, 1]) or a list of [row, column]");
+    // A tail that reaches beyond 64 windows (20 time constants and one more).
+    EXPECT_NE(error({{"jitter_tail", {{"time_constant", 10}, {"fraction", 0.1}}}}).find("sensor.exposure.jitter_tail.time_constant: reaches 210"),
+              std::string::npos);
+    // Unknown keys stay errors, inside the new objects too; their keys are required.
+    EXPECT_NE(error({{"dead_tme", 1}}).find("sensor.exposure.dead_tme: unknown key"), std::string::npos);
+    EXPECT_NE(error({{"afterpulsing", {{"probability", 0.1}, {"tau", 1}}}}).find("afterpulsing.tau: unknown key"), std::string::npos);
+    EXPECT_NE(error({{"jitter_tail", {{"fraction", 0.1}}}}).find("sensor.exposure.jitter_tail"), std::string::npos);
+    // The SPAD's keys belong to the SPAD.
+    const json gates = {{"exposure", {{"type", "gates"}, {"start", 0}, {"width", 0.1}, {"step", 0.1}, {"count", 2}, {"dead_time", 1}}}};
+    EXPECT_NE(error_of([&] { sensor_from(gates); }).find("exposure.dead_time: unknown key"), std::string::npos);
 }
 
 }  // namespace

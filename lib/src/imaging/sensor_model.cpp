@@ -18,20 +18,241 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace tprf {
 
 namespace {
 
 constexpr double kMaxPoissonMean = 1e15;
+// The SplitMix64 output of the user's seed that seeds the choice of dead pixels: pixels' own streams use
+// outputs 0 to H W - 1, far below 2^63.
+constexpr std::uint64_t kDeadPixelStream = std::uint64_t(1) << 63;
 
-
-// The kernel the exposure sees: the pulse, and for a SPAD its timing jitter too.
+// The kernel the exposure sees: the pulse, and for a SPAD its timing jitter (and the jitter's tail) too.
 TimeKernel exposure_kernel(const SensorSettings& s, double bin_width) {
     TimeKernel k = pulse_kernel(s.pulse, bin_width);
-    if (s.exposure.type == ExposureType::Spad && s.exposure.jitter_fwhm > 0.0)
-        k = convolve(k, gaussian_kernel(s.exposure.jitter_fwhm, bin_width));
+    const Exposure& e = s.exposure;
+    if (e.type == ExposureType::Spad && (e.jitter_fwhm > 0.0 || e.jitter_tail.fraction > 0.0))
+        k = convolve(k, jitter_kernel(e, bin_width));
     return k;
+}
+
+// Measurement k of one pixel's profile e (T x 3), per channel, before any noise.
+void weighted_sum(const SensorWeights& weights, std::size_t k, const float* e, double acc[3]) {
+    acc[0] = acc[1] = acc[2] = 0.0;
+    const std::vector<double>& w = weights.weight[k];
+    const float* ek = e + std::size_t(weights.first[k]) * 3;
+    for (std::size_t i = 0; i < w.size(); ++i)
+        for (int c = 0; c < 3; ++c) acc[c] += w[i] * double(ek[i * 3 + std::size_t(c)]);
+}
+
+// A SPAD's detector, prepared once per render (docs/sensor.md, "SPAD"). Offsets and times in bins.
+struct SpadModel {
+    std::uint64_t seed = 0;
+    double photons = 1.0;
+    double background = 0.0;          // dark and ambient counts per bin over the acquisition
+    double cycles = 1.0;              // laser repetitions
+    bool dead_time = false;           // whether detections blind the detector at all
+    std::size_t dead_bins = 0;        // the bins blinded after a detection's own
+    double crosstalk = 0.0;           // probability per 4-neighbour
+    double afterpulse = 0.0;          // expected afterpulses per detection
+    std::size_t head_first = 0;       // offset of head[0]; head[i] is the share of offset head_first + i,
+    std::vector<double> head;         // up to tail_first; from there tail_weight * ratio^(m - tail_first)
+    std::size_t tail_first = 0;
+    double tail_weight = 0.0, ratio = 0.0;
+    std::vector<unsigned char> dead;  // per pixel, row-major; empty: none dead
+};
+
+// P(U + Z > z) for U uniform in [0, 1) (a detection's place in its bin) and Z exponential of mean u: how much
+// of the afterpulses' delay beyond the dead time's end reaches past z bins from the detection bin's start.
+double delay_survival(double z, double u) {
+    if (z <= 0.0) return 1.0;
+    if (z < 1.0) return 1.0 - (z + u * std::expm1(-z / u));
+    return u * -std::expm1(-1.0 / u) * std::exp(-(z - 1.0) / u);
+}
+
+// The share h[m] of a detection's afterpulses that falls m bins after its own, for the delay dead_time +
+// Exp(time_constant); exact integrals, which beyond the first one or two offsets fall geometrically (ratio
+// exp(-dt / tau)), so that the convolution needs only a running sum.
+void afterpulse_offsets(const Exposure& e, double dt, std::size_t K, SpadModel& m) {
+    const double a = e.dead_time / dt, u = e.afterpulsing.time_constant / dt;
+    // A delay too long for a double in bins puts no afterpulse in the window.
+    m.afterpulse = std::isfinite(u) ? e.afterpulsing.probability : 0.0;
+    if (!(m.afterpulse > 0.0)) return;
+    auto h = [&](double offset) { return delay_survival(offset - a, u) - delay_survival(offset + 1.0 - a, u); };
+    auto index = [&](double x) { return x >= double(K) ? K : std::size_t(std::max(0.0, x)); };
+    m.head_first = index(std::floor(a));
+    m.tail_first = index(std::ceil(a + 1.0));
+    for (std::size_t i = m.head_first; i < m.tail_first; ++i) m.head.push_back(h(double(i)));
+    if (m.tail_first < K) m.tail_weight = h(double(m.tail_first));
+    m.ratio = std::exp(-1.0 / u);
+}
+
+std::string dead_pixel_path(const SensorSettings& s, std::size_t i) {
+    const std::string key = "exposure.dead_pixels[" + std::to_string(i) + "]";
+    return s.json_path.empty() ? key : s.json_path + "." + key;
+}
+
+// The pixels that count nothing: those listed, and round(fraction H W) more chosen from the seed (the
+// smallest SplitMix64 keys, which do not depend on the thread count).
+std::vector<unsigned char> dead_pixel_mask(const SensorSettings& s, int height, int width) {
+    const Exposure& e = s.exposure;
+    const std::size_t pixels = std::size_t(height) * std::size_t(width);
+    if (!(e.dead_fraction > 0.0) && e.dead_pixels.empty()) return {};
+    std::vector<unsigned char> dead(pixels, 0);
+    auto check = [&](std::size_t i, const std::string& what, int v, int size) {
+        if (v < 0 || v >= size)
+            fail_input(s.file, dead_pixel_path(s, i), what + " " + std::to_string(v) + " is outside the image's " +
+                                                          std::to_string(size) + " " + what + "s (0 to " +
+                                                          std::to_string(size - 1) + ")");
+    };
+    for (std::size_t i = 0; i < e.dead_pixels.size(); ++i) {
+        const auto [row, column] = e.dead_pixels[i];
+        check(i, "row", row, height);
+        check(i, "column", column, width);
+        dead[std::size_t(row) * std::size_t(width) + std::size_t(column)] = 1;
+    }
+    const auto count = std::size_t(std::llround(e.dead_fraction * double(pixels)));
+    if (count == 0) return dead;
+    const std::uint64_t stream = SplitMix64::output(e.seed, kDeadPixelStream);
+    std::vector<std::pair<std::uint64_t, std::size_t>> keys(pixels);
+    for (std::size_t p = 0; p < pixels; ++p) keys[p] = {SplitMix64::output(stream, p), p};
+    if (count < pixels) std::nth_element(keys.begin(), keys.begin() + std::ptrdiff_t(count), keys.end());
+    for (std::size_t i = 0; i < std::min(count, pixels); ++i) dead[keys[i].second] = 1;
+    return dead;
+}
+
+SpadModel spad_model(const SensorSettings& s, const TimeAxis& time, int height, int width) {
+    const Exposure& e = s.exposure;
+    const std::size_t K = std::size_t(time.bins);
+    SpadModel m;
+    m.seed = e.seed;
+    m.photons = e.photons;
+    m.background = e.dark_rate * time.to_metres(time.bin_width) / kSpeedOfLight;
+    if (e.ambient > 0.0) m.background += e.ambient * (time.to_metres(time.bin_width) / kSpeedOfLight) * e.cycles;
+    m.cycles = e.cycles;
+    m.dead_time = e.dead_time > 0.0;
+    // A detection blinds the rest of its bin and the next floor(dead_time / bin) bins: on average within half a
+    // bin of the dead time (the 1e-9 keeps a dead time of exactly n bins from rounding down to n - 1).
+    const double blind = std::floor(e.dead_time / time.bin_width + 1e-9);
+    m.dead_bins = blind >= double(K) ? K : std::size_t(blind);
+    m.crosstalk = e.crosstalk;
+    afterpulse_offsets(e, time.bin_width, K, m);
+    m.dead = dead_pixel_mask(s, height, width);
+    return m;
+}
+
+bool is_dead(const SpadModel& m, std::size_t p) { return !m.dead.empty() && m.dead[p] != 0; }
+
+// Expected counts over the acquisition of one pixel's profile e, K x 3, before the detector's dead time:
+// photons x signal + dark + ambient, each rounded as expected_counts() rounds it.
+void spad_rates(const SensorWeights& w, const float* e, const SpadModel& m, double* lambda) {
+    for (std::size_t k = 0; k < w.first.size(); ++k) {
+        double acc[3];
+        weighted_sum(w, k, e, acc);
+        for (std::size_t c = 0; c < 3; ++c) lambda[k * 3 + c] = expected_counts(m.photons, acc[c], m.background);
+    }
+}
+
+// Dead time (in place): the expected detections over the acquisition from the expected counts without it.
+// Per cycle, bin k holds a photon with p_k = 1 - exp(-x_k), x_k = lambda_k / N, and the detector is live with
+// q_k; detections within dead_bins of each other exclude each other, so D_k = q_k p_k exactly, with
+// q_{k+1} = q_k exp(-x_k) + D_{k - dead_bins} (docs/sensor.md, "Dead time and pile-up").
+void pile_up(const SpadModel& m, double* lambda, std::size_t K, std::vector<double>& D) {
+    if (!m.dead_time) return;
+    for (std::size_t c = 0; c < 3; ++c) {
+        double live = 1.0;
+        for (std::size_t k = 0; k < K; ++k) {
+            const double x = lambda[k * 3 + c] / m.cycles;
+            D[k] = x > 0.0 ? live * -std::expm1(-x) : 0.0;
+            const double back = k >= m.dead_bins ? D[k - m.dead_bins] : 0.0;
+            live = std::min(1.0, (x > 0.0 ? live * std::exp(-x) : live) + back);
+            lambda[k * 3 + c] = m.cycles * D[k];
+        }
+    }
+}
+
+// Afterpulses (in place): lambda_k += P sum_m h[m] lambda_{k - m}, the head's terms one by one and the
+// geometric tail as the running sum run_i = ratio run_{i-1} + lambda_i.
+void add_afterpulses(const SpadModel& m, double* lambda, std::size_t K, std::vector<double>& detections) {
+    if (!(m.afterpulse > 0.0)) return;
+    for (std::size_t c = 0; c < 3; ++c) {
+        for (std::size_t k = 0; k < K; ++k) detections[k] = lambda[k * 3 + c];
+        double run = 0.0;
+        for (std::size_t k = 0; k < K; ++k) {
+            double a = 0.0;
+            for (std::size_t i = 0; i < m.head.size() && m.head_first + i <= k; ++i)
+                a += m.head[i] * detections[k - m.head_first - i];
+            if (k >= m.tail_first) {
+                run = run * m.ratio + detections[k - m.tail_first];
+                a += m.tail_weight * run;
+            }
+            lambda[k * 3 + c] = detections[k] + m.afterpulse * a;
+        }
+    }
+}
+
+// One thread's buffers, K x 3 (and K).
+struct SpadScratch {
+    explicit SpadScratch(std::size_t K) : lambda(K * 3), neighbour(K * 3), work(K) {}
+    std::vector<double> lambda, neighbour, work;
+};
+
+// The means of live pixel p's counts, into scratch.lambda (K x 3): its own expected counts, plus crosstalk
+// from each live 4-neighbour's detections (after that neighbour's own dead time), through the pixel's dead
+// time, plus afterpulses.
+void spad_means(const SpadModel& m, const SensorWeights& w, const float* cube, std::size_t T, int height, int width,
+                std::size_t p, SpadScratch& scratch) {
+    const std::size_t K = w.first.size();
+    spad_rates(w, cube + p * T * 3, m, scratch.lambda.data());
+    if (m.crosstalk > 0.0) {
+        const auto row = std::int64_t(p) / width, column = std::int64_t(p) % width;
+        const std::int64_t near[4][2] = {{row - 1, column}, {row + 1, column}, {row, column - 1}, {row, column + 1}};
+        for (const auto& [r, c] : near) {
+            if (r < 0 || c < 0 || r >= height || c >= width) continue;
+            const std::size_t q = std::size_t(r * width + c);
+            if (is_dead(m, q)) continue;
+            spad_rates(w, cube + q * T * 3, m, scratch.neighbour.data());
+            pile_up(m, scratch.neighbour.data(), K, scratch.work);
+            for (std::size_t i = 0; i < K * 3; ++i) scratch.lambda[i] += m.crosstalk * scratch.neighbour[i];
+        }
+    }
+    pile_up(m, scratch.lambda.data(), K, scratch.work);
+    add_afterpulses(m, scratch.lambda.data(), K, scratch.work);
+}
+
+// A SPAD's histograms: each pixel's means, then its Poisson counts from its own stream, output p of
+// SplitMix64(seed), drawn bin by bin and channel by channel whichever thread draws it.
+void apply_spad(const SensorSettings& s, const TimeAxis& time, const SensorWeights& w, const float* cube, int height,
+                int width, float* measurements, int threads) {
+    const SpadModel m = spad_model(s, time, height, width);
+    const std::size_t K = w.first.size(), T = std::size_t(time.bins);
+    const auto pixels = std::int64_t(height) * width;
+#pragma omp parallel num_threads(threads)
+    {
+        SpadScratch scratch(K);
+#pragma omp for schedule(dynamic, 16)
+        for (std::int64_t i = 0; i < pixels; ++i) {
+            const auto p = std::size_t(i);
+            float* out = measurements + p * K * 3;
+            if (is_dead(m, p)) {
+                std::fill(out, out + K * 3, 0.0f);
+                continue;
+            }
+            spad_means(m, w, cube, T, height, width, p, scratch);
+            Random rng(SplitMix64::output(m.seed, std::uint64_t(p)));
+            for (std::size_t j = 0; j < K * 3; ++j) {
+                const double mean = scratch.lambda[j];
+                // Beyond 1e15 expected counts the Poisson spread (1/sqrt(mean)) is below float precision
+                // (and Random::poisson takes means up to 2^52 only): the count is its mean. Saturated rather
+                // than infinite beyond a float's range.
+                const double v = mean > kMaxPoissonMean ? mean : rng.poisson(mean);
+                out[j] = float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX)));
+            }
+        }
+    }
 }
 
 // A bin index from a real position, clamped in floating point first, so that a window far outside the
@@ -168,16 +389,30 @@ double amcw_depth(const SensorSettings& s, const float* measurements) {
     return 0.5 * theta / omega_per_metre;
 }
 
+std::vector<double> spad_expected_counts(const SensorSettings& s, const TimeAxis& time, const float* cube, int height,
+                                         int width, int row, int column) {
+    TPRF_CHECK(s.exposure.type == ExposureType::Spad);
+    TPRF_CHECK(row >= 0 && row < height && column >= 0 && column < width);
+    const SensorWeights w = sensor_weights(s, time);
+    const SpadModel m = spad_model(s, time, height, width);
+    const std::size_t p = std::size_t(row) * std::size_t(width) + std::size_t(column);
+    SpadScratch scratch(w.first.size());
+    if (!is_dead(m, p)) spad_means(m, w, cube, std::size_t(time.bins), height, width, p, scratch);
+    return scratch.lambda;
+}
+
 void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cube, int height, int width,
                   float* measurements, float* depth, const SensorOptions& options) {
     const SensorWeights weights = sensor_weights(s, time);
     const std::size_t K = weights.first.size(), T = std::size_t(time.bins);
     const std::int64_t pixels = std::int64_t(height) * width;
     const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-    const bool spad = s.exposure.type == ExposureType::Spad;
-    const double dark = spad ? s.exposure.dark_rate * time.to_metres(time.bin_width) / kSpeedOfLight : 0.0;
-    const std::uint64_t seed = spad ? s.exposure.seed : s.noise.seed;
-    const bool draws = spad || s.noise.sigma > 0.0;  // a generator is seeded only where it is used
+    if (s.exposure.type == ExposureType::Spad) {
+        apply_spad(s, time, weights, cube, height, width, measurements, threads);
+        if (depth != nullptr) std::fill(depth, depth + pixels, 0.0f);
+        return;
+    }
+    const bool draws = s.noise.sigma > 0.0;  // a generator is seeded only where it is used
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
     for (std::int64_t p = 0; p < pixels; ++p) {
         const float* e = cube + std::size_t(p) * T * 3;
@@ -185,24 +420,14 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
         // Pixel p's stream is seeded with output p of SplitMix64(seed), so that a pixel's noise does not
         // depend on which thread draws it.
         std::optional<Random> rng;
-        if (draws) rng.emplace(SplitMix64::output(seed, std::uint64_t(p)));
+        if (draws) rng.emplace(SplitMix64::output(s.noise.seed, std::uint64_t(p)));
         for (std::size_t k = 0; k < K; ++k) {
-            double acc[3] = {0.0, 0.0, 0.0};
-            const std::vector<double>& w = weights.weight[k];
-            const float* ek = e + std::size_t(weights.first[k]) * 3;
-            for (std::size_t i = 0; i < w.size(); ++i)
-                for (int c = 0; c < 3; ++c) acc[c] += w[i] * double(ek[i * 3 + std::size_t(c)]);
+            double acc[3];
+            weighted_sum(weights, k, e, acc);
             for (int c = 0; c < 3; ++c) {
                 double v = acc[c];
-                if (spad) {
-                    const double mean = expected_counts(s.exposure.photons, v, dark);
-                    // Beyond 1e15 expected counts the Poisson spread (1/sqrt(mean)) is below float
-                    // precision (and Random::poisson takes means up to 2^52 only): the count is its mean.
-                    v = mean > kMaxPoissonMean ? mean : rng->poisson(mean);
-                } else {
-                    if (s.noise.sigma > 0.0) v = rng->add_normal(v, s.noise.sigma);
-                    if (s.clamp) v = std::max(0.0, v);
-                }
+                if (draws) v = rng->add_normal(v, s.noise.sigma);
+                if (s.clamp) v = std::max(0.0, v);
                 // Saturated rather than infinite when a signal's scale exceeds a float's range.
                 out[k * 3 + std::size_t(c)] = float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX)));
             }

@@ -106,6 +106,45 @@ SensorPulse parse_pulse(const JsonNode& n) {
     return p;
 }
 
+// A SPAD's dead pixels: a fraction of the image (chosen from the seed when the sensor is applied, once the
+// image's size is known) or a list of [row, column].
+void parse_dead_pixels(const JsonNode& n, Exposure& e) {
+    if (n.j.is_number()) {
+        e.dead_fraction = n.number();
+        return;
+    }
+    if (!n.j.is_array()) n.fail("expected a fraction of the pixels (a number in [0, 1]) or a list of [row, column]");
+    const std::size_t count = n.array_size();
+    for (std::size_t i = 0; i < count; ++i) {
+        const JsonNode pixel = n.at(i);
+        if (pixel.array_size() != 2) pixel.fail("expected [row, column]");
+        e.dead_pixels.push_back({pixel.at(0).integer(), pixel.at(1).integer()});
+    }
+}
+
+void parse_spad(const JsonNode& n, Exposure& e) {
+    n.check_keys({"type", "photons", "jitter_fwhm", "dark_rate", "seed", "jitter_tail", "dead_time", "cycles",
+                  "afterpulsing", "ambient", "crosstalk", "dead_pixels"});
+    e.type = ExposureType::Spad;
+    e.photons = n.child("photons").number();
+    if (const auto jitter = n.find("jitter_fwhm")) e.jitter_fwhm = jitter->number();
+    if (const auto dark = n.find("dark_rate")) e.dark_rate = dark->number();
+    if (const auto seed = n.find("seed")) e.seed = seed_value(*seed);
+    if (const auto tail = n.find("jitter_tail")) {
+        tail->check_keys({"time_constant", "fraction"});
+        e.jitter_tail = {tail->child("time_constant").number(), tail->child("fraction").number()};
+    }
+    if (const auto dead = n.find("dead_time")) e.dead_time = dead->number();
+    if (const auto cycles = n.find("cycles")) e.cycles = cycles->number();
+    if (const auto after = n.find("afterpulsing")) {
+        after->check_keys({"probability", "time_constant"});
+        e.afterpulsing = {after->child("probability").number(), after->child("time_constant").number()};
+    }
+    if (const auto ambient = n.find("ambient")) e.ambient = ambient->number();
+    if (const auto crosstalk = n.find("crosstalk")) e.crosstalk = crosstalk->number();
+    if (const auto dead = n.find("dead_pixels")) parse_dead_pixels(*dead, e);
+}
+
 Exposure parse_exposure(const JsonNode& n) {
     Exposure e;
     const JsonNode type = n.child("type");
@@ -144,12 +183,7 @@ Exposure parse_exposure(const JsonNode& n) {
             e.phases_deg = {0.0, 90.0, 180.0, 270.0};
         }
     } else if (name == "spad") {
-        n.check_keys({"type", "photons", "jitter_fwhm", "dark_rate", "seed"});
-        e.type = ExposureType::Spad;
-        e.photons = n.child("photons").number();
-        if (const auto jitter = n.find("jitter_fwhm")) e.jitter_fwhm = jitter->number();
-        if (const auto dark = n.find("dark_rate")) e.dark_rate = dark->number();
-        if (const auto seed = n.find("seed")) e.seed = seed_value(*seed);
+        parse_spad(n, e);
     } else {
         type.fail("unknown exposure type " + in_quotes(name) +
                   " (expected \"gates\", \"windows\", \"amcw\" or \"spad\")");

@@ -34,6 +34,20 @@ TimeKernel table_kernel(const SensorPulse& p, double bin_width) {
     return k;
 }
 
+// wa a + wb b on the grid of b (a resampled onto it, which keeps its total and mean).
+TimeKernel mix(const TimeKernel& a, double wa, const TimeKernel& b, double wb) {
+    const TimeKernel ga = resample(a, b.step);
+    TimeKernel k;
+    k.step = b.step;
+    k.first = std::min(ga.first, b.first);
+    const int end = std::max(ga.first + int(ga.mass.size()), b.first + int(b.mass.size()));
+    k.mass.assign(std::size_t(end - k.first), 0.0);
+    for (std::size_t q = 0; q < ga.mass.size(); ++q) k.mass[std::size_t(ga.first - k.first) + q] += wa * ga.mass[q];
+    for (std::size_t q = 0; q < b.mass.size(); ++q) k.mass[std::size_t(b.first - k.first) + q] += wb * b.mass[q];
+    normalise(k);
+    return k;
+}
+
 }  // namespace
 
 const char* exposure_name(ExposureType type) {
@@ -61,6 +75,39 @@ TimeKernel pulse_kernel(const SensorPulse& p, double bin_width) {
         case PulseShape::Table: return table_kernel(p, bin_width);
     }
     throw InternalError("unknown pulse shape");
+}
+
+TimeKernel exponential_kernel(double time_constant, double bin_width) {
+    const double tau = time_constant, cut = kTailReach * tau;
+    const double step = std::max(std::min(bin_width, tau) / kStepsPerFeature, (cut + tau) / kMaxKernelPoints);
+    TimeKernel k = kernel_range(step, 0.0, cut + tau);
+    // Cells of width h over [0, cut): cell j holds exp(-j h / tau) (1 - exp(-h / tau)) at the exponential's
+    // centroid in the cell, j h + tau - h / expm1(h / tau); what lies beyond the cut sits at its own mean,
+    // cut + tau (memorylessness). So the kernel's total and mean are the exponential's.
+    const int cells = std::max(1, int(std::ceil(cut / step)));
+    const double h = cut / cells;
+    const double in_cell = -std::expm1(-h / tau), centroid = tau - h / std::expm1(h / tau);
+    for (int j = 0; j < cells; ++j) add_split(k, j * h + centroid, std::exp(-j * h / tau) * in_cell);
+    add_split(k, cut + tau, std::exp(-kTailReach));
+    normalise(k);
+    return k;
+}
+
+TimeKernel jitter_kernel(const Exposure& e, double bin_width) {
+    const bool gaussian = e.jitter_fwhm > 0.0;
+    const TimeKernel core = gaussian ? gaussian_kernel(e.jitter_fwhm, bin_width) : TimeKernel{bin_width, 0, {1.0}};
+    const double f = e.jitter_tail.fraction;
+    if (!(f > 0.0)) return core;
+    // The diffusion tail delays the avalanche, whose build-up jitters as any other: G * E.
+    const TimeKernel exponential = exponential_kernel(e.jitter_tail.time_constant, bin_width);
+    const TimeKernel tail = gaussian ? convolve(core, exponential) : exponential;
+    return f >= 1.0 ? tail : mix(core, 1.0 - f, tail, f);
+}
+
+double jitter_reach(const Exposure& e) {
+    double reach = kGaussianReach * e.jitter_fwhm / kFwhmPerSigma;
+    if (e.jitter_tail.fraction > 0.0) reach += (kTailReach + 1.0) * e.jitter_tail.time_constant;
+    return reach;
 }
 
 Eigen::Matrix3d phase_normal_matrix(const std::vector<double>& phases_deg) {

@@ -50,9 +50,17 @@ struct SensorOptions {
 
 /// Applies the sensor to a cube (H, W, T, 3): writes `measurements` (H, W, K, 3) and, for amcw,
 /// `depth` (H, W), metres (may be null otherwise). Noise and photon counts are drawn per pixel from
-/// the seed, so that the result does not depend on the thread count.
+/// the seed, so that the result does not depend on the thread count. A SPAD's dead pixel outside the
+/// image is an Error (its JSON path and the image's size), raised before anything is written.
 void apply_sensor(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
                   float* measurements, float* depth, const SensorOptions& options = {});
+
+/// A SPAD pixel's expected counts per bin and channel (K x 3, bin by bin), the means that apply_sensor
+/// draws its Poisson counts from: photons x signal, dark and ambient counts, crosstalk from the 4-neighbours,
+/// dead time and afterpulses (docs/sensor.md, "SPAD"); all 0 for a dead pixel. `cube` is (height, width,
+/// T, 3); (row, column) the pixel. A dead pixel outside the image is an Error, as in apply_sensor.
+std::vector<double> spad_expected_counts(const SensorSettings& sensor, const TimeAxis& time, const float* cube,
+                                         int height, int width, int row, int column);
 
 /// The depth a CW-ToF camera infers from one pixel's phase measurements (channels summed): the phase
 /// of the fitted M(phi) = a + b cos(phi) + c sin(phi), as distance c * phase / (4 pi f) (emitter
