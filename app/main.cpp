@@ -150,6 +150,9 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     bar.finish();
     print_mesh_repairs(r.meshes);
     print_warnings(r.warnings);
+    if (!quiet && r.capture_pairs > 0)
+        std::fprintf(stderr, "tprf: capture of %zu laser-sensor pairs x %d bins -> %s\n", r.capture_pairs, r.bins,
+                     (options.output / "capture.hdf5").string().c_str());
     if (!quiet)
         std::fprintf(stderr,
                      "tprf: %zu patches, %zu links, %dx%d pixels x %d bins in %.2f s (patches %.2f, links %.2f, "

@@ -53,8 +53,20 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
     j["bins"] = r.time.bins;
     j["time"] = {{"bins", r.time.bins}, {"bin_width", r.time.bin_width}, {"start", r.time.start},
                  {"unit", unit_name(r.time.unit)}};
-    j["camera"] = {{"width", r.camera.width}, {"height", r.camera.height}, {"spp", r.camera.spp},
-                   {"unwarp", r.camera.unwarp}};
+    if (r.camera)
+        j["camera"] = {{"width", r.camera->width}, {"height", r.camera->height}, {"spp", r.camera->spp},
+                       {"unwarp", r.camera->unwarp}};
+    if (const auto& c = r.capture)
+        j["capture"] = {{"type", c->type},
+                        {"laser_points", c->laser_points},
+                        {"sensor_points", c->sensor_points},
+                        {"solved", c->solved},
+                        {"batch", c->batch},
+                        {"marches", c->marches},
+                        {"view_pairs", c->view_pairs},
+                        {"link_bin_updates", c->link_bin_updates},
+                        {"seconds", {{"views", c->seconds_views}, {"solve", c->seconds_solve},
+                                     {"gather", c->seconds_gather}}}};
     j["solver"] = solver_json(r);
     j["seconds"] = seconds_json(r.seconds);
     // The solve's phases (wall times): the long-link pass, the bin-by-bin pass, the output blocks.
@@ -87,9 +99,20 @@ void write_sensor_json(const std::filesystem::path& path, const SensorSettings& 
     j["measurements"] = K;
     j["axis"] = measurement_axis(sensor, time, K);
     j["clamp"] = sensor.clamp;
-    if (sensor.exposure.type == ExposureType::Spad)
-        j["spad"] = {{"photons", sensor.exposure.photons}, {"jitter_fwhm", sensor.exposure.jitter_fwhm},
-                     {"dark_rate", sensor.exposure.dark_rate}, {"seed", sensor.exposure.seed}};
+    const Exposure& e = sensor.exposure;
+    if (e.type == ExposureType::Spad)
+        j["spad"] = {{"photons", e.photons},
+                     {"jitter_fwhm", e.jitter_fwhm},
+                     {"dark_rate", e.dark_rate},
+                     {"seed", e.seed},
+                     {"jitter_tail", {{"time_constant", e.jitter_tail.time_constant}, {"fraction", e.jitter_tail.fraction}}},
+                     {"dead_time", e.dead_time},
+                     {"cycles", e.cycles},
+                     {"afterpulsing",
+                      {{"probability", e.afterpulsing.probability}, {"time_constant", e.afterpulsing.time_constant}}},
+                     {"ambient", e.ambient},
+                     {"crosstalk", e.crosstalk},
+                     {"dead_pixels", {{"fraction", e.dead_fraction}, {"list", e.dead_pixels}}}};
     else
         j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
     j["plot_pixel"] = plot_pixel;

@@ -6,6 +6,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
+#include "tprf/pipeline/capture.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/transport/link_set.h"
 #include "tprf/transport/solver.h"
@@ -394,6 +395,21 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
 }
 
 // The peak: the largest sum of what is held at once, stage by stage in the order of a render.
+// A capture's H (and its time-first copy while it is written); a scene with only a capture that stops at
+// the third bounce builds no links and marches nothing. The batch's rings (one lane per illumination)
+// are not modelled yet (docs/capture.md, Limits).
+void estimate_capture(const Scene& scene, ResourceEstimate& e) {
+    if (!scene.capture) return;
+    const Capture& c = *scene.capture;
+    const double pairs = c.type == CaptureType::Confocal ? double(c.sensor_grid.size())
+                                                          : double(c.laser_grid.size()) * double(c.sensor_grid.size());
+    e.cube_bytes += to_size(2.0 * pairs * scene.time.bins * 4);
+    if (scene.camera || capture_needs_links(scene)) return;
+    e.links = 0;
+    e.link_bytes = e.link_build_bytes = e.solver_bytes = 0;
+    e.seconds.links = e.seconds.solve = 0.0;
+}
+
 void sum_peak(ResourceEstimate& e) {
     const std::size_t held = e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes;
     const std::pair<std::size_t, const char*> stages[] = {
@@ -448,6 +464,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     estimate_camera(scene, census, shares, e);
     estimate_solver(scene, census, shares, e);
     estimate_outputs(scene, census, patch_profiles, e);
+    estimate_capture(scene, e);
     sum_peak(e);
     // The throughputs are for 2 threads; every stage but loading the meshes runs in parallel.
     const double scale = 2.0 / double(thread_count(options.threads));

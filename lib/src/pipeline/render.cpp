@@ -1,5 +1,6 @@
 #include "tprf/pipeline/render.h"
 
+#include "capture_outputs.h"
 #include "staging.h"
 #include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
@@ -7,9 +8,11 @@
 #include "tprf/imaging/camera.h"
 #include "tprf/imaging/film.h"
 #include "tprf/io/atomic_file.h"
+#include "tprf/io/hdf5_capture.h"
 #include "tprf/io/image_io.h"
 #include "tprf/io/npy.h"
 #include "tprf/io/sequences.h"
+#include "tprf/pipeline/capture.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
@@ -30,7 +33,7 @@ using Clock = std::chrono::steady_clock;
 std::vector<std::string> render_outputs() {
     std::vector<std::string> all = {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json",
                                     "patches.csv", "patch_transient.npy", "patch_steady.npy", "frames", "streaks",
-                                    "light_in_flight.mp4", "transient_bounce_*"};
+                                    "light_in_flight.mp4", "transient_bounce_*", "capture.hdf5", "capture.npy"};
     all.insert(all.end(), sensor_outputs().begin(), sensor_outputs().end());
     return all;
 }
@@ -67,12 +70,15 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
 
     start = Clock::now();
     t.visibility = std::make_unique<Visibility>(t.patches);
-    LinkOptions link_options;
-    link_options.threads = options.threads;
-    link_options.progress = options.progress;
-    t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
-    report.links = t.links.links.size();
+    if (scene.camera || capture_needs_links(scene)) {
+        LinkOptions link_options;
+        link_options.threads = options.threads;
+        link_options.progress = options.progress;
+        t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
+        report.links = t.links.links.size();
+    }
     report.seconds.links = seconds_since(start);
+    if (!scene.camera) return;  // a capture lights the patches from its own laser points
 
     start = Clock::now();
     t.sources = light_sources(scene, t.patches, *t.visibility);
@@ -197,7 +203,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     r.patches = report.patches;
     r.links = report.links;
     r.time = scene.time;
-    r.camera = *scene.camera;
+    r.camera = scene.camera;
     r.solver = scene.solver;
     r.bounce_terms = bounce_terms(scene.solver);
     r.stats = stats;
@@ -213,13 +219,32 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
 // ffmpeg for a video, the plot pixel, the estimated peak memory and the output directory.
 Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options) {
     Scene scene = load_scene(scene_file);
-    if (!scene.camera) fail_input(scene_file, "camera", "missing: tprf render needs a camera");
+    if (!scene.camera && !scene.capture)
+        fail_input(scene_file, "camera", "missing: tprf render needs a camera (or a capture block)");
+    if (!scene.camera) check_capture_flags(options);
     if (options.video && !have_ffmpeg())
         throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
-    plot_pixel(options.plot_pixel, scene.camera->width, scene.camera->height);
+    if (scene.camera) plot_pixel(options.plot_pixel, scene.camera->width, scene.camera->height);
     check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
     check_output_dir(options.output);
     return scene;
+}
+
+// The camera's outputs: the cubes filled block by block, then the steady image and the views.
+SolveStats render_camera(const Scene& scene, const RenderOptions& options, const Transport& transport,
+                         Staging& staging, RenderReport& report) {
+    Cubes cubes;
+    open_cubes(scene, options, transport, staging, cubes);
+    const SolveStats stats = solve_into_cubes(scene, options, transport, cubes, report);
+    const auto write_start = Clock::now();
+    if (options.progress) options.progress("write", 0.0);
+    write_steady(scene, options, transport, staging);
+    write_views(scene, options, cubes.cube->data(), staging, report);
+    cubes.cube->commit();
+    if (cubes.patch_cube) cubes.patch_cube->commit();
+    for (auto& c : cubes.term_cubes) c->commit();
+    report.seconds.write += seconds_since(write_start);
+    return stats;
 }
 
 }  // namespace
@@ -230,27 +255,24 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     const Scene scene = load_render_scene(scene_file, options);
     report.seconds.load = seconds_since(start);
     report.bins = scene.time.bins;
-    report.width = scene.camera->width;
-    report.height = scene.camera->height;
+    report.width = scene.camera ? scene.camera->width : 0;
+    report.height = scene.camera ? scene.camera->height : 0;
 
     Transport transport;
     build_transport(scene, options, transport, report);
     Staging staging(options.output);
-    Cubes cubes;
-    open_cubes(scene, options, transport, staging, cubes);
-    const SolveStats stats = solve_into_cubes(scene, options, transport, cubes, report);
-
-    const auto write_start = Clock::now();
-    if (options.progress) options.progress("write", 0.0);
-    write_steady(scene, options, transport, staging);
-    write_views(scene, options, cubes.cube->data(), staging, report);
-    cubes.cube->commit();
-    if (cubes.patch_cube) cubes.patch_cube->commit();
-    for (auto& c : cubes.term_cubes) c->commit();
-    report.seconds.write = seconds_since(write_start);
+    SolveStats stats;
+    if (scene.camera) stats = render_camera(scene, options, transport, staging, report);
+    std::optional<CaptureRecord> capture;
+    if (scene.capture)
+        capture = render_capture(scene, options, transport.patches, *transport.visibility,
+                                 scene.camera || capture_needs_links(scene) ? &transport.links : nullptr, staging,
+                                 report);
     report.seconds.total = seconds_since(start);
     report.peak_rss_mb = peak_rss_mb();
-    write_render_json(staging.path("render.json"), render_record(scene_file, scene, stats, report));
+    RenderRecord record = render_record(scene_file, scene, stats, report);
+    record.capture = capture;
+    write_render_json(staging.path("render.json"), record);
     staging.publish(render_outputs());
     report.written = staging.names();
     if (options.progress) options.progress("write", 1.0);

@@ -4,6 +4,7 @@
 /// expected a number"). Value ranges are checked later, on the built data (scene/validate.h).
 
 #include "tprf/core/types.h"
+#include "tprf/scene/scene.h"
 #include "tprf/scene/sensor_settings.h"
 
 #include <nlohmann/json.hpp>
@@ -66,5 +67,8 @@ nlohmann::json read_json_file(const std::filesystem::path& file, std::string_vie
 /// Reads a `sensor` block; errors name the node's file and JSON path. A table pulse's CSV is read (and
 /// checked) here, relative to the node's file; the ranges of the result are validate_sensor()'s.
 SensorSettings parse_sensor(const JsonNode& block);
+
+/// Reads a `capture` block (parse_capture.cpp); its ranges and grids are validate()'s.
+Capture parse_capture(const JsonNode& block);
 
 }  // namespace tprf

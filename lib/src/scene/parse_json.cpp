@@ -221,7 +221,7 @@ LinkSettings parse_links(const Node& n) {
 Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file) {
     if (!root.is_object()) fail_input(file, "", "the top level must be a JSON object");
     const Node n{root, "", file};
-    n.check_keys({"time", "camera", "lights", "objects", "patches", "links", "solver", "sensor"});
+    n.check_keys({"time", "camera", "lights", "objects", "patches", "links", "solver", "sensor", "capture"});
 
     Scene scene;
     scene.file = file;
@@ -241,6 +241,7 @@ Scene build_scene(const nlohmann::json& root, const std::filesystem::path& file)
     if (const auto links = n.find("links")) scene.links = parse_links(*links);
     if (const auto solver = n.find("solver")) scene.solver = parse_solver(*solver);
     if (const auto sensor = n.find("sensor")) scene.sensor = parse_sensor(*sensor);
+    if (const auto capture = n.find("capture")) scene.capture = parse_capture(*capture);
     return scene;
 }
 

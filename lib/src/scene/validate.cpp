@@ -31,6 +31,9 @@ constexpr double kMaxReachInWindows = 64.0;
 // Bounds that keep a SPAD's expected counts finite whatever the signal's scale.
 constexpr double kMaxPhotons = 1e20;
 constexpr double kMaxDarkRate = 1e30;
+// A SPAD's laser repetitions over one acquisition: at least one, and few enough that a bin's expected counts
+// per cycle stay far above the smallest double.
+constexpr double kMaxCycles = 1e15;
 
 bool parallel(const Vec3& a, const Vec3& b) { return a.cross(b).norm() <= kParallelTol * a.norm() * b.norm(); }
 
@@ -235,6 +238,42 @@ void check_spad(const Exposure& e, const At& at) {
     if (e.dark_rate > kMaxDarkRate) dark.fail("must be at most 1e30 counts per second");
 }
 
+// A probability or a share.
+void unit_interval(double v, const At& at) {
+    finite(v, at);
+    if (v < 0.0 || v > 1.0) at.fail("must be in [0, 1]");
+}
+
+// An exponential's 1/e time: > 0 wherever the exponential has weight.
+void time_constant(double tau, double weight, const At& at) {
+    non_negative(tau, at);
+    if (weight > 0.0 && tau == 0.0) at.fail("must be > 0");
+}
+
+// A SPAD's detector effects (docs/sensor.md, "SPAD"). A dead pixel's place is checked against the image
+// when the sensor is applied, where the image's size is known.
+void check_spad_detector(const Exposure& e, const At& at) {
+    const At tail = at.key("jitter_tail");
+    unit_interval(e.jitter_tail.fraction, tail.key("fraction"));
+    time_constant(e.jitter_tail.time_constant, e.jitter_tail.fraction, tail.key("time_constant"));
+    non_negative(e.dead_time, at.key("dead_time"));
+    const At cycles = at.key("cycles");
+    finite(e.cycles, cycles);
+    if (e.cycles < 1.0 || e.cycles > kMaxCycles) cycles.fail("must be in [1, 1e15] laser repetitions");
+    const At after = at.key("afterpulsing");
+    unit_interval(e.afterpulsing.probability, after.key("probability"));
+    time_constant(e.afterpulsing.time_constant, e.afterpulsing.probability, after.key("time_constant"));
+    const At ambient = at.key("ambient");
+    non_negative(e.ambient, ambient);
+    if (e.ambient > kMaxDarkRate) ambient.fail("must be at most 1e30 counts per second");
+    unit_interval(e.crosstalk, at.key("crosstalk"));
+    const At dead = at.key("dead_pixels");
+    unit_interval(e.dead_fraction, dead);
+    for (std::size_t i = 0; i < e.dead_pixels.size(); ++i)
+        for (std::size_t j = 0; j < 2; ++j)
+            if (e.dead_pixels[i][j] < 0) dead.index(i).index(j).fail("must be >= 0");
+}
+
 void check_sensor_block(const SensorSettings& s, const At& at) {
     check_pulse(s.pulse, at.key("pulse"));
     const At exposure = at.key("exposure");
@@ -242,7 +281,10 @@ void check_sensor_block(const SensorSettings& s, const At& at) {
         case ExposureType::Gates: check_gates(s.exposure, exposure); break;
         case ExposureType::Windows: check_windows(s.exposure, exposure); break;
         case ExposureType::Amcw: check_amcw(s.exposure, exposure); break;
-        case ExposureType::Spad: check_spad(s.exposure, exposure); break;
+        case ExposureType::Spad:
+            check_spad(s.exposure, exposure);
+            check_spad_detector(s.exposure, exposure);
+            break;
     }
     const At noise = at.key("noise");
     if (s.exposure.type == ExposureType::Spad && s.noise.sigma != 0.0)
@@ -271,8 +313,10 @@ void check_sensor_against_time(const SensorSettings& s, const TimeAxis& time, co
                         pulse.key("file"));
             break;
     }
-    if (s.exposure.type == ExposureType::Spad)
+    if (s.exposure.type == ExposureType::Spad) {
         check_reach(kGaussianReach * s.exposure.jitter_fwhm / kFwhmPerSigma, at.key("exposure").key("jitter_fwhm"));
+        check_reach(jitter_reach(s.exposure), at.key("exposure").key("jitter_tail").key("time_constant"));
+    }
     if (s.exposure.type != ExposureType::Gates && s.exposure.type != ExposureType::Windows) return;
     const TimeKernel k = pulse_kernel(s.pulse, time.bin_width);
     const double reach_lo = time.start + k.first * k.step;
@@ -284,6 +328,28 @@ void check_sensor_against_time(const SensorSettings& s, const TimeAxis& time, co
        << " lies outside the render's time window [" << time.start << ", "
        << time.start + time.bins * time.bin_width << ") and the pulse's reach: it would measure nothing";
     at.key("exposure").fail(os.str());
+}
+
+// A capture's grids must be real grids; whether their points lie on a surface is the capture stage's
+// question (imaging/capture_points.h), which needs the patches.
+void check_grid(const CaptureGrid& g, const At& at) {
+    check_rectangle({g.origin, g.u, g.v}, at);
+    positive(g.nu, at.key("nu"));
+    positive(g.nv, at.key("nv"));
+    // Beyond this a capture's H alone would not fit any memory: 2^24 points per grid (4096 x 4096).
+    constexpr std::size_t kMaxGridPoints = std::size_t(1) << 24;
+    if (g.size() > kMaxGridPoints) at.fail("has " + std::to_string(g.size()) + " points; at most 16,777,216 (4096 x 4096)");
+}
+
+void check_capture(const Capture& c, const At& at) {
+    finite3(c.laser_position, at.key("laser").key("position"));
+    non_negative(c.laser_power, at.key("laser").key("power"));
+    finite3(c.sensor_position, at.key("sensor").key("position"));
+    const bool exhaustive = c.type == CaptureType::Exhaustive;
+    check_grid(c.laser_grid, at.key(c.laser_grid_key));
+    if (exhaustive) check_grid(c.sensor_grid, at.key(c.sensor_grid_key));
+    if (c.max_bounces < -1 || c.max_bounces == 0 || c.max_bounces == 1)
+        at.key("max_bounces").fail("must be >= 2 (3: laser spot -> hidden surface -> sensor point), or null for every bounce");
 }
 
 void check_objects(const Scene& scene, const At& root) {
@@ -327,6 +393,7 @@ void validate(const Scene& scene) {
     for (std::size_t i = 0; i < scene.lights.size(); ++i) check_light(scene.lights[i], lights.index(i));
     check_objects(scene, root);
     check_settings(scene, root);
+    if (scene.capture) check_capture(*scene.capture, At{scene.file, scene.capture->json_path});
     if (!scene.sensor) return;
     const SensorSettings& s = *scene.sensor;
     const At sensor{s.file.empty() ? scene.file : s.file, s.json_path.empty() ? "sensor" : s.json_path};

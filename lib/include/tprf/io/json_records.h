@@ -26,13 +26,27 @@ struct PhaseSeconds {
     double illumination = 0;  ///< the part of `gather` that lights the patches (illuminate())
 };
 
+/// What render.json records of a capture (docs/capture.md).
+struct CaptureRecord {
+    std::string type;                 ///< "confocal" or "exhaustive"
+    std::size_t laser_points = 0;
+    std::size_t sensor_points = 0;
+    bool solved = false;              ///< later bounces marched
+    int batch = 0;                    ///< illuminations per march
+    int marches = 0;
+    std::size_t view_pairs = 0;       ///< (wall point, patch) pairs seen
+    std::uint64_t link_bin_updates = 0;
+    double seconds_views = 0.0, seconds_solve = 0.0, seconds_gather = 0.0;
+};
+
 /// Everything render.json records.
 struct RenderRecord {
     std::filesystem::path scene_file;
     std::size_t patches = 0;
     std::size_t links = 0;
     TimeAxis time;
-    Camera camera;
+    std::optional<Camera> camera;         ///< absent for a capture without a camera
+    std::optional<CaptureRecord> capture; ///< the scene's capture, if it has one
     SolverSettings solver;
     int bounce_terms = 0;
     SolveStats stats;

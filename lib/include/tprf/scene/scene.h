@@ -92,6 +92,45 @@ struct LinkSettings {
     double time_bins = 4.0;
 };
 
+/// A grid of points on a relay surface (SPEC.md v2, "Capture"): point (a, b) is
+/// origin + (a + 0.5) / nu * u + (b + 0.5) / nv * v, for a in [0, nu) and b in [0, nv).
+struct CaptureGrid {
+    Vec3 origin = Vec3::Zero();     ///< metres
+    Vec3 u = Vec3::UnitX();         ///< metres, non-zero
+    Vec3 v = Vec3::UnitZ();         ///< metres, non-zero, not parallel to u
+    int nu = 0;                     ///< points along u, > 0
+    int nv = 0;                     ///< points along v, > 0
+
+    /// Grid point (a, b), metres.
+    Vec3 point(int a, int b) const { return origin + (a + 0.5) / nu * u + (b + 0.5) / nv * v; }
+    std::size_t size() const { return std::size_t(nu) * std::size_t(nv); }
+};
+
+/// How the laser and the sensor points are paired.
+enum class CaptureType {
+    Confocal,    ///< laser and sensor aim at the same grid point
+    Exhaustive,  ///< every laser point of `laser_grid` with every sensor point of `sensor_grid`
+};
+
+/// The optional `capture` block: an NLOS scan of a relay wall (SPEC.md v2, "Capture"; docs/capture.md).
+struct Capture {
+    CaptureType type = CaptureType::Confocal;
+    Vec3 laser_position = Vec3::Zero();    ///< the laser device, metres; in front of the wall, in no object
+    Rgb laser_power = Rgb::Ones();         ///< W per channel, >= 0
+    Vec3 sensor_position = Vec3::Zero();   ///< the sensor device, metres
+    /// Laser points (`grid`; for an exhaustive capture with only `sensor_grid`, that grid). Confocal:
+    /// also the sensor points.
+    CaptureGrid laser_grid;
+    /// Sensor points (`sensor_grid`, or `grid` when it is absent); confocal: the laser grid.
+    CaptureGrid sensor_grid;
+    bool account_first_and_last_bounces = false;  ///< device legs in the time (false: the NLOS convention)
+    int max_bounces = -1;                  ///< -1: all; >= 2 (3: laser spot -> hidden surface -> sensor point)
+    std::string json_path = "capture";     ///< for error messages
+    /// The keys the grids came from ("grid" or "sensor_grid"), for error messages.
+    std::string laser_grid_key = "grid";
+    std::string sensor_grid_key = "grid";
+};
+
 /// A scene. Whatever builds one (a parser, a test, a binding) calls validate() (scene/validate.h)
 /// before handing it to a later stage; each field's comment says what validate() requires, and every
 /// number must be finite. Messages name the scene file's JSON paths: `time`, `camera`, `lights[i]`,
@@ -106,6 +145,7 @@ struct Scene {
     SolverSettings solver;
     LinkSettings links;
     std::optional<SensorSettings> sensor;  ///< the optional `sensor` block (named "sensor" when its json_path is "")
+    std::optional<Capture> capture;        ///< the optional `capture` block; a scene without one needs a camera
 };
 
 }  // namespace tprf

@@ -1,0 +1,72 @@
+#pragma once
+/// The sensing points of an NLOS capture (SPEC.md v2, "Capture"; docs/capture.md): the grid points on
+/// the relay wall as their devices see them, and what a wall point sees of every patch.
+///
+/// A wall point is both a laser spot (a Lambertian point that sends on what the laser deposits) and a
+/// sensor point (it measures the radiance leaving it toward the sensor). Both directions use one
+/// description of the light between the point and a patch, a PatchView: the kernel cos cos / r^2 and
+/// the exact path at stratified samples of the patch, from arrive() (transport/light_sources.h), the
+/// function that times every other point source's light. So the light that leaves laser point l, is
+/// reflected by patch j and reaches sensor point s is summed over the same samples from both ends,
+/// which makes exhaustive captures reciprocal, and every sample's path is exact, which makes the
+/// onsets exact to the bin.
+
+#include "tprf/core/types.h"
+#include "tprf/transport/light_sources.h"
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace tprf {
+
+struct Scene;
+struct PatchSet;
+class Visibility;
+struct CaptureGrid;
+
+/// A grid point on the relay wall.
+struct WallPoint {
+    Vec3 point = Vec3::Zero();     ///< on the surface, metres
+    Vec3 normal = Vec3::UnitZ();   ///< unit front normal of the surface there (toward its device)
+    std::uint32_t patch = 0;       ///< the patch it lies on
+    double device_leg = 0.0;       ///< metres from the device (laser or sensor) to the point
+};
+
+/// Both grids of a capture, each point (a, b) at index a * nv + b.
+struct CapturePoints {
+    std::vector<WallPoint> laser;   ///< the laser grid
+    std::vector<WallPoint> sensor;  ///< the sensor grid (a confocal capture: the laser grid)
+};
+
+/// Finds every grid point of scene.capture on the front of the surface that its device sees. Throws
+/// Error naming the scene file, the grid's JSON path and the point when a point lies on no surface,
+/// is hidden from its device, or is seen from behind; or naming the device's position when the
+/// device is inside or behind an object.
+CapturePoints locate_capture_points(const Scene& scene, const PatchSet& patches, const Visibility& visibility);
+
+/// Stratified samples per patch side that a PatchView takes (2 x 2 samples).
+inline constexpr int kViewSide = 2;
+inline constexpr int kViewSamples = kViewSide * kViewSide;
+
+/// What a wall point sees of one patch: at each stratified sample y of the patch, the kernel
+/// g = V cos(at the wall) cos(at y) / |y - x|^2 (m^-2, 0 where hidden or behind) and the path |y - x|.
+struct PatchView {
+    std::uint32_t patch = 0;
+    std::array<float, kViewSamples> path{};  ///< metres
+    std::array<float, kViewSamples> g{};     ///< m^-2
+};
+
+/// The point source that wall point w is when a laser of `power` (W per channel) lights it: radiant
+/// intensity albedo P cos / pi about its normal (the v1 laser model), its light leaving at `path`.
+PointSource wall_source(const WallPoint& w, const Rgb& power, double path, const PatchSet& patches,
+                        const Visibility& visibility);
+
+/// Every patch that wall point w sees (some sample with g > 0), in increasing patch order.
+std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility);
+
+/// The sensor cell of `grid` (index a * nv + b) that holds x, or -1 when x is off the grid's plane (by
+/// more than `tolerance` metres) or outside it.
+std::int64_t grid_cell(const CaptureGrid& grid, const Vec3& x, double tolerance);
+
+}  // namespace tprf

@@ -1,0 +1,64 @@
+#pragma once
+/// The NLOS capture (SPEC.md v2, "Capture"; docs/capture.md): H[t, laser point, sensor point] of a
+/// relay-wall scan, every illumination a laser spot on the wall, solved in batches that share one
+/// read of the links per block.
+///
+/// What reaches sensor point s from laser point l, by the number of surface reflections:
+/// 1. the spot itself, when it lies in s's grid cell: albedo P / (pi A_cell), the spot's exitance
+///    spread over the cell that the sensor point stands for;
+/// 2. the spot's light reaching s directly (zero on a planar wall);
+/// 3. spot -> patch j -> s, summed over stratified samples y of every patch that both see, each at its
+///    exact path |l - y| + |y - s| (imaging/capture_points.h): the onsets are exact to the bin;
+/// 4+. the solved patch profiles (all later bounces, the links' time march) less their first pulses,
+///    gathered at s with each patch's mean last leg.
+/// The device legs join every path when account_first_and_last_bounces is set.
+
+#include "tprf/core/progress.h"
+#include "tprf/imaging/capture_points.h"
+
+#include <cstddef>
+#include <vector>
+
+namespace tprf {
+
+struct Scene;
+struct PatchSet;
+struct LinkSet;
+class Visibility;
+
+/// Options of the capture.
+struct CaptureOptions {
+    int threads = 0;           ///< 0: all cores
+    /// Illuminations solved together (1..kMaxBatch, transport/solver.h); 0: chosen from memory_bytes.
+    int batch = 0;
+    std::size_t memory_bytes = 0;  ///< the memory the batch may use (0: no limit but kMaxBatch)
+    ProgressFn progress;       ///< phase "capture"
+};
+
+/// A capture's H and what it measured.
+struct CaptureResult {
+    CapturePoints points;
+    /// pairs x T, float: radiance (the mean of RGB) times seconds per bin, W s / (m^2 sr). Pair index:
+    /// the sensor point s for a confocal capture, l * sensor points + s for an exhaustive one.
+    std::vector<float> H;
+    std::size_t pairs = 0;
+    int bins = 0;
+    bool solved = false;             ///< later bounces marched (max_bounces null or >= 4)
+    int batch = 0;                   ///< illuminations per march
+    int marches = 0;                 ///< marches run
+    std::size_t view_pairs = 0;      ///< (sensor point, patch) pairs seen, summed over sensor points
+    std::uint64_t link_bin_updates = 0;  ///< links x bins x layers, summed over marches
+    double seconds_views = 0.0;      ///< locating points and viewing the patches from them
+    double seconds_solve = 0.0;      ///< the marches
+    double seconds_gather = 0.0;     ///< exact first bounces and the marched profiles gathered into H
+};
+
+/// Computes scene.capture over the built patches (and, when later bounces are asked for, `links`, which
+/// may otherwise be null). Throws Error for grid points that lie on no surface their device sees.
+CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const Visibility& visibility,
+                              const LinkSet* links, const CaptureOptions& options = {});
+
+/// Whether scene.capture needs the links (its bounces go beyond laser spot -> patch -> sensor point).
+bool capture_needs_links(const Scene& scene);
+
+}  // namespace tprf

@@ -1,0 +1,361 @@
+#include "tprf/pipeline/capture.h"
+
+#include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/scene/scene.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/link_set.h"
+#include "tprf/transport/solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <span>
+
+namespace tprf {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_from(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+double mean3(const Rgb& c) { return (c[0] + c[1] + c[2]) / 3.0; }
+
+// One sensor point's share of a patch's profile: radiance = weight . B_patch(t - leg), per colour.
+struct SensorTap {
+    std::uint32_t patch = 0;
+    Rgb weight = Rgb::Zero();  // albedo_s A_j / (pi^2 S) sum g, per colour (sr^-1)
+    double leg = 0.0;          // the g-weighted mean path from the patch to the point, metres
+};
+
+// Everything fixed for the whole capture.
+struct CapturePlan {
+    const Scene& scene;
+    const Capture& capture;
+    const PatchSet& patches;
+    const Visibility& visibility;
+    CapturePoints points;
+    bool confocal = true;
+    bool solve = false;
+    int max_bounces = -1;          // the capture's (sensor side)
+    std::size_t sensors = 0;       // sensor points
+    int T = 0;
+    double start = 0.0, inv_bin = 0.0;
+    double laser_leg(std::size_t l) const { return capture.account_first_and_last_bounces ? points.laser[l].device_leg : 0.0; }
+    double sensor_leg(std::size_t s) const {
+        return capture.account_first_and_last_bounces ? points.sensor[s].device_leg : 0.0;
+    }
+    bool keeps(int order) const { return max_bounces < 0 || order <= max_bounces; }
+    // The sensor points that laser point l is measured at, as pair indices and sensor indices.
+    std::size_t first_pair(std::size_t l) const { return confocal ? l : l * sensors; }
+    std::size_t pair_count() const { return confocal ? 1 : sensors; }
+    std::size_t sensor_of(std::size_t l, std::size_t k) const { return confocal ? l : k; }
+    std::int64_t bin(double path) const { return std::int64_t(std::floor((path - start) * inv_bin)); }
+};
+
+void deposit(std::vector<float>& H, const CapturePlan& p, std::size_t pair, double path, double value) {
+    const std::int64_t b = p.bin(path);
+    if (b < 0 || b >= p.T || value == 0.0) return;
+    H[pair * std::size_t(p.T) + std::size_t(b)] += float(value);
+}
+
+// Orders 1 and 2: the spot itself where sensor point s's cell holds it, and the spot's light reaching
+// s straight (a relay surface that is not planar).
+void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair, std::vector<float>& H) {
+    const WallPoint& laser = p.points.laser[l];
+    const WallPoint& sensor = p.points.sensor[s];
+    const Rgb spot = p.patches.albedo[laser.patch] * p.capture.laser_power;  // W leaving the spot
+    const CaptureGrid& g = p.capture.sensor_grid;
+    const double tolerance = 10.0 * p.visibility.epsilon();
+    if (p.keeps(1) && grid_cell(g, laser.point, tolerance) == std::int64_t(s)) {
+        const double cell = g.u.cross(g.v).norm() / double(g.size());
+        deposit(H, p, pair, p.laser_leg(l) + p.sensor_leg(s), mean3(spot) / (M_PI * cell));
+    }
+    if (!p.keeps(2)) return;
+    const PointSource source = wall_source(laser, p.capture.laser_power, p.laser_leg(l), p.patches, p.visibility);
+    PointArrival a;
+    if (!arrive(source, sensor.point, sensor.normal, p.visibility, a)) return;
+    const Rgb radiance = p.patches.albedo[sensor.patch] * a.intensity * a.cos_over_r2 / M_PI;
+    deposit(H, p, pair, a.path + p.sensor_leg(s), mean3(radiance));
+}
+
+// Order 3: spot -> patch j -> sensor point, over the samples that both ends see, each at its own path.
+// Views are in patch order, so the patches both see are found by one merge.
+void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair,
+                      const std::vector<PatchView>& from_laser, const std::vector<PatchView>& from_sensor,
+                      std::vector<float>& H) {
+    if (!p.keeps(3)) return;
+    const Rgb ends = p.patches.albedo[p.points.laser[l].patch] * p.capture.laser_power *
+                     p.patches.albedo[p.points.sensor[s].patch] / (M_PI * M_PI * M_PI * kViewSamples);
+    const double legs = p.laser_leg(l) + p.sensor_leg(s);
+    auto a = from_laser.begin(), b = from_sensor.begin();
+    while (a != from_laser.end() && b != from_sensor.end()) {
+        if (a->patch < b->patch) {
+            ++a;
+            continue;
+        }
+        if (b->patch < a->patch) {
+            ++b;
+            continue;
+        }
+        const std::uint32_t j = a->patch;
+        const double scale = mean3(ends * p.patches.albedo[j]) * p.patches.area[j];
+        for (int k = 0; k < kViewSamples; ++k) {
+            const double g = double(a->g[std::size_t(k)]) * double(b->g[std::size_t(k)]);
+            if (g > 0.0) deposit(H, p, pair, legs + double(a->path[std::size_t(k)]) + double(b->path[std::size_t(k)]),
+                                 scale * g);
+        }
+        ++a;
+        ++b;
+    }
+}
+
+// The g-weighted mean path from a wall point to a patch, and the sum of g: what the solved part of a
+// capture uses at both ends (the spot's pulse into the patch, the sensor point's tap on it), so that
+// exchanging laser and sensor points exchanges identical pieces.
+struct MeanView {
+    double sum = 0.0;
+    double path = 0.0;
+};
+
+MeanView mean_view(const PatchView& v) {
+    MeanView m;
+    double moment = 0.0;
+    for (int k = 0; k < kViewSamples; ++k) {
+        m.sum += double(v.g[std::size_t(k)]);
+        moment += double(v.g[std::size_t(k)]) * double(v.path[std::size_t(k)]);
+    }
+    if (m.sum > 0.0) m.path = moment / m.sum;
+    return m;
+}
+
+// The pulses that laser point l's spot sends into the patch system for the march (CSR by patch): each
+// patch's first-bounce exitance at its mean path, split between the two bins about it as the taps
+// split their legs. The gather takes these pulses out of the solved profiles again (their light is
+// add_third_bounce's, exact per sample); they only feed the later bounces.
+Illumination spot_illumination(const CapturePlan& p, std::size_t l, const std::vector<PatchView>& views) {
+    const WallPoint& laser = p.points.laser[l];
+    const Rgb spot = p.patches.albedo[laser.patch] * p.capture.laser_power / (M_PI * kViewSamples);
+    const double bin_width = 1.0 / p.inv_bin;
+    Illumination out;
+    out.row.assign(p.patches.size() + 1, 0);
+    for (const PatchView& v : views) {
+        const MeanView m = mean_view(v);
+        if (!(m.sum > 0.0)) continue;
+        const double at = (p.laser_leg(l) + m.path - p.start) * p.inv_bin;
+        const double whole = std::floor(at), f = at - whole;
+        for (int side = 0; side < 2; ++side) {
+            const double share = side == 0 ? 1.0 - f : f;
+            if (!(share > 0.0)) continue;
+            Pulse pulse;
+            pulse.path = p.start + (whole + side + 0.5) * bin_width;  // the middle of its bin
+            pulse.energy = p.patches.albedo[v.patch] * spot * (m.sum * share);
+            pulse.order = 2;
+            pulse.point_source = 0;
+            out.pulses.push_back(pulse);
+            ++out.row[v.patch + 1];
+        }
+    }
+    for (std::size_t i = 0; i < p.patches.size(); ++i) out.row[i + 1] += out.row[i];
+    return out;
+}
+
+std::vector<SensorTap> sensor_taps(const CapturePlan& p, std::size_t s, const std::vector<PatchView>& views) {
+    const Rgb albedo = p.patches.albedo[p.points.sensor[s].patch] / (M_PI * M_PI * kViewSamples);
+    std::vector<SensorTap> taps;
+    taps.reserve(views.size());
+    for (const PatchView& v : views) {
+        const MeanView m = mean_view(v);
+        if (!(m.sum > 0.0)) continue;
+        taps.push_back({v.patch, albedo * p.patches.area[v.patch] * m.sum, m.path + p.sensor_leg(s)});
+    }
+    return taps;
+}
+
+// The views of a set of wall points, in parallel.
+std::vector<std::vector<PatchView>> view_all(const CapturePlan& p, const std::vector<WallPoint>& points, std::size_t from,
+                                             std::size_t to, int threads) {
+    std::vector<std::vector<PatchView>> views(to - from);
+    parallel_for(to - from, {threads, 1, true},
+                 [&](std::size_t k) { views[k] = view_patches(points[from + k], p.patches, p.visibility); });
+    return views;
+}
+
+// The light of laser point l that needs no march (orders 1 to 3) at every sensor point it is paired with.
+void add_exact(const CapturePlan& p, std::size_t l, const std::vector<PatchView>& laser_views,
+               const std::vector<std::vector<PatchView>>& sensor_views, std::vector<float>& H) {
+    for (std::size_t k = 0; k < p.pair_count(); ++k) {
+        const std::size_t s = p.sensor_of(l, k), pair = p.first_pair(l) + k;
+        add_spot_light(p, l, s, pair, H);
+        add_third_bounce(p, l, s, pair, laser_views, p.confocal ? laser_views : sensor_views[s], H);
+    }
+}
+
+// One laser point's profiles of a solved block, less its exact pulses, at its sensor points: each tap
+// shifts its patch's profile by its leg, split between two bins (or rounded, with solver.delay nearest).
+class CaptureFilm {
+public:
+    CaptureFilm(const CapturePlan& p, std::vector<float>& H) : m_plan(p), m_H(H) {}
+
+    void add(const SolveBlock& block, std::size_t lane, std::size_t l, const Illumination& pulses,
+             const std::vector<std::vector<SensorTap>>& taps_by_pair, std::vector<float>& indirect) const {
+        const std::size_t n = block.patches, bins = std::size_t(block.bins), K = std::size_t(block.illuminations);
+        indirect.resize(n * bins * 3);
+        for (std::size_t j = 0; j < n; ++j)
+            for (std::size_t b = 0; b < bins; ++b)
+                for (std::size_t c = 0; c < 3; ++c)
+                    indirect[(j * bins + b) * 3 + c] = block.radiosity[((j * bins + b) * K + lane) * 3 + c];
+        for (std::size_t j = 0; j < n; ++j)
+            for (std::uint64_t k = pulses.row[j]; k < pulses.row[j + 1]; ++k) {
+                const Pulse& pulse = pulses.pulses[k];
+                const std::int64_t b = m_plan.bin(pulse.path) - block.first_bin;
+                if (b < 0 || b >= std::int64_t(bins)) continue;
+                float* v = indirect.data() + (j * bins + std::size_t(b)) * 3;
+                // What is left is the light of later orders; float cancellation must not make it negative.
+                for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(pulse.energy[c]));
+            }
+        for (std::size_t k = 0; k < m_plan.pair_count(); ++k)
+            for (const SensorTap& tap : taps_by_pair[k]) add_tap(tap, m_plan.first_pair(l) + k, block.first_bin, bins, indirect);
+    }
+
+private:
+    void add_tap(const SensorTap& tap, std::size_t pair, int first_bin, std::size_t bins,
+                 const std::vector<float>& indirect) const {
+        const double lag = tap.leg * m_plan.inv_bin;
+        const bool nearest = m_plan.scene.solver.delay == DelayMode::Nearest;
+        const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
+        const float f = nearest ? 0.0f : float(lag - double(whole));
+        const float w[3] = {float(tap.weight[0] / 3.0), float(tap.weight[1] / 3.0), float(tap.weight[2] / 3.0)};
+        const float* in = indirect.data() + std::size_t(tap.patch) * bins * 3;
+        float* out = m_H.data() + pair * std::size_t(m_plan.T);
+        for (std::size_t b = 0; b < bins; ++b) {
+            const float v = w[0] * in[b * 3] + w[1] * in[b * 3 + 1] + w[2] * in[b * 3 + 2];
+            if (v == 0.0f) continue;
+            const std::int64_t t = first_bin + std::int64_t(b) + whole;
+            if (t >= 0 && t < m_plan.T) out[t] += (1.0f - f) * v;
+            if (t + 1 >= 0 && t + 1 < m_plan.T) out[t + 1] += f * v;
+        }
+    }
+
+    const CapturePlan& m_plan;
+    std::vector<float>& m_H;
+};
+
+CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
+    CapturePlan p{scene, *scene.capture, patches, visibility, locate_capture_points(scene, patches, visibility)};
+    p.confocal = p.capture.type == CaptureType::Confocal;
+    p.max_bounces = p.capture.max_bounces;
+    p.solve = capture_needs_links(scene);
+    p.sensors = p.points.sensor.size();
+    p.T = scene.time.bins;
+    p.start = scene.time.start_m();
+    p.inv_bin = 1.0 / scene.time.bin_width_m();
+    return p;
+}
+
+// Laser points [l0, l1) solved together: their spots' pulses march through the links in one batch, and
+// every block is filmed at their sensor points.
+void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std::size_t l1,
+                 const std::vector<std::vector<PatchView>>& laser_views,
+                 const std::vector<std::vector<SensorTap>>& sensor_taps_all, const CaptureOptions& options,
+                 CaptureResult& result) {
+    const std::size_t K = l1 - l0;
+    std::vector<Illumination> illuminations(K);
+    std::vector<std::vector<std::vector<SensorTap>>> taps(K);
+    parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
+        illuminations[k] = spot_illumination(p, l0 + k, laser_views[k]);
+        if (p.confocal) taps[k] = {sensor_taps(p, l0 + k, laser_views[k])};
+    });
+    std::vector<const Illumination*> batch;
+    for (const Illumination& i : illuminations) batch.push_back(&i);
+    SolverOptions solver;
+    solver.delay = p.scene.solver.delay;
+    solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;  // patch orders: one less than the sensor's
+    solver.threads = options.threads;
+    const CaptureFilm film(p, result.H);
+    double film_seconds = 0.0;
+    const auto start = Clock::now();
+    const SolveStats stats = solve_transient(p.patches, links, std::span<const Illumination* const>(batch), p.scene.time,
+                                             solver, [&](const SolveBlock& block) {
+        const auto t0 = Clock::now();
+        parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
+            thread_local std::vector<float> indirect;
+            film.add(block, k, l0 + k, illuminations[k], p.confocal ? taps[k] : sensor_taps_all, indirect);
+        });
+        film_seconds += seconds_from(t0);
+    });
+    result.seconds_solve += seconds_from(start) - film_seconds;
+    result.seconds_gather += film_seconds;
+    result.link_bin_updates += stats.link_bin_updates;
+    ++result.marches;
+}
+
+// Illuminations per march: options.batch, or the most (up to kMaxBatch) whose march fits the memory
+// budget; the rings grow linearly with the batch (one lane per illumination and colour).
+int choose_batch(const CapturePlan& p, const LinkSet& links, const CaptureOptions& options) {
+    if (options.batch > 0) return std::min(options.batch, kMaxBatch);
+    if (options.memory_bytes == 0) return kMaxBatch;
+    bool grey = p.capture.laser_power[0] == p.capture.laser_power[1] && p.capture.laser_power[1] == p.capture.laser_power[2];
+    for (const Rgb& a : p.patches.albedo) grey = grey && a[0] == a[1] && a[1] == a[2];
+    SolverOptions solver;
+    solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;
+    const double one = double(solve_working_bytes(p.patches, links, p.scene.time, solver, 1, grey ? 1 : 3));
+    const double all = double(solve_working_bytes(p.patches, links, p.scene.time, solver, kMaxBatch, grey ? 1 : 3));
+    const double per_lane = std::max(0.0, (all - one) / (kMaxBatch - 1));
+    const double room = double(options.memory_bytes) - one;
+    if (room < 0.0)
+        throw Error("a capture's march needs about " + std::to_string(std::size_t(one / 1e6)) +
+                    " MB for one illumination, over the memory left (" +
+                    std::to_string(options.memory_bytes / 1000000) + " MB): raise --max-memory or patches.max_edge");
+    return per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
+}
+
+}  // namespace
+
+CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const Visibility& visibility,
+                              const LinkSet* links, const CaptureOptions& options) {
+    const auto start = Clock::now();
+    const CapturePlan p = make_plan(scene, patches, visibility);
+    CaptureResult result;
+    result.seconds_views = seconds_from(start);
+    result.pairs = p.confocal ? p.sensors : p.points.laser.size() * p.sensors;
+    result.bins = p.T;
+    result.solved = p.solve;
+    result.H.assign(result.pairs * std::size_t(p.T), 0.0f);
+    if (p.solve) TPRF_CHECK(links != nullptr);
+    // An exhaustive capture pairs every laser point with every sensor point: the sensor side is viewed once.
+    std::vector<std::vector<PatchView>> sensor_views;
+    std::vector<std::vector<SensorTap>> taps_all;
+    if (!p.confocal) {
+        sensor_views = view_all(p, p.points.sensor, 0, p.sensors, options.threads);
+        if (p.solve)
+            for (std::size_t s = 0; s < p.sensors; ++s) taps_all.push_back(sensor_taps(p, s, sensor_views[s]));
+    }
+    const std::size_t lasers = p.points.laser.size();
+    result.batch = p.solve ? int(std::min<std::size_t>(std::size_t(choose_batch(p, *links, options)), lasers)) : 0;
+    const std::size_t step = p.solve ? std::size_t(result.batch) : std::size_t(64);
+    for (std::size_t l0 = 0; l0 < lasers; l0 += step) {
+        const std::size_t l1 = std::min(lasers, l0 + step);
+        const auto t0 = Clock::now();
+        const std::vector<std::vector<PatchView>> laser_views = view_all(p, p.points.laser, l0, l1, options.threads);
+        result.seconds_views += seconds_from(t0);
+        const auto t1 = Clock::now();
+        parallel_for(l1 - l0, {options.threads, 1, true},
+                     [&](std::size_t k) { add_exact(p, l0 + k, laser_views[k], sensor_views, result.H); });
+        for (std::size_t k = 0; k < l1 - l0 && p.confocal; ++k) result.view_pairs += laser_views[k].size();
+        result.seconds_gather += seconds_from(t1);
+        if (p.solve) solve_batch(p, *links, l0, l1, laser_views, taps_all, options, result);
+        if (options.progress) options.progress("capture", double(l1) / double(lasers));
+    }
+    for (const auto& v : sensor_views) result.view_pairs += v.size();
+    result.points = p.points;
+    return result;
+}
+
+bool capture_needs_links(const Scene& scene) {
+    return scene.capture && (scene.capture->max_bounces < 0 || scene.capture->max_bounces >= 4);
+}
+
+}  // namespace tprf

@@ -1,0 +1,26 @@
+#pragma once
+// Private to the pipeline: what `tprf render` writes for a scene's capture block (capture.hdf5,
+// capture.npy, and the sensor's measurements of the capture when the scene has no camera).
+
+#include "staging.h"
+#include "tprf/io/json_records.h"
+#include "tprf/pipeline/render.h"
+
+namespace tprf {
+
+struct Scene;
+struct PatchSet;
+struct LinkSet;
+class Visibility;
+
+/// The render flags that need a camera (frames, streaks, video, patch profiles, a plot pixel) are bad
+/// flags for a scene that has only a capture.
+void check_capture_flags(const RenderOptions& options);
+
+/// Computes the scene's capture (pipeline/capture.h) and stages its outputs; adds its seconds to
+/// report.seconds. `links` may be null when the capture needs none (capture_needs_links).
+CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
+                             const Visibility& visibility, const LinkSet* links, Staging& staging,
+                             RenderReport& report);
+
+}  // namespace tprf

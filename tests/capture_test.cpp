@@ -1,0 +1,272 @@
+// NLOS captures (pipeline/capture.h): onsets from geometry, the third bounce of a small patch against
+// its closed form, reciprocity of exhaustive scans, batches against single marches, and bad blocks.
+
+#include "test_process.h"
+#include "test_scenes.h"
+
+#include "tprf/core/error.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/pipeline/capture.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/transport/link_set.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+
+namespace tprf {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A 2 m relay wall in the plane z = 0, its front toward +z.
+const char* kWall = R"({"type": "rectangle", "origin": [-1, -1, 0], "u": [2, 0, 0], "v": [0, 2, 0], "albedo": 0.8})";
+// A hidden plane z = 0.6 + 0.2 x over the wall, its front toward the wall.
+const char* kTiltedPlane =
+    R"({"type": "rectangle", "origin": [-1, -1, 0.4], "u": [0, 2, 0], "v": [2, 0, 0.4], "albedo": 0.5})";
+
+std::string scene_text(const std::string& objects, const std::string& capture, const std::string& time,
+                       double max_edge = 0.05, const std::string& links = R"({"method": "flat"})") {
+    return R"({"time": )" + time + R"(, "objects": [)" + objects + R"(], "patches": {"max_edge": )" +
+           std::to_string(max_edge) + R"(}, "links": )" + links + R"(, "capture": )" + capture + "}";
+}
+
+// The built stages a capture needs.
+struct Built {
+    Scene scene;
+    PatchSet patches;
+    std::unique_ptr<Visibility> visibility;
+    LinkSet links;
+
+    explicit Built(const std::string& text) : scene(parse_scene(text, "capture_test.json")) {
+        patches = build_patches(scene);
+        visibility = std::make_unique<Visibility>(patches);
+        if (capture_needs_links(scene)) links = make_link_set(patches, *visibility, scene.links, scene.time.bin_width_m());
+    }
+    CaptureResult capture(int batch = 0) const {
+        CaptureOptions options;
+        options.batch = batch;
+        return compute_capture(scene, patches, *visibility, capture_needs_links(scene) ? &links : nullptr, options);
+    }
+};
+
+double plane_distance(const Vec3& x) {
+    // The plane through (-1, -1, 0.4) with normal (0.8, 0, -4) (u x v of kTiltedPlane).
+    const Vec3 n = Vec3(0.8, 0.0, -4.0).normalized();
+    return std::abs(n.dot(x - Vec3(-1, -1, 0.4)));
+}
+
+// Confocal onsets: the first light after the spot (bin 0) reaches every sensor point at twice its distance
+// to the hidden plane (plus both device legs when they are accounted), to the bin. The samples that time
+// the third bounce lie within sqrt(2) h / 4 of any point of their patch (h = max_edge, 2 x 2 samples), so
+// the shortest sampled path exceeds 2d by at most h^2 / (8 d) (the path is stationary at the foot of the
+// perpendicular): the onset may be one bin late only where 2d lies that close below a bin's end.
+void check_confocal_onsets(bool account) {
+    const std::string capture = std::string(R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]}, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0],
+        "v": [0, 1, 0], "nu": 8, "nv": 8}, "max_bounces": 3, "account_first_and_last_bounces": )") +
+                                (account ? "true" : "false") + "}";
+    const Built b(scene_text(std::string(kWall) + "," + kTiltedPlane, capture,
+                             R"({"bins": 700, "bin_width": 0.01})"));
+    const CaptureResult r = b.capture();
+    ASSERT_EQ(r.pairs, 64u);
+    EXPECT_FALSE(r.solved);
+    const double h = 0.05, bw = 0.01;
+    const Vec3 device(0, -1.5, 0.3);
+    for (std::size_t s = 0; s < r.pairs; ++s) {
+        const Vec3 x = r.points.sensor[s].point;
+        const double legs = account ? 2.0 * (device - x).norm() : 0.0;
+        const double d = plane_distance(x);
+        const std::size_t lo = std::size_t(std::floor((2 * d + legs) / bw));
+        const std::size_t hi = std::size_t(std::floor((2 * d + legs + h * h / (8 * d)) / bw));
+        const std::size_t spot = std::size_t(std::floor(legs / bw));
+        const float* H = r.H.data() + s * std::size_t(r.bins);
+        // The spot itself: albedo P / (pi A_cell), A_cell = 1/64 m^2.
+        EXPECT_NEAR(H[spot], 0.8 * 64 / M_PI, 1e-5 * 0.8 * 64 / M_PI) << "point " << s;
+        std::size_t onset = spot + 1;
+        while (onset < std::size_t(r.bins) && H[onset] == 0.0f) ++onset;
+        EXPECT_GE(onset, lo) << "point " << s << " d " << d;
+        EXPECT_LE(onset, hi) << "point " << s << " d " << d;
+    }
+}
+
+TEST(Capture, ConfocalOnsetsAreTwiceTheDistanceToTheHiddenPlane) { check_confocal_onsets(false); }
+
+TEST(Capture, ConfocalOnsetsAddTheDeviceLegsWhenAccounted) { check_confocal_onsets(true); }
+
+// One small hidden patch (2 cm, one patch) above the wall, laser point l and sensor point s apart: the
+// third bounce is albedo_l albedo_j albedo_s P A / pi^3 cos_l cos_j / r_l^2 cos_j' cos_s / r_s^2. The
+// 2 x 2 samples integrate a kernel that varies by (a / r)^2 ~ 1e-3 across the patch: 1% holds easily.
+TEST(Capture, ThirdBounceOfASmallPatchMatchesTheClosedForm) {
+    const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0.5, -1.5, 0.3]},
+        "grid": {"origin": [-0.305, -0.005, 0], "u": [0.01, 0, 0], "v": [0, 0.01, 0], "nu": 1, "nv": 1},
+        "sensor_grid": {"origin": [0.195, -0.005, 0], "u": [0.01, 0, 0], "v": [0, 0.01, 0], "nu": 1, "nv": 1},
+        "max_bounces": 3})";
+    const char* patch =
+        R"({"type": "rectangle", "origin": [-0.01, -0.01, 0.5], "u": [0, 0.02, 0], "v": [0.02, 0, 0], "albedo": 0.5})";
+    const Built b(scene_text(std::string(kWall) + "," + patch, capture, R"({"bins": 300, "bin_width": 0.01})"));
+    const CaptureResult r = b.capture();
+    ASSERT_EQ(r.pairs, 1u);
+    double total = 0.0;
+    for (float v : r.H) total += v;
+    const double D = 0.5, rl2 = 0.3 * 0.3 + D * D, rs2 = 0.2 * 0.2 + D * D;
+    const double expected = 0.8 * 0.5 * 0.8 * 1.0 * 0.02 * 0.02 / (M_PI * M_PI * M_PI) * (D * D / (rl2 * rl2)) *
+                            (D * D / (rs2 * rs2));
+    MEASURED("third bounce %.9g expected %.9g (%.2e)\n", total, expected, total / expected - 1);
+    EXPECT_NEAR(total, expected, 0.01 * expected);
+    // All of it near the path l -> patch -> s (the patch's samples span a few millimetres of path).
+    const double path = std::sqrt(rl2) + std::sqrt(rs2);
+    for (int t = 0; t < r.bins; ++t) {
+        if (r.H[std::size_t(t)] == 0.0f) continue;
+        EXPECT_NEAR((t + 0.5) * 0.01, path, 0.02) << "bin " << t;
+    }
+}
+
+// A hidden corner (the tilted plane and a wall standing on it), every bounce marched.
+std::string corner_scene(const std::string& extra_capture = "") {
+    const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]},
+        "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 3, "nv": 3})" +
+                                extra_capture + "}";
+    const char* plane =
+        R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
+    const char* side =
+        R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
+    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, R"({"bins": 150, "bin_width": 0.02})",
+                      0.1);
+}
+
+// Helmholtz reciprocity: with the laser and the sensor at one position and one grid, H[l, s] = H[s, l] at
+// every bin. The exact bounces are sums of the same sample products; the marched ones exchange identical
+// pieces (flat links are reciprocal, A_i F_ij = A_j F_ji); what differs is float rounding and the same-bin
+// iteration's stopping point (1e-7 of the largest value): 1e-6 of the largest off-diagonal value.
+TEST(Capture, ExhaustiveCapturesAreReciprocal) {
+    const Built b(corner_scene());
+    const CaptureResult r = b.capture();
+    ASSERT_TRUE(r.solved);
+    const std::size_t n = 9, T = std::size_t(r.bins);
+    ASSERT_EQ(r.pairs, n * n);
+    double largest = 0.0;
+    for (std::size_t l = 0; l < n; ++l)
+        for (std::size_t s = 0; s < n; ++s)
+            if (l != s)
+                for (std::size_t t = 0; t < T; ++t) largest = std::max(largest, double(r.H[(l * n + s) * T + t]));
+    ASSERT_GT(largest, 0.0);
+    double worst = 0.0;
+    for (std::size_t l = 0; l < n; ++l)
+        for (std::size_t s = l + 1; s < n; ++s)
+            for (std::size_t t = 0; t < T; ++t)
+                worst = std::max(worst, std::abs(double(r.H[(l * n + s) * T + t]) - double(r.H[(s * n + l) * T + t])));
+    MEASURED("reciprocity: worst %.3g of largest %.3g\n", worst, largest);
+    EXPECT_LE(worst, 1e-6 * largest);
+}
+
+// The later bounces matter (the hidden corner sends light between its faces) and a batch of
+// illuminations gives what one march per illumination gives.
+TEST(Capture, BatchedMarchesMatchSingleOnes) {
+    const Built b(corner_scene());
+    const CaptureResult batched = b.capture(0), single = b.capture(1);
+    EXPECT_EQ(single.marches, 9);
+    EXPECT_LT(batched.marches, 9);
+    double largest = 0.0, worst = 0.0;
+    for (std::size_t k = 0; k < batched.H.size(); ++k) {
+        largest = std::max(largest, double(single.H[k]));
+        worst = std::max(worst, std::abs(double(batched.H[k]) - double(single.H[k])));
+    }
+    EXPECT_LE(worst, 1e-6 * largest);
+    // Bounces beyond the third add light after the third bounce's onset.
+    const Built third(corner_scene(R"(, "max_bounces": 3)"));
+    const CaptureResult r3 = third.capture();
+    double all = 0.0, only3 = 0.0;
+    for (std::size_t k = 0; k < r3.H.size(); ++k) {
+        all += batched.H[k];
+        only3 += r3.H[k];
+    }
+    EXPECT_GT(all, only3 * 1.001);
+}
+
+// Bad capture blocks: one line naming the file and the JSON path, exit status 2, nothing written.
+class CaptureCli : public ::testing::Test {
+protected:
+    void SetUp() override {
+        m_dir = fs::temp_directory_path() / ("tprf_capture_" + std::to_string(std::random_device{}()));
+        fs::create_directories(m_dir);
+    }
+    void TearDown() override { fs::remove_all(m_dir); }
+    std::string scene(const std::string& capture, const std::string& objects = std::string(kWall) + "," +
+                                                                               kTiltedPlane) {
+        const fs::path file = m_dir / "scene.json";
+        std::ofstream(file) << scene_text(objects, capture, R"({"bins": 100, "bin_width": 0.02})", 0.2);
+        return file.string();
+    }
+    void expect_refused(const std::string& capture, const std::string& path, const std::string& words) {
+        const test::Outcome o = test::run_tprf("render " + scene(capture) + " -o " + (m_dir / "out").string());
+        EXPECT_EQ(o.status, 2) << o.err;
+        EXPECT_NE(o.err.find("scene.json: " + path + ": "), std::string::npos) << o.err;
+        EXPECT_NE(o.err.find(words), std::string::npos) << o.err;
+        EXPECT_FALSE(fs::exists(m_dir / "out" / "capture.hdf5"));
+    }
+    fs::path m_dir;
+};
+
+const std::string kDevices = R"("laser": {"position": [0, -1.5, 0.3]}, "sensor": {"position": [0, -1.5, 0.3]})";
+
+TEST_F(CaptureCli, GridPointOffEverySurfaceIsRefused) {
+    expect_refused(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0.2], "u": [1, 0, 0], "v": [0, 1, 0],
+        "nu": 4, "nv": 4}})", "capture.grid", "lies on no surface");
+}
+
+TEST_F(CaptureCli, ZeroPointsAlongAGridSideIsRefused) {
+    expect_refused(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0],
+        "nu": 0, "nv": 4}})", "capture.grid.nu", "must be > 0");
+}
+
+TEST_F(CaptureCli, ExhaustiveWithoutGridsIsRefused) {
+    expect_refused(R"({"type": "exhaustive", )" + kDevices + "}", "capture", "needs \"grid\"");
+}
+
+TEST_F(CaptureCli, DeviceBehindAnObjectIsRefused) {
+    // Above the hidden plane, whose front faces the wall: the laser meets its back first.
+    expect_refused(R"({"laser": {"position": [0, 0, 2]}, "sensor": {"position": [0, -1.5, 0.3]},
+        "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0], "nu": 4, "nv": 4}})",
+                   "capture.laser.position", "is inside or behind objects[1]");
+}
+
+TEST_F(CaptureCli, DeviceBehindTheWallIsRefused) {
+    expect_refused(R"({"laser": {"position": [0, -1.5, 0.3]}, "sensor": {"position": [0, 0, -1]},
+        "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0], "nu": 4, "nv": 4}})",
+                   "capture.sensor.position", "is behind objects[0]");
+}
+
+TEST_F(CaptureCli, FramesNeedACamera) {
+    const test::Outcome o = test::run_tprf("render " + scene(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0],
+        "u": [1, 0, 0], "v": [0, 1, 0], "nu": 4, "nv": 4}})") + " -o " + (m_dir / "out").string() + " --frames");
+    EXPECT_EQ(o.status, 2) << o.err;
+    EXPECT_NE(o.err.find("--frames needs a camera"), std::string::npos) << o.err;
+}
+
+// A capture-only render writes capture.hdf5, capture.npy and render.json, and no camera outputs.
+TEST_F(CaptureCli, RenderWritesTheCaptureFiles) {
+    const fs::path out = m_dir / "out";
+    const test::Outcome o = test::run_tprf("render " + scene(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0],
+        "u": [1, 0, 0], "v": [0, 1, 0], "nu": 4, "nv": 2}, "max_bounces": 3})") + " -o " + out.string());
+    ASSERT_EQ(o.status, 0) << o.err;
+    EXPECT_TRUE(fs::exists(out / "capture.hdf5"));
+    EXPECT_TRUE(fs::exists(out / "render.json"));
+    EXPECT_FALSE(fs::exists(out / "transient.npy"));
+    const std::string npy = test::read_bytes(out / "capture.npy");
+    EXPECT_NE(npy.find("'shape': (100, 4, 2)"), std::string::npos);
+    EXPECT_NE(npy.find("'descr': '<f4'"), std::string::npos);
+    ASSERT_GT(npy.size(), 10u);
+    const std::size_t header = 10 + std::size_t(std::uint8_t(npy[8])) + 256 * std::size_t(std::uint8_t(npy[9]));
+    EXPECT_EQ(npy.size(), header + 100 * 4 * 2 * sizeof(float));
+}
+
+}  // namespace
+}  // namespace tprf
