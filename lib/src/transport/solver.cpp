@@ -270,7 +270,9 @@ void with_lanes(int C, Fn&& fn) {
 
 // Tiles of the long-link pass (March::long_pass): a tile of 256 receivers walks its links in tiles of
 // 64 sources, so that those sources' rings (64 x ring x 3 floats, under 0.5 MB for rings of 512) stay
-// in a core's L2 while every receiver of the tile reads them (sizes measured, bench/RESULTS.md).
+// in a core's L2 while every receiver of the tile reads them (sizes measured, bench/RESULTS.md). A
+// batch's lanes make them larger; tiles of fewer sources for more lanes (8 for 24 lanes, 12 for 16)
+// measured no faster on the Cornell box (bench/solver_bench.cpp, BM_TransientSolveBatch).
 constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
 // Links per receiver below which the sources are not tiled.
@@ -595,9 +597,6 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.K = illuminations;
     plan.channels = channels;
     plan.C = illuminations * channels;
-    // A source tile's rings grow with the lanes: fewer sources per tile keep them in L2.
-    if (plan.source_tile == kSourceTile && plan.C > 3)
-        plan.source_tile = std::max<std::size_t>(8, kSourceTile * 3 / std::size_t(plan.C));
     plan.delay = options.delay;
     plan.start_m = time.start_m();
     plan.inv_bin = 1.0 / time.bin_width_m();
