@@ -222,6 +222,16 @@ TEST_F(CaptureCli, GridPointOffEverySurfaceIsRefused) {
         "nu": 4, "nv": 4}})", "capture.grid", "lies on no surface");
 }
 
+// A grid point exactly on a corner that four wall patches share (found refused by a single ray).
+TEST(Capture, GridPointOnAPatchCornerIsOnTheWall) {
+    const Built b(scene_text(kWall, R"({"laser": {"position": [0, -1.5, 0.3]}, "sensor": {"position": [0, -1.5, 0.3]},
+        "grid": {"origin": [-0.65, 0.55, 0], "u": [0.1, 0, 0], "v": [0, 0.1, 0], "nu": 1, "nv": 1},
+        "max_bounces": 3})", R"({"bins": 100, "bin_width": 0.02})", 0.1));
+    const CaptureResult r = b.capture();
+    ASSERT_EQ(r.points.sensor.size(), 1u);
+    EXPECT_LT((r.points.sensor[0].point - Vec3(-0.6, 0.6, 0)).norm(), 1e-12);
+}
+
 TEST_F(CaptureCli, ZeroPointsAlongAGridSideIsRefused) {
     expect_refused(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0],
         "nu": 0, "nv": 4}})", "capture.grid.nu", "must be > 0");

@@ -47,7 +47,15 @@ WallPoint locate(const Scene& scene, const PatchSet& patches, const Visibility& 
                                                    " must stand in front of the wall");
     // Embree's rays are single precision: a point on the surface is met within a few epsilons.
     const double tolerance = 10.0 * visibility.epsilon() + 1e-6 * dist;
-    const RayHit hit = visibility.intersect(r.device, d / dist, dist + tolerance);
+    RayHit hit = visibility.intersect(r.device, d / dist, dist + tolerance);
+    // A ray at a corner shared by patches can slip between them in single precision: a point that
+    // lies on a surface is met by rays aimed a hair beside it.
+    const Vec3 across[4] = {r.grid.u.normalized(), -r.grid.u.normalized(), r.grid.v.normalized(),
+                            -r.grid.v.normalized()};
+    for (int k = 0; k < 4 && !hit.hit; ++k) {
+        const Vec3 aside = target + 0.5 * tolerance * across[k] - r.device;
+        hit = visibility.intersect(r.device, aside.normalized(), aside.norm() + tolerance);
+    }
     if (!hit.hit)
         fail_input(scene.file, r.grid_path, where + " lies on no surface: the line from the " + r.device_name +
                                                 " at " + show(r.device) + " meets nothing there");
