@@ -111,19 +111,6 @@ CapturePoints locate_capture_points(const Scene& scene, const PatchSet& patches,
     return points;
 }
 
-PointSource wall_source(const WallPoint& w, const Rgb& power, double path, const PatchSet& patches,
-                        const Visibility& visibility) {
-    PointSource s;
-    s.position = w.point + visibility.epsilon() * w.normal;
-    s.origin = w.point;
-    s.path = path;
-    s.intensity = patches.albedo[w.patch] * power;  // W leaving the spot, in a Lambertian lobe
-    s.lobe = w.normal;
-    s.patch = w.patch;
-    s.order = 2;
-    return s;
-}
-
 namespace {
 
 // Patches smaller than this share of their distance from the wall point take one shadow ray, from their

@@ -74,7 +74,8 @@ void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::siz
         deposit(H, p, pair, p.laser_leg(l) + p.sensor_leg(s), mean3(spot) / (M_PI * cell));
     }
     if (!p.keeps(2)) return;
-    const PointSource source = wall_source(laser, p.capture.laser_power, p.laser_leg(l), p.patches, p.visibility);
+    const PointSource source =
+        spot_source(wall_spot(laser, p.capture.laser_power, p.laser_leg(l)), p.patches, p.visibility);
     PointArrival a;
     if (!arrive(source, sensor.point, sensor.normal, p.visibility, a)) return;
     const Rgb radiance = p.patches.albedo[sensor.patch] * a.intensity * a.cos_over_r2 / M_PI;
@@ -320,7 +321,7 @@ CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const
     const CapturePlan p = make_plan(scene, patches, visibility);
     CaptureResult result;
     result.seconds_views = seconds_from(start);
-    result.pairs = p.confocal ? p.sensors : p.points.laser.size() * p.sensors;
+    result.pairs = p.capture.pairs();
     result.bins = p.T;
     result.solved = p.solve;
     result.H.assign(result.pairs * std::size_t(p.T), 0.0f);
@@ -357,5 +358,7 @@ CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const
 bool capture_needs_links(const Scene& scene) {
     return scene.capture && (scene.capture->max_bounces < 0 || scene.capture->max_bounces >= 4);
 }
+
+bool render_needs_links(const Scene& scene) { return scene.camera || capture_needs_links(scene); }
 
 }  // namespace tprf

@@ -120,11 +120,7 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
     capture_options.progress = options.progress;
     // What the march may use: the limit (--max-memory, or 80% of what is available) less what this
     // process has held so far and the capture's H (twice: its copy while written).
-    const double held = peak_rss_mb() * 1e6 + 2.0 * 4.0 * double(scene.time.bins) *
-                                                  double(scene.capture->laser_grid.size()) *
-                                                  double(scene.capture->type == CaptureType::Confocal
-                                                             ? 1
-                                                             : scene.capture->sensor_grid.size());
+    const double held = peak_rss_mb() * 1e6 + 2.0 * 4.0 * double(scene.time.bins) * double(scene.capture->pairs());
     const double limit = double(memory_limit_bytes(options));
     if (limit > 0.0) capture_options.memory_bytes = std::size_t(std::max(1.0, limit - held));
     const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options);

@@ -400,11 +400,8 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
 // are not modelled yet (docs/capture.md, Limits).
 void estimate_capture(const Scene& scene, ResourceEstimate& e) {
     if (!scene.capture) return;
-    const Capture& c = *scene.capture;
-    const double pairs = c.type == CaptureType::Confocal ? double(c.sensor_grid.size())
-                                                          : double(c.laser_grid.size()) * double(c.sensor_grid.size());
-    e.cube_bytes += to_size(2.0 * pairs * scene.time.bins * 4);
-    if (scene.camera || capture_needs_links(scene)) return;
+    e.cube_bytes += to_size(2.0 * double(scene.capture->pairs()) * scene.time.bins * 4);
+    if (render_needs_links(scene)) return;
     e.links = 0;
     e.link_bytes = e.link_build_bytes = e.solver_bytes = 0;
     e.seconds.links = e.seconds.solve = 0.0;

@@ -70,7 +70,7 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
 
     start = Clock::now();
     t.visibility = std::make_unique<Visibility>(t.patches);
-    if (scene.camera || capture_needs_links(scene)) {
+    if (render_needs_links(scene)) {
         LinkOptions link_options;
         link_options.threads = options.threads;
         link_options.progress = options.progress;
@@ -266,7 +266,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     std::optional<CaptureRecord> capture;
     if (scene.capture)
         capture = render_capture(scene, options, transport.patches, *transport.visibility,
-                                 scene.camera || capture_needs_links(scene) ? &transport.links : nullptr, staging,
+                                 render_needs_links(scene) ? &transport.links : nullptr, staging,
                                  report);
     report.seconds.total = seconds_since(start);
     report.peak_rss_mb = peak_rss_mb();

@@ -45,7 +45,8 @@ AreaSource make_area_source(const Vec3* corners, std::size_t count, const Rgb& r
     return a;
 }
 
-// The spot as a Lambertian point: radiant intensity albedo P cos(theta) / pi about its normal.
+}  // namespace
+
 PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Visibility& visibility) {
     const Vec3& normal = patches.normal[spot.patch];
     PointSource s;
@@ -59,7 +60,6 @@ PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Vi
     return s;
 }
 
-}  // namespace
 
 Rgb PointSource::intensity_towards(const Vec3& dir) const {
     if (lobe.isZero()) return intensity;

@@ -57,10 +57,11 @@ struct PatchView {
     std::array<float, kViewSamples> g{};     ///< m^-2
 };
 
-/// The point source that wall point w is when a laser of `power` (W per channel) lights it: radiant
-/// intensity albedo P cos / pi about its normal (the v1 laser model), its light leaving at `path`.
-PointSource wall_source(const WallPoint& w, const Rgb& power, double path, const PatchSet& patches,
-                        const Visibility& visibility);
+/// The laser spot that wall point w is when a laser of `power` (W per channel) lights it, its light
+/// leaving at `path` (spot_source() turns it into the Lambertian point source of the v1 laser model).
+inline LaserSpot wall_spot(const WallPoint& w, const Rgb& power, double path) {
+    return {true, w.patch, w.point, path, power};
+}
 
 /// Every patch that wall point w sees (some sample with g > 0), in increasing patch order.
 std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility);

@@ -61,4 +61,7 @@ CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const
 /// Whether scene.capture needs the links (its bounces go beyond laser spot -> patch -> sensor point).
 bool capture_needs_links(const Scene& scene);
 
+/// Whether a render of `scene` builds links: for a camera's solve, or a capture that marches.
+bool render_needs_links(const Scene& scene);
+
 }  // namespace tprf

@@ -129,6 +129,12 @@ struct Capture {
     /// The keys the grids came from ("grid" or "sensor_grid"), for error messages.
     std::string laser_grid_key = "grid";
     std::string sensor_grid_key = "grid";
+
+    /// (laser point, sensor point) pairs measured: the sensor points (confocal), or every laser point
+    /// with every sensor point (exhaustive).
+    std::size_t pairs() const {
+        return type == CaptureType::Confocal ? sensor_grid.size() : laser_grid.size() * sensor_grid.size();
+    }
 };
 
 /// A scene. Whatever builds one (a parser, a test, a binding) calls validate() (scene/validate.h)

@@ -80,6 +80,10 @@ std::vector<AreaSource> area_sources(const Scene* scene, const PatchSet& patches
 /// Where a laser's ray first meets the scene (a back side absorbs: hit stays false).
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visibility& visibility);
 
+/// The spot as a Lambertian point source: radiant intensity albedo P cos(theta) / pi about its patch's
+/// normal, its light leaving at spot.path (a laser's spot, or a capture's laser point on the wall).
+PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Visibility& visibility);
+
 /// Collects the scene's sources over its patches (lasers traced to their spots).
 LightSources light_sources(const Scene& scene, const PatchSet& patches, const Visibility& visibility);
 
