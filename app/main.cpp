@@ -1,4 +1,5 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/pipeline/render.h"
@@ -9,10 +10,12 @@
 
 #include <array>
 #include <charconv>
+#include <csignal>
 #include <chrono>
 #include <optional>
 #include <cstdio>
 #include <exception>
+#include <new>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -21,25 +24,39 @@
 
 namespace {
 
-// A one-line progress bar on stderr with the time left, redrawn at most ten times a second.
+// The phase that the run was in last, for the message of a cancelled run.
+std::string g_phase = "load";
+
+// Progress on stderr: a one-line bar with the time left, redrawn at most ten times a second, on a
+// terminal; with --progress-lines, one line per phase and per tenth of it (for log files of batch jobs).
 class ProgressBar {
 public:
-    // Drawn only on a terminal: a log file gets the summary alone, not hundreds of redraws.
-    explicit ProgressBar(bool quiet) : m_quiet(quiet || !isatty(fileno(stderr))) {}
+    // The bar is drawn only on a terminal: a log file gets the summary alone, not hundreds of redraws.
+    ProgressBar(bool quiet, bool lines) : m_lines(lines), m_quiet(quiet || (!lines && !isatty(fileno(stderr)))) {}
     ~ProgressBar() { finish(); }
 
     void update(std::string_view phase, double fraction) {
-        if (m_quiet) return;
         const auto now = std::chrono::steady_clock::now();
         if (phase != m_phase) {
             finish();
             m_phase = phase;
+            g_phase = phase;
             m_start = now;
             m_last = {};
+            m_tenths = -1;
+        }
+        if (m_quiet) return;
+        const double elapsed = std::chrono::duration<double>(now - m_start).count();
+        if (m_lines) {
+            const int tenths = int(fraction * 10.0);
+            if (tenths <= m_tenths) return;
+            m_tenths = tenths;
+            std::fprintf(stderr, "tprf: %s %3d%% %.1f s\n", m_phase.c_str(), 10 * tenths, elapsed);
+            std::fflush(stderr);
+            return;
         }
         if (fraction < 1.0 && now - m_last < std::chrono::milliseconds(100)) return;
         m_last = now;
-        const double elapsed = std::chrono::duration<double>(now - m_start).count();
         const int width = 30, filled = int(fraction * width + 0.5);
         std::string bar(std::size_t(filled), '#');
         bar.resize(std::size_t(width), '.');
@@ -56,11 +73,36 @@ public:
     }
 
 private:
+    bool m_lines;
     bool m_quiet;
     bool m_drawn = false;
+    int m_tenths = -1;
     std::string m_phase;
     std::chrono::steady_clock::time_point m_start{}, m_last{};
 };
+
+// SIGINT, SIGTERM and SIGHUP: the first asks the run to stop (every stage checks tprf's cancel flag
+// and unwinds, removing its staging files); a second one ends the process at once (its staging folder
+// is then removed by the next run into that directory).
+extern "C" void on_stop_signal(int sig) {
+    if (tprf::cancel_requested()) {
+        std::signal(sig, SIG_DFL);
+        std::raise(sig);
+        return;
+    }
+    tprf::request_cancel(sig);
+}
+
+void install_signal_handlers() {
+    struct sigaction stop {};
+    stop.sa_handler = on_stop_signal;
+    sigemptyset(&stop.sa_mask);
+    stop.sa_flags = SA_RESTART;
+    for (const int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &stop, nullptr);
+    // A file-size limit (ulimit -f) would kill the process; ignored, a write past it fails with EFBIG
+    // and the run reports which file could not be written.
+    std::signal(SIGXFSZ, SIG_IGN);
+}
 
 // The estimate of a render (tprf::estimate_resources), printed before anything heavy runs.
 tprf::ResourceEstimate print_estimate(const tprf::Scene& scene, const tprf::PipelineOptions& options) {
@@ -97,7 +139,8 @@ void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
     for (const tprf::MeshReport& m : meshes) std::printf("mesh     %s\n", tprf::describe(m).c_str());
 }
 
-int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool meshes_only, bool quiet) {
+int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool meshes_only, bool quiet,
+             bool progress_lines) {
     const tprf::Scene scene = tprf::load_scene(scene_file);
     tprf::PipelineOptions options;
     options.threads = threads;
@@ -120,7 +163,7 @@ int run_info(const std::string& scene_file, int threads, double max_memory_gb, b
         std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
         return 0;
     }
-    ProgressBar bar(quiet);
+    ProgressBar bar(quiet, progress_lines);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::SceneSummary s = tprf::describe_scene(scene, options);
     bar.finish();
@@ -143,8 +186,8 @@ void print_warnings(const std::vector<std::string>& warnings) {
     for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
 }
 
-int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet) {
-    ProgressBar bar(quiet);
+int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet, bool progress_lines) {
+    ProgressBar bar(quiet, progress_lines);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::RenderReport r = tprf::render_file(scene_file, options);
     bar.finish();
@@ -189,6 +232,34 @@ std::string parse_pixel(const std::string& text, std::optional<std::array<int, 2
     return "";
 }
 
+// The message and exit status of a run that threw (rethrown here): 2 for bad input, 128 + the signal
+// for a cancelled run, 1 for a failed write, memory or a bug.
+int report_failure() {
+    try {
+        throw;
+    } catch (const tprf::Error& e) {
+        std::fprintf(stderr, "tprf: error: %s\n", e.what());
+        return 2;
+    } catch (const tprf::Cancelled& e) {
+        std::fprintf(stderr, "tprf: %s in the %s stage: nothing of this run was kept; earlier outputs are untouched\n",
+                     e.what(), g_phase.c_str());
+        return 128 + (e.signal() > 0 ? e.signal() : SIGINT);
+    } catch (const tprf::OutputError& e) {
+        std::fprintf(stderr, "tprf: error: %s; nothing of this run was kept, earlier outputs are untouched\n", e.what());
+        return 1;
+    } catch (const std::bad_alloc&) {
+        std::fprintf(stderr,
+                     "tprf: error: out of memory in the %s stage (the estimate of `tprf info` was exceeded, or other "
+                     "processes took the memory); nothing of this run was kept. Lower --max-memory to have such "
+                     "renders refused before they start, or make the scene smaller (patches.max_edge, time.bins)\n",
+                     g_phase.c_str());
+        return 1;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "tprf: internal error: %s\n", e.what());
+        return 1;
+    }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -200,6 +271,9 @@ int main(int argc, char** argv) {
     bool quiet = false;
     app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
     app.add_flag("-q,--quiet", quiet, "no progress bar");
+    bool progress_lines = false;
+    app.add_flag("--progress-lines", progress_lines,
+                 "progress as lines, one per stage and per tenth of it, even when stderr is not a terminal (logs)");
     auto* info = app.add_subcommand("info", "print the estimated peak memory and seconds of a render, then the patch "
                                             "count, link count, link memory and the time window");
     info->add_option("scene", scene_file, "scene JSON file")->required();
@@ -244,12 +318,13 @@ int main(int argc, char** argv) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
+    install_signal_handlers();
     try {
-        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, info_meshes, quiet);
+        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, info_meshes, quiet, progress_lines);
         if (rend->parsed()) {
             render.output = output;
             render.threads = threads;
-            return run_render(scene_file, render, quiet);
+            return run_render(scene_file, render, quiet, progress_lines);
         }
         if (sens->parsed()) {
             sensor.render_dir = render_dir;
@@ -258,11 +333,7 @@ int main(int argc, char** argv) {
             return run_sensor(sensor, quiet);
         }
         return 2;
-    } catch (const tprf::Error& e) {
-        std::fprintf(stderr, "tprf: error: %s\n", e.what());
-        return 2;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "tprf: internal error: %s\n", e.what());
-        return 1;
+    } catch (...) {
+        return report_failure();
     }
 }

@@ -258,7 +258,7 @@ TEST(Hdf5Capture, MissingFolderIsAnErrorNamingTheFile) {
     try {
         tprf::write_capture_hdf5(path, capture);
         ADD_FAILURE() << "no error";
-    } catch (const tprf::Error& e) {
+    } catch (const tprf::OutputError& e) {
         const std::string what = e.what();
         EXPECT_EQ(what.rfind(path.string() + ": cannot create the file (", 0), 0u) << what;
         EXPECT_NE(what.find("No such file or directory"), std::string::npos) << what;
@@ -287,7 +287,7 @@ TEST(Hdf5Capture, FullDiskIsAnErrorNamingTheFile) {
     try {
         tprf::write_capture_hdf5(path, capture);
         ADD_FAILURE() << "an 8 MiB capture on a 1 MiB file system was accepted";
-    } catch (const tprf::Error& e) {
+    } catch (const tprf::OutputError& e) {
         const std::string what = e.what();
         EXPECT_EQ(what.rfind(path.string() + ": cannot ", 0), 0u) << what;
         EXPECT_NE(what.find("No space left on device"), std::string::npos) << what;

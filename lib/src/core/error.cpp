@@ -1,6 +1,8 @@
 #include "tprf/core/error.h"
 
+#include <cerrno>
 #include <sstream>
+#include <system_error>
 
 namespace tprf {
 
@@ -10,6 +12,18 @@ void fail_input(const std::filesystem::path& file, std::string_view json_path, s
     if (!json_path.empty()) msg << json_path << ": ";
     msg << what;
     throw Error(msg.str());
+}
+
+void fail_output(const std::filesystem::path& file, std::string_view what, int err) {
+    std::string msg = file.string();
+    msg += ": ";
+    msg += what;
+    msg += ": ";
+    msg += std::system_category().message(err);
+    // The one hint that turns an errno into an action.
+    if (err == ENOSPC || err == EDQUOT) msg += " (free some space, or write elsewhere with -o)";
+    if (err == EFBIG) msg += " (a file-size limit: see ulimit -f)";
+    throw OutputError(msg);
 }
 
 }  // namespace tprf

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,13 @@ namespace {
 struct EmbreeErrors {
     std::mutex mutex;
     std::string first;
+    RTCError code = RTC_ERROR_NONE;
+
+    // Out of memory becomes std::bad_alloc, as anywhere else; any other error is a bug of tprf's.
+    [[noreturn]] void raise(const char* otherwise) const {
+        if (code == RTC_ERROR_OUT_OF_MEMORY) throw std::bad_alloc();
+        throw InternalError(first.empty() ? otherwise : first);
+    }
 };
 
 void embree_error(void* user, RTCError code, const char* message) {
@@ -30,7 +38,10 @@ void embree_error(void* user, RTCError code, const char* message) {
     auto* errors = static_cast<EmbreeErrors*>(user);
     try {
         std::lock_guard<std::mutex> lock(errors->mutex);
-        if (errors->first.empty()) errors->first = std::string("Embree: ") + (message ? message : "unknown error");
+        if (errors->first.empty()) {
+            errors->first = std::string("Embree: ") + (message ? message : "unknown error");
+            errors->code = code;
+        }
     } catch (...) {  // no memory left even for the message: the builder still sees that it failed
     }
 }
@@ -77,7 +88,11 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
     Impl& im = *m_impl;
     im.patches = &patches;
     im.device = rtcNewDevice(nullptr);
-    if (!im.device) throw InternalError("Embree: cannot create a device");
+    if (!im.device) {
+        // Out of memory is what a process at its limit meets first here: say so, as for any allocation.
+        if (rtcGetDeviceError(nullptr) == RTC_ERROR_OUT_OF_MEMORY) throw std::bad_alloc();
+        throw InternalError("Embree: cannot create a device");
+    }
     rtcSetDeviceErrorFunction(im.device, embree_error, &im.errors);
     im.scene = rtcNewScene(im.device);
     rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_HIGH);
@@ -103,7 +118,7 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
                                                                   RTC_FORMAT_UINT4, 4 * sizeof(unsigned), n));
         if (!vb || !ib) {  // out of memory: Embree has said why
             rtcReleaseGeometry(geometry);
-            throw InternalError(im.errors.first.empty() ? "Embree: cannot allocate the geometry" : im.errors.first);
+            im.errors.raise("Embree: cannot allocate the geometry");
         }
         for (std::size_t k = 0; k < patches.vertices.size(); ++k)
             for (int c = 0; c < 3; ++c) vb[3 * k + c] = static_cast<float>(patches.vertices[k][c]);
@@ -121,7 +136,7 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
         rtcReleaseGeometry(geometry);
     }
     rtcCommitScene(im.scene);
-    if (!im.errors.first.empty()) throw InternalError(im.errors.first);
+    if (!im.errors.first.empty()) im.errors.raise("");
     im.twin = find_twins(patches);
 }
 

@@ -1,5 +1,6 @@
 #include "tprf/imaging/sensor_model.h"
 
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/core/random.h"
 #include "tprf/core/types.h"
@@ -230,11 +231,15 @@ void apply_spad(const SensorSettings& s, const TimeAxis& time, const SensorWeigh
     const SpadModel m = spad_model(s, time, height, width);
     const std::size_t K = w.first.size(), T = std::size_t(time.bins);
     const auto pixels = std::int64_t(height) * width;
+    // Allocated here, not in the region: an allocation failure there would end the process.
+    const std::vector<SpadScratch>::size_type lanes = std::size_t(threads);
+    std::vector<SpadScratch> scratches(lanes, SpadScratch{K});
 #pragma omp parallel num_threads(threads)
     {
-        SpadScratch scratch(K);
+        SpadScratch& scratch = scratches[std::size_t(omp_get_thread_num())];
 #pragma omp for schedule(dynamic, 16)
         for (std::int64_t i = 0; i < pixels; ++i) {
+            if (cancel_requested()) continue;  // apply_sensor throws after the region
             const auto p = std::size_t(i);
             float* out = measurements + p * K * 3;
             if (is_dead(m, p)) {
@@ -409,12 +414,14 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
     const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
     if (s.exposure.type == ExposureType::Spad) {
         apply_spad(s, time, weights, cube, height, width, measurements, threads);
+        check_cancelled();
         if (depth != nullptr) std::fill(depth, depth + pixels, 0.0f);
         return;
     }
     const bool draws = s.noise.sigma > 0.0;  // a generator is seeded only where it is used
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
     for (std::int64_t p = 0; p < pixels; ++p) {
+        if (cancel_requested()) continue;  // thrown after the region
         const float* e = cube + std::size_t(p) * T * 3;
         float* out = measurements + std::size_t(p) * K * 3;
         // Pixel p's stream is seeded with output p of SplitMix64(seed), so that a pixel's noise does not
@@ -434,6 +441,7 @@ void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cu
         }
         if (depth != nullptr) depth[p] = s.exposure.type == ExposureType::Amcw ? float(amcw_depth(s, out)) : 0.0f;
     }
+    check_cancelled();
 }
 
 SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const float* profile, const float* measurements,

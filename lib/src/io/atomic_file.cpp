@@ -4,7 +4,6 @@
 
 #include <atomic>
 #include <cerrno>
-#include <fstream>
 #include <string>
 #include <system_error>
 #include <utility>
@@ -17,11 +16,6 @@ namespace tprf {
 namespace fs = std::filesystem;
 
 namespace {
-
-[[noreturn]] void fail_errno(const fs::path& path, const std::string& what, int err) {
-    // std::system_category().message is thread-safe where strerror is not.
-    throw Error(path.string() + ": " + what + ": " + std::system_category().message(err));
-}
 
 // Creates an empty file under a name no other process or thread uses: the pid separates processes,
 // the counter separates threads and earlier files of this process, and O_EXCL catches a leftover
@@ -51,7 +45,7 @@ AtomicFile::AtomicFile(fs::path final_path) : m_path(std::move(final_path)) {
     stem += ".tmp.";
     fs::path temp;
     if (const int err = create_unique(m_path.parent_path(), stem, temp))
-        fail_errno(temp, "cannot create", err);
+        fail_output(m_path, "cannot create its temporary " + temp.filename().string(), err);
     m_temp = std::move(temp);
 }
 
@@ -84,16 +78,16 @@ void AtomicFile::commit() {
     // Without the fsync, a crash soon after the rename could leave the final name pointing at a
     // file whose data never reached the disk: exactly the truncated file that the rename avoids.
     const int fd = ::open(m_temp.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) fail_errno(m_temp, "cannot open", errno);
+    if (fd < 0) fail_output(m_path, "cannot open", errno);
     if (::fsync(fd) != 0) {
         const int err = errno;
         ::close(fd);
-        fail_errno(m_temp, "cannot flush", err);
+        fail_output(m_path, "cannot flush", err);
     }
     ::close(fd);
     std::error_code ec;
     fs::rename(m_temp, m_path, ec);
-    if (ec) throw Error(m_path.string() + ": cannot rename " + m_temp.string() + ": " + ec.message());
+    if (ec) fail_output(m_path, "cannot rename its temporary " + m_temp.filename().string() + " to it", ec.value());
     m_committed = true;
 }
 
@@ -109,13 +103,29 @@ void check_output_dir(const fs::path& dir) {
     fs::remove(probe, ec);
 }
 
+void create_output_dir(const fs::path& dir) {
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec) fail_output(dir, "cannot create the folder", ec.value());
+}
+
 void write_text_file(const fs::path& path, const std::string& text) {
     AtomicFile file(path);
-    {
-        std::ofstream out(file.temp_path(), std::ios::binary);
-        out << text;
-        if (!out.flush()) throw Error(file.temp_path().string() + ": cannot write");
+    const int fd = ::open(file.temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+    if (fd < 0) fail_output(file.path(), "cannot open", errno);
+    const char* bytes = text.data();
+    for (std::size_t left = text.size(); left > 0;) {
+        const ssize_t n = ::write(fd, bytes, left);
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) {
+            const int err = errno;
+            ::close(fd);
+            fail_output(file.path(), "cannot write", err);
+        }
+        bytes += n;
+        left -= std::size_t(n);
     }
+    if (::close(fd) != 0) fail_output(file.path(), "cannot write", errno);
     file.commit();
 }
 

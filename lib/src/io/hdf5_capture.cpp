@@ -58,7 +58,7 @@ herr_t keep_innermost(unsigned n, const H5E_error2_t* entry, void* out) {
     // One line (the app prints the message as one): HDF5's write errors hold a ctime() stamp.
     for (char& c : cause)
         if (c == '\n') c = ' ';
-    fail_input(path, "", std::string(what) + " (" + cause + ")");
+    throw OutputError(path.string() + ": " + std::string(what) + " (" + cause + ")");
 }
 
 // An HDF5 enum type over `base` with the given members (values converted to the base's width).

@@ -58,7 +58,7 @@ void write_exr(const fs::path& path, int width, int height, const float* rgb) {
         out.setFrameBuffer(frame);
         out.writePixels(height);
     } catch (const std::exception& e) {
-        throw Error(path.string() + ": cannot write OpenEXR: " + e.what());
+        throw OutputError(path.string() + ": cannot write OpenEXR: " + e.what());
     }
     file.commit();
 }
@@ -76,7 +76,7 @@ void write_png(const fs::path& path, int width, int height, const std::uint8_t* 
     if (png_image_write_to_file(&image, file.temp_path().c_str(), 0, rgb8, 0, nullptr) == 0) {
         const std::string message = image.message;
         png_image_free(&image);
-        throw Error(path.string() + ": cannot write PNG: " + message);
+        throw OutputError(path.string() + ": cannot write PNG: " + message);
     }
     file.commit();
 }

@@ -78,7 +78,7 @@ void write_all(int fd, const fs::path& path, const char* bytes, std::size_t n) {
         const ssize_t written = ::write(fd, bytes, std::min<std::size_t>(n, std::size_t{1} << 30));
         if (written < 0) {
             if (errno == EINTR) continue;
-            fail_errno(path, "cannot write", errno);
+            fail_output(path, "cannot write", errno);
         }
         bytes += written;
         n -= static_cast<std::size_t>(written);
@@ -187,16 +187,16 @@ void write_npy(const fs::path& path, const std::vector<std::size_t>& shape, cons
     const std::string header = make_header(path, shape);
     AtomicFile file(path);
     const int fd = ::open(file.temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
-    if (fd < 0) fail_errno(file.temp_path(), "cannot open", errno);
+    if (fd < 0) fail_output(file.path(), "cannot open", errno);
     try {
-        write_all(fd, file.temp_path(), header.data(), header.size());
-        if (bytes > 0) write_all(fd, file.temp_path(), reinterpret_cast<const char*>(data), bytes);
+        write_all(fd, file.path(), header.data(), header.size());
+        if (bytes > 0) write_all(fd, file.path(), reinterpret_cast<const char*>(data), bytes);
     } catch (...) {
         ::close(fd);
         throw;
     }
     // close() is where some file systems (NFS) report a failed write.
-    if (::close(fd) != 0) fail_errno(file.temp_path(), "cannot write", errno);
+    if (::close(fd) != 0) fail_output(file.path(), "cannot write", errno);
     file.commit();
 }
 
@@ -206,11 +206,11 @@ NpyMap::NpyMap(const fs::path& path, std::vector<std::size_t> shape) : m_file(pa
     m_map_bytes = header.size() + bytes;
     const fs::path& temp = m_file.temp_path();
     const int fd = ::open(temp.c_str(), O_RDWR | O_CLOEXEC);
-    if (fd < 0) fail_errno(temp, "cannot open", errno);
+    if (fd < 0) fail_output(m_file.path(), "cannot open", errno);
     if (::ftruncate(fd, static_cast<off_t>(m_map_bytes)) != 0) {
         const int err = errno;
         ::close(fd);
-        fail_errno(temp, "cannot resize to " + std::to_string(m_map_bytes) + " bytes", err);
+        fail_output(m_file.path(), "cannot resize to " + std::to_string(m_map_bytes) + " bytes", err);
     }
     // Reserve the blocks now: writing through the mapping to a sparse file on a full disk would kill
     // the process with SIGBUS instead of reporting an error. (File systems that cannot preallocate
@@ -218,12 +218,12 @@ NpyMap::NpyMap(const fs::path& path, std::vector<std::size_t> shape) : m_file(pa
     if (const int err = ::posix_fallocate(fd, 0, static_cast<off_t>(m_map_bytes));
         err != 0 && err != EOPNOTSUPP && err != EINVAL) {
         ::close(fd);
-        fail_errno(temp, "cannot reserve " + std::to_string(m_map_bytes) + " bytes (is the disk full?)", err);
+        fail_output(m_file.path(), "cannot reserve " + std::to_string(m_map_bytes) + " bytes", err);
     }
     void* map = ::mmap(nullptr, m_map_bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     const int err = errno;
     ::close(fd);  // the mapping keeps the file open
-    if (map == MAP_FAILED) fail_errno(temp, "cannot map " + std::to_string(m_map_bytes) + " bytes", err);
+    if (map == MAP_FAILED) fail_output(m_file.path(), "cannot map " + std::to_string(m_map_bytes) + " bytes", err);
     m_map = map;
     std::memcpy(m_map, header.data(), header.size());
     m_data = reinterpret_cast<float*>(static_cast<char*>(m_map) + header.size());
@@ -260,7 +260,7 @@ void NpyMap::unmap() noexcept {
 
 void NpyMap::commit() {
     TPRF_CHECK(m_map != nullptr);
-    if (::msync(m_map, m_map_bytes, MS_SYNC) != 0) fail_errno(m_file.temp_path(), "cannot write", errno);
+    if (::msync(m_map, m_map_bytes, MS_SYNC) != 0) fail_output(m_file.path(), "cannot write", errno);
     unmap();
     m_file.commit();
 }

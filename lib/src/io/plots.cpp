@@ -1,9 +1,11 @@
 #include "tprf/io/plots.h"
 
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/io/atomic_file.h"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -12,6 +14,7 @@
 #include <cmath>
 #include <cctype>
 #include <cerrno>
+#include <csignal>
 #include <cstdlib>
 #include <cstdio>
 #include <cstring>
@@ -105,7 +108,15 @@ ChildResult run_child(const std::vector<std::string>& argv) {
     }
     r.started = true;
     char buf[4096];
+    bool stopped = false;
     for (;;) {
+        // Woken every 100 ms to see whether the run was cancelled: then the child is stopped too, and the
+        // caller's next check throws (a plot takes a second or two; a cancelled run must not wait).
+        pollfd readable{fds[0], POLLIN, 0};
+        if (::poll(&readable, 1, 100) == 0 || (readable.revents & (POLLIN | POLLHUP | POLLERR)) == 0) {
+            if (cancel_requested() && !stopped) stopped = ::kill(pid, SIGTERM) == 0;
+            continue;
+        }
         const ssize_t n = ::read(fds[0], buf, sizeof buf);
         if (n == 0) break;
         if (n < 0) {

@@ -1,6 +1,8 @@
 #include "tprf/io/sequences.h"
 
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
+#include "tprf/io/atomic_file.h"
 #include "tprf/io/image_io.h"
 
 #include <algorithm>
@@ -37,18 +39,20 @@ std::string quoted(const std::filesystem::path& p) {
 }  // namespace
 
 void write_frames(const std::filesystem::path& dir, const float* cube, int height, int width, int bins) {
-    std::filesystem::create_directories(dir);
+    create_output_dir(dir);
     std::vector<float> image;
     for (int t = 0; t < bins; ++t) {
+        check_cancelled();  // thousands of files: stop between two of them
         frame(cube, height, width, bins, t, image);
         write_exr(dir / numbered("frame_", t, 5, ".exr"), width, height, image.data());
     }
 }
 
 void write_streaks(const std::filesystem::path& dir, const float* cube, int height, int width, int bins) {
-    std::filesystem::create_directories(dir);
+    create_output_dir(dir);
     std::vector<float> image(std::size_t(width) * std::size_t(bins) * 3);
     for (int r = 0; r < height; ++r) {
+        check_cancelled();
         for (int c = 0; c < width; ++c) {
             const float* profile = cube + (std::size_t(r) * std::size_t(width) + std::size_t(c)) * std::size_t(bins) * 3;
             for (int t = 0; t < bins; ++t)
@@ -79,9 +83,10 @@ void write_video(const std::filesystem::path& mp4, const std::filesystem::path& 
         std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
         scale = 1.0 / double(lum[k]);
     }
-    std::filesystem::create_directories(scratch);
+    create_output_dir(scratch);
     std::vector<float> image;
     for (int t = 0; t < bins; ++t) {
+        check_cancelled();
         frame(cube, height, width, bins, t, image);
         const std::vector<std::uint8_t> rgb8 = tonemap(width, height, image.data(), scale);
         write_png(scratch / numbered("frame_", t, 5, ".png"), width, height, rgb8.data());

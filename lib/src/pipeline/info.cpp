@@ -16,7 +16,12 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <cstdlib>
+#include <string>
+
+#include <sys/resource.h>
 #include <limits>
 #include <sstream>
 #include <utility>
@@ -424,13 +429,61 @@ void sum_peak(ResourceEstimate& e) {
         }
 }
 
-// MemAvailable from /proc/meminfo, bytes (0 when it cannot be read).
-std::size_t memory_available() {
-    std::ifstream meminfo("/proc/meminfo");
+// The value of the line of `file` that starts with `key` (a /proc file's "Key:   123 kB"), times
+// `unit`; 0 when there is none.
+double proc_value(const char* file, const char* key, double unit) {
+    std::ifstream in(file);
     std::string line;
-    while (std::getline(meminfo, line))
-        if (line.rfind("MemAvailable:", 0) == 0) return std::size_t(std::stod(line.substr(13)) * 1024.0);
-    return 0;
+    const std::size_t n = std::char_traits<char>::length(key);
+    while (std::getline(in, line))
+        if (line.compare(0, n, key) == 0) return std::strtod(line.c_str() + n, nullptr) * unit;
+    return 0.0;
+}
+
+// The first number in `file` (a cgroup file: "123456", or "max"); 0 when none.
+double file_number(const char* file) {
+    std::ifstream in(file);
+    double v = 0.0;
+    return in >> v ? v : 0.0;
+}
+
+// The memory this process may still take, bytes (0 when nothing can be read): the least of the
+// system's MemAvailable, what its cgroup (a container, a batch job) leaves under its limit, and what
+// the address-space limit (ulimit -v) leaves beyond the process's present size and what `threads`
+// worker threads reserve besides the estimate's bytes.
+std::size_t memory_available(int threads) {
+    // A limit already reached still reads as a limit (1 MB of room), not as "nothing known" (0).
+    constexpr double kNoRoom = 1e6;
+    double free = proc_value("/proc/meminfo", "MemAvailable:", 1024.0);
+    auto least = [&](double v) {
+        if (v > 0.0) free = free > 0.0 ? std::min(free, v) : v;
+    };
+    // The process's cgroups (/proc/self/cgroup: "0::/path" for v2, "N:memory:/path" for v1) and every
+    // group above them, for a batch job's limit is often a level up. v2's "no limit" reads "max" (0
+    // here), v1's is a huge number.
+    std::ifstream groups("/proc/self/cgroup");
+    for (std::string line; std::getline(groups, line);) {
+        const bool v2 = line.rfind("0::", 0) == 0;
+        const std::size_t at = line.find(":memory:");
+        if (!v2 && at == std::string::npos) continue;
+        const std::filesystem::path root = v2 ? "/sys/fs/cgroup" : "/sys/fs/cgroup/memory";
+        const char* limit = v2 ? "memory.max" : "memory.limit_in_bytes";
+        const char* usage = v2 ? "memory.current" : "memory.usage_in_bytes";
+        std::filesystem::path g = root / std::filesystem::path(line.substr(v2 ? 3 : at + 8)).relative_path();
+        for (;; g = g.parent_path()) {
+            if (const double max = file_number((g / limit).c_str()); max > 0.0 && max < 1e18)
+                least(std::max(kNoRoom, max - file_number((g / usage).c_str())));
+            if (g == root || g.string().size() <= root.string().size()) break;
+        }
+    }
+    // An address-space limit counts reserved, not used, memory: every worker thread of OpenMP and of
+    // Embree's TBB may reserve a 64 MB malloc arena and an 8 MB stack (measured: the Cornell-size
+    // corner, 80 MB estimated, needs ulimit -v above 300 MB with 2 threads).
+    rlimit as{};
+    if (::getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY)
+        least(std::max(kNoRoom, double(as.rlim_cur) - proc_value("/proc/self/status", "VmSize:", 1024.0) -
+                                2.0 * thread_count(threads) * 72e6));
+    return to_size(free);
 }
 
 // "0.425 GB", "18.8 GB", "20011234 GB".
@@ -473,7 +526,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
 
 std::size_t memory_limit_bytes(const PipelineOptions& options) {
     if (options.max_memory_gb > 0.0) return to_size(options.max_memory_gb * kGB);
-    return to_size(0.8 * double(memory_available()));
+    return to_size(0.8 * double(memory_available(options.threads)));
 }
 
 void check_memory(const Scene& scene, const PipelineOptions& options, bool patch_profiles) {
@@ -487,7 +540,7 @@ void check_memory(const Scene& scene, const PipelineOptions& options, bool patch
     what << "estimated peak memory " << gb(double(e.peak_bytes)) << " (" << e.patches << " patches, about "
          << links << " links: links " << gb(double(e.link_bytes)) << ", solver " << gb(double(e.solver_bytes))
          << ", cubes " << gb(double(e.cube_bytes)) << ") exceeds the limit of " << gb(double(limit))
-         << (options.max_memory_gb > 0.0 ? " (--max-memory)" : " (80% of the memory available; --max-memory GB)")
+         << (options.max_memory_gb > 0.0 ? " (--max-memory)" : " (80% of the memory available: MemAvailable, the cgroup's limit and ulimit -v; --max-memory GB)")
          << "; nothing was rendered. To shrink it: raise patches.max_edge, lower time.bins or camera.width and "
             "camera.height, "
          << (scene.links.method == LinkMethod::Flat ? "set links.method to \"hierarchical\" or " : "")

@@ -258,23 +258,28 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     report.width = scene.camera ? scene.camera->width : 0;
     report.height = scene.camera ? scene.camera->height : 0;
 
-    Transport transport;
-    build_transport(scene, options, transport, report);
+    // Before any heavy work: a second run into the same directory is refused now, not at the end.
     Staging staging(options.output);
-    SolveStats stats;
-    if (scene.camera) stats = render_camera(scene, options, transport, staging, report);
-    std::optional<CaptureRecord> capture;
-    if (scene.capture)
-        capture = render_capture(scene, options, transport.patches, *transport.visibility,
-                                 render_needs_links(scene) ? &transport.links : nullptr, staging,
-                                 report);
-    report.seconds.total = seconds_since(start);
-    report.peak_rss_mb = peak_rss_mb();
-    RenderRecord record = render_record(scene_file, scene, stats, report);
-    record.capture = capture;
-    write_render_json(staging.path("render.json"), record);
-    staging.publish(render_outputs());
-    report.written = staging.names();
+    try {
+        Transport transport;
+        build_transport(scene, options, transport, report);
+        SolveStats stats;
+        if (scene.camera) stats = render_camera(scene, options, transport, staging, report);
+        std::optional<CaptureRecord> capture;
+        if (scene.capture)
+            capture = render_capture(scene, options, transport.patches, *transport.visibility,
+                                     render_needs_links(scene) ? &transport.links : nullptr, staging,
+                                     report);
+        report.seconds.total = seconds_since(start);
+        report.peak_rss_mb = peak_rss_mb();
+        RenderRecord record = render_record(scene_file, scene, stats, report);
+        record.capture = capture;
+        write_render_json(staging.path("render.json"), record);
+        staging.publish(render_outputs());
+        report.written = staging.names();
+    } catch (const OutputError& e) {
+        throw OutputError(staging.public_message(e.what()));
+    }
     if (options.progress) options.progress("write", 1.0);
     return report;
 }

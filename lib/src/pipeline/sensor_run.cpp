@@ -31,9 +31,13 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     check_output_dir(dir);
     Staging staging(dir);
     if (options.progress) options.progress("sensor", 0.0);
-    report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width, pixel,
-                                               options, report.warnings);
-    staging.publish(sensor_outputs());
+    try {
+        report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width,
+                                                   pixel, options, report.warnings);
+        staging.publish(sensor_outputs());
+    } catch (const OutputError& e) {
+        throw OutputError(staging.public_message(e.what()));
+    }
     report.written = staging.names();
     if (options.progress) options.progress("sensor", 1.0);
     report.seconds = seconds_since(start);

@@ -1,28 +1,70 @@
 #include "staging.h"
 
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/io/json_records.h"
 #include "tprf/io/npy.h"
 #include "tprf/io/plots.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <memory>
 
 namespace tprf {
 
-Staging::Staging(const std::filesystem::path& out) : m_out(out) {
+namespace {
+
+constexpr const char* kStagingPrefix = ".tprf-staging-";
+
+// The output directory, open and locked for this process's run; -1 when it cannot be opened (a file
+// system without directory descriptors: then runs are not kept apart).
+int lock_output_dir(const std::filesystem::path& out) {
+    const int fd = ::open(out.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) return -1;
+    while (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+        const int err = errno;
+        if (err == EINTR) continue;
+        ::close(fd);
+        if (err == EWOULDBLOCK)
+            throw Error(out.string() + ": another tprf run is writing into this output directory; wait for it to "
+                                       "finish, or choose another with -o (nothing was rendered)");
+        return -1;  // no locks on this file system (some network file systems): nothing to keep apart with
+    }
+    return fd;
+}
+
+// Staging folders of runs that were killed (SIGKILL, a power cut): with the directory locked, no
+// living run owns one.
+void remove_stale_staging(const std::filesystem::path& out) {
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(out, ec))
+        if (entry.path().filename().string().rfind(kStagingPrefix, 0) == 0) std::filesystem::remove_all(entry.path(), ec);
+}
+
+}  // namespace
+
+Staging::Staging(const std::filesystem::path& out) : m_out(out), m_lock(lock_output_dir(out)) {
     m_earlier_run = std::filesystem::exists(out / "render.json");
-    m_dir = out / (".tprf-staging-" + std::to_string(::getpid()));
-    std::filesystem::remove_all(m_dir);
-    std::filesystem::create_directories(m_dir);
+    if (m_lock >= 0) remove_stale_staging(out);
+    m_dir = out / (kStagingPrefix + std::to_string(::getpid()));
+    std::error_code ec;
+    std::filesystem::remove_all(m_dir, ec);
+    std::filesystem::create_directories(m_dir, ec);
+    if (ec) {
+        if (m_lock >= 0) ::close(m_lock);
+        fail_output(m_dir, "cannot create the staging folder", ec.value());
+    }
 }
 
 Staging::~Staging() {
     std::error_code ec;
     std::filesystem::remove_all(m_dir, ec);
+    if (m_lock >= 0) ::close(m_lock);  // releases the lock
 }
 
 std::filesystem::path Staging::path(const std::string& name) {
@@ -37,10 +79,13 @@ void Staging::forget(const std::string& name) {
 }
 
 void Staging::publish(const std::vector<std::string>& owned) {
+    check_cancelled();  // the last point where a cancelled run leaves the directory as it was
     for (const std::string& name : m_names) {
         const std::filesystem::path to = m_out / name;
-        if (std::filesystem::is_directory(to)) std::filesystem::remove_all(to);
-        std::filesystem::rename(m_dir / name, to);
+        std::error_code ec;
+        if (std::filesystem::is_directory(to)) std::filesystem::remove_all(to, ec);
+        if (!ec) std::filesystem::rename(m_dir / name, to, ec);
+        if (ec) fail_output(to, "cannot move the finished output into place", ec.value());
     }
     // Only in a directory that an earlier run wrote: a folder of the user's own named "frames" in
     // some other directory is not ours to remove.
@@ -56,6 +101,14 @@ void Staging::publish(const std::vector<std::string>& owned) {
             }
         }
     }
+}
+
+std::string Staging::public_message(const std::string& message) const {
+    const std::string from = (m_dir / "").string(), to = (m_out / "").string();
+    std::string out = message;
+    for (std::size_t at = out.find(from); at != std::string::npos; at = out.find(from, at + to.size()))
+        out.replace(at, from.size(), to);
+    return out;
 }
 
 const std::vector<std::string>& sensor_outputs() {

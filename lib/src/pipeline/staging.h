@@ -16,9 +16,13 @@
 namespace tprf {
 
 /// Outputs are written into a hidden staging folder inside the output directory, then moved into
-/// place one by one once every one of them is complete; on failure the folder is removed.
+/// place one by one once every one of them is complete; on failure or cancellation the folder is
+/// removed. The output directory is locked (flock) from construction to destruction, so two runs
+/// never write into one directory at once: the second is refused (tprf::Error) before it renders.
 class Staging {
 public:
+    /// Locks `out` (which must exist), removes staging folders that killed runs left there, and
+    /// creates this run's.
     explicit Staging(const std::filesystem::path& out);
     ~Staging();
     Staging(const Staging&) = delete;
@@ -32,16 +36,19 @@ public:
     /// Where output `name` will be once published.
     std::filesystem::path final_path(const std::string& name) const { return m_out / name; }
 
-    /// Moves every staged output into place, then, when the directory held an earlier render, removes
+    /// Moves every staged output into place (unless the run was cancelled: then Cancelled), then, when the directory held an earlier render, removes
     /// that run's outputs that this one did not write (`owned`: names, or prefixes ending in '*'), so
     /// that the directory never mixes two runs (a depth.npy of an earlier AMCW sensor beside gated
     /// measurements, say).
     void publish(const std::vector<std::string>& owned);
+    /// `message` with the staging folder's paths replaced by the final ones: what a user looks for.
+    std::string public_message(const std::string& message) const;
     /// The outputs written, relative to the output directory.
     const std::vector<std::string>& names() const { return m_names; }
 
 private:
     std::filesystem::path m_out, m_dir;
+    int m_lock = -1;  ///< the output directory, open and flock()ed
     std::vector<std::string> m_names;
     bool m_earlier_run = false;
 };

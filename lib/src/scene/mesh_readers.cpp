@@ -1,5 +1,7 @@
 #include "mesh_readers.h"
 
+#include "tprf/core/cancel.h"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -40,7 +42,7 @@ bool Lines::next(std::string_view& line, char comment) {
         const bool crlf = m_rest[end] == '\r' && end + 1 < m_rest.size() && m_rest[end + 1] == '\n';
         m_rest.remove_prefix(end + (crlf ? 2 : 1));
     }
-    ++m_number;
+    if ((++m_number & 0xffff) == 0) check_cancelled();  // a text mesh of millions of lines takes seconds
     if (comment != '\0')
         if (const std::size_t c = line.find(comment); c != std::string_view::npos) line = line.substr(0, c);
     return true;

@@ -1,6 +1,7 @@
 #include "tprf/transport/solver.h"
 
 #include "tprf/transport/illumination.h"
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
 #include "tprf/transport/link_set.h"
@@ -740,6 +741,7 @@ private:
     float m_change[kMaxLanes] = {}, m_largest[kMaxLanes] = {};
     std::atomic<int> m_worst_iterations{0};
     std::uint64_t m_sweeps = 0;                 // written by one thread (omp single)
+    bool m_stop = false;                        // a cancelled run, as read by one thread (omp single)
 };
 
 void March::store(int layer, std::size_t node, std::int64_t bin, const float* v) {
@@ -817,6 +819,9 @@ void March::long_pass(std::int64_t b0) {
     const std::size_t tiles = (m_plan.m + kReceiverTile - 1) / kReceiverTile;
 #pragma omp for schedule(dynamic, 1)
     for (std::size_t tile = 0; tile < tiles; ++tile) {
+        // A cancelled run skips the rest of the pass (a long block of a large flat set takes seconds);
+        // solve_transient throws after the region.
+        if (cancel_requested()) continue;
         const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.m, i0 + kReceiverTile);
         for (std::size_t i = i0; i < i1; ++i) load_emission(i, b0);
         gather_tile(i0, i1, b0);
@@ -1039,6 +1044,11 @@ bool March::sweeps_converged() const {
 template <int CT>
 void March::short_pass_lanes(std::int64_t b0) {
     for (int o = 0; o < m_plan.bt; ++o) {
+        // A cancelled run leaves the block here (solve_transient throws after the region): every
+        // thread reads the one answer after the single's barrier, so all leave at the same bin.
+#pragma omp single
+        m_stop = cancel_requested();
+        if (m_stop) break;
 #pragma omp for schedule(static)
         for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of<CT>(q, b0, o);
         for (int iteration = 1; iteration <= kMaxSweeps && !m_plan.same_links.empty(); ++iteration) {
@@ -1216,6 +1226,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
             march.short_pass(b0);
             if (plan.clusters) march.pull_block(b0);
         }
+        check_cancelled();
         stats.seconds_long += long_seconds;
         stats.seconds_short += lap(since);
         march.emit_block(b0, sink);

@@ -1,6 +1,7 @@
 #include "tprf/transport/steady.h"
 
 #include "tprf/transport/illumination.h"
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/transport/link_set.h"
 #include "tprf/geometry/patches.h"
@@ -23,6 +24,7 @@ double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i) {
 // y = diag(albedo_c) F x for one channel: with clusters, their values pulled from x, every node's
 // gather pushed down to the patches below it (link_set.h).
 Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen::VectorXd& x, int c) {
+    check_cancelled();  // once per iteration of the solver, outside its parallel loops
     const Eigen::Index n = Eigen::Index(patches.size());
     const ClusterTree& t = set.tree;
     Eigen::VectorXd y(n);

@@ -2,7 +2,9 @@
 /// Errors and invariant checks.
 ///
 /// tprf::Error is bad input (a scene, a flag, a file): the app prints its message on one line and exits
-/// with status 2. tprf::InternalError is a broken invariant: exit status 1. The library never exits.
+/// with status 2. tprf::OutputError is a system that failed to take an output (a full disk): exit
+/// status 1. tprf::InternalError is a broken invariant: exit status 1. A cancelled run throws
+/// tprf::Cancelled (core/cancel.h). The library never exits.
 
 #include <filesystem>
 #include <sstream>
@@ -18,6 +20,13 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// An output that could not be written through no fault of the input: a full disk, a file-size limit,
+/// an I/O error, a directory removed under the run. The message names the file and the system's reason.
+class OutputError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
 /// A broken internal invariant (a bug in tprf, not in the user's input).
 class InternalError : public std::logic_error {
 public:
@@ -27,6 +36,9 @@ public:
 /// Throws Error with the message "FILE: PATH: WHAT" (PATH left out when empty).
 [[noreturn]] void fail_input(const std::filesystem::path& file, std::string_view json_path,
                              std::string_view what);
+
+/// Throws OutputError with the message "FILE: WHAT: the system's reason for errno `err`".
+[[noreturn]] void fail_output(const std::filesystem::path& file, std::string_view what, int err);
 
 namespace detail {
 template <class A, class B>

@@ -2,9 +2,12 @@
 /// Exception-safe parallel loops. An exception that leaves an OpenMP region (or an Embree callback)
 /// calls std::terminate; here every worker's exception is caught, the remaining iterations are
 /// skipped, and the first exception is rethrown on the calling thread once all workers have stopped,
-/// so that a bad mesh, an allocation failure or a cancelled run reaches the caller as an exception.
+/// so that a bad mesh, an allocation failure or a cancelled run (checked before every iteration)
+/// reaches the caller as an exception.
 ///
 /// OpenMP stays inside the library's sources: nothing in this header needs it.
+
+#include "tprf/core/cancel.h"
 
 #include <atomic>
 #include <cstddef>
@@ -21,11 +24,13 @@ int thread_count(int requested);
 /// Holds the first exception thrown by any worker of a parallel region.
 class ExceptionSlot {
 public:
-    /// Runs f() unless a worker has already failed; an exception from f() is kept, not propagated.
+    /// Runs f() unless a worker has already failed or the run was cancelled (core/cancel.h: then
+    /// Cancelled is kept); an exception from f() is kept, not propagated.
     template <class F>
     void run(F&& f) noexcept {
         if (failed()) return;
         try {
+            check_cancelled();
             std::forward<F>(f)();
         } catch (...) {
             capture();

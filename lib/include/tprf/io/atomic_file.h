@@ -15,8 +15,8 @@ namespace tprf {
 /// The constructor creates an empty temporary file `.NAME.tmp.PID.COUNTER` in the final file's
 /// directory (the same file system, so that the rename is atomic); a writer then opens temp_path()
 /// and fills it. commit() flushes the temporary to disk and renames it to the final name; an
-/// AtomicFile destroyed without commit() removes its temporary. Errors throw tprf::Error naming the
-/// path and the system's reason.
+/// AtomicFile destroyed without commit() removes its temporary. Errors throw tprf::OutputError naming
+/// the path and the system's reason.
 class AtomicFile {
 public:
     /// Creates the temporary file next to `final_path` (the directory must exist).
@@ -54,7 +54,11 @@ private:
 /// Throws tprf::Error "DIR: cannot write: REASON".
 void check_output_dir(const std::filesystem::path& dir);
 
-/// Writes `text` to `path` atomically (through an AtomicFile). Throws tprf::Error when it cannot.
+/// Creates the folder `dir` of an output (and its parents). Throws tprf::OutputError naming it when
+/// the system refuses (a full disk, a vanished parent).
+void create_output_dir(const std::filesystem::path& dir);
+
+/// Writes `text` to `path` atomically (through an AtomicFile). Throws tprf::OutputError when it cannot.
 void write_text_file(const std::filesystem::path& path, const std::string& text);
 
 }  // namespace tprf

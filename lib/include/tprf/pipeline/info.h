@@ -94,7 +94,8 @@ struct ResourceEstimate {
 /// patch_transient.npy). Cheap: milliseconds, plus loading the scene's mesh files.
 ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& options, bool patch_profiles = false);
 
-/// The memory limit in bytes: options.max_memory_gb, or 80% of MemAvailable when that is 0.
+/// The memory limit in bytes: options.max_memory_gb, or, when that is 0, 80% of the memory available
+/// to the process: the least of MemAvailable, its cgroups' room under their limits and ulimit -v's.
 std::size_t memory_limit_bytes(const PipelineOptions& options);
 
 /// Throws tprf::Error (exit 2) when the estimated peak of a render of `scene` exceeds the limit,
