@@ -10,6 +10,7 @@
 
 #include <array>
 #include <charconv>
+#include <cmath>
 #include <csignal>
 #include <chrono>
 #include <optional>
@@ -139,12 +140,10 @@ void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
     for (const tprf::MeshReport& m : meshes) std::printf("mesh     %s\n", tprf::describe(m).c_str());
 }
 
-int run_info(const std::string& scene_file, int threads, double max_memory_gb, bool meshes_only, bool quiet,
+int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool quiet,
              bool progress_lines) {
-    const tprf::Scene scene = tprf::load_scene(scene_file);
-    tprf::PipelineOptions options;
-    options.threads = threads;
-    options.max_memory_gb = max_memory_gb;
+    tprf::Scene scene = tprf::load_scene(scene_file);
+    if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     std::printf("scene    %s\n", scene_file.c_str());
     if (meshes_only) {
         const std::vector<tprf::MeshReport> meshes = tprf::describe_meshes(scene);
@@ -260,6 +259,19 @@ int report_failure() {
     }
 }
 
+// A flag's number must be positive and finite: "--max-edge: must be a positive, finite number, got -1".
+CLI::Validator positive_finite() {
+    return CLI::Validator(
+        [](std::string& text) {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v <= 0.0)
+                return "must be a positive, finite number, got " + text;
+            return std::string();
+        },
+        "POSITIVE");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -271,15 +283,18 @@ int main(int argc, char** argv) {
     bool quiet = false;
     app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
     app.add_flag("-q,--quiet", quiet, "no progress bar");
+    double max_edge = 0.0;
+    app.add_option("--max-edge", max_edge, "patch size L in metres: replaces the scene's patches.max_edge")
+        ->check(positive_finite());
     bool progress_lines = false;
     app.add_flag("--progress-lines", progress_lines,
                  "progress as lines, one per stage and per tenth of it, even when stderr is not a terminal (logs)");
     auto* info = app.add_subcommand("info", "print the estimated peak memory and seconds of a render, then the patch "
                                             "count, link count, link memory and the time window");
     info->add_option("scene", scene_file, "scene JSON file")->required();
-    double info_max_memory = 0.0;
-    info->add_option("--max-memory", info_max_memory, "the render limit to compare the estimate with, GB")
-        ->check(CLI::PositiveNumber);
+    tprf::PipelineOptions info_options;
+    info->add_option("--max-memory", info_options.max_memory_gb, "the render limit to compare the estimate with, GB")
+        ->check(positive_finite());
     bool info_meshes = false;
     info->add_flag("--meshes", info_meshes,
                    "only load the mesh files and print, per mesh, its vertices, faces, triangles, bounding box "
@@ -296,7 +311,7 @@ int main(int argc, char** argv) {
     rend->add_option("--max-memory", render.max_memory_gb,
                      "refuse (exit 2, before allocating) a render whose estimated peak memory exceeds GB "
                      "(default: 80% of the memory available)")
-        ->check(CLI::PositiveNumber);
+        ->check(positive_finite());
     auto pixel_option = [](std::optional<std::array<int, 2>>& target) {
         return [&target](const std::string& text) {
             const std::string error = parse_pixel(text, target);
@@ -320,10 +335,15 @@ int main(int argc, char** argv) {
     }
     install_signal_handlers();
     try {
-        if (info->parsed()) return run_info(scene_file, threads, info_max_memory, info_meshes, quiet, progress_lines);
+        if (info->parsed()) {
+            info_options.threads = threads;
+            info_options.max_edge = max_edge;
+            return run_info(scene_file, info_options, info_meshes, quiet, progress_lines);
+        }
         if (rend->parsed()) {
             render.output = output;
             render.threads = threads;
+            render.max_edge = max_edge;
             return run_render(scene_file, render, quiet, progress_lines);
         }
         if (sens->parsed()) {

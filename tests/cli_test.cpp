@@ -101,6 +101,28 @@ TEST_F(Cli, GoodSceneRendersAndInfoPrints) {
         EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / f)) << f;
 }
 
+TEST_F(Cli, MaxEdgeReplacesTheScenesPatchSize) {
+    // good.json: one 1 m square at max_edge 0.5 (4 patches); --max-edge 0.25 cuts it into 16, 0.1 into 100.
+    int status = -1;
+    EXPECT_EQ(line_after(run_stdout("info " + (m_dir / "good.json").string(), status), "patches  "),
+              "4 (max_edge 0.5 m)");
+    EXPECT_EQ(line_after(run_stdout("info --max-edge 0.25 " + (m_dir / "good.json").string(), status), "patches  "),
+              "16 (max_edge 0.25 m)");
+    EXPECT_EQ(status, 0);
+    const Outcome r = run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string() +
+                          " --max-edge 0.1");
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::string record = read_bytes(m_dir / "out" / "render.json");
+    EXPECT_NE(record.find("\"patches\": 100"), std::string::npos) << record;
+    for (const char* bad : {"0", "-1", "inf", "nan", "abc", "1e999"}) {
+        const Outcome b = run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out2").string() +
+                              " --max-edge " + bad);
+        EXPECT_EQ(b.status, 2) << bad;
+        EXPECT_NE(b.err.find("--max-edge: must be a positive, finite number"), std::string::npos) << b.err;
+    }
+    EXPECT_FALSE(fs::exists(m_dir / "out2"));
+}
+
 TEST_F(Cli, InfoPrintsPatchesLinksAndTheTimeWindow) {
     // Two facing 1 m squares cut at 0.25 m: 16 + 16 patches; every patch of one sees every patch of the
     // other and none of its own, so 2 x 16 x 16 links. 100 bins of 10 ps: bins of

@@ -6,10 +6,14 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 #include <unistd.h>
@@ -233,6 +237,39 @@ TEST_F(Mesh, DirectoryInPlaceOfTheFileNamesTheJsonPath) {
     const fs::path dir = m_dir / "folder.obj";
     fs::create_directory(dir);
     expect_input_error(dir, "mesh file '" + dir.string() + "' is not a regular file");
+}
+
+TEST_F(Mesh, FifoInPlaceOfTheFileIsRefusedWithoutWaitingForAWriter) {
+    // Opening a FIFO for reading blocks until someone writes: the file is refused before it is opened.
+    const fs::path fifo = m_dir / "pipe.obj";
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    expect_input_error(fifo, "mesh file '" + fifo.string() + "' is not a regular file");
+}
+
+TEST_F(Mesh, AFaceOfThreeHundredCornersIsKeptWhole) {
+    // A regular 300-gon of circumradius 1: area (n / 2) sin(2 pi / n).
+    const int n = 300;
+    std::ostringstream obj;  // (GCC 12 warns falsely, -Wrestrict, on "literal" + std::string here)
+    obj.precision(17);
+    for (int k = 0; k < n; ++k) obj << "v " << std::cos(2 * M_PI * k / n) << ' ' << std::sin(2 * M_PI * k / n) << " 0\n";
+    obj << 'f';
+    for (int k = 1; k <= n; ++k) obj << ' ' << k;
+    obj << '\n';
+    const auto mesh = tprf::load_mesh(write("polygon.obj", obj.str()), Eigen::Matrix4d::Identity(), "scene.json",
+                                      "objects[0].file");
+    ASSERT_EQ(mesh.faces(), 1u);
+    EXPECT_EQ(mesh.face(0).size(), std::size_t(n));
+    const double area = 0.5 * n * std::sin(2 * M_PI / n);
+    EXPECT_NEAR(total_area(mesh), area, 1e-12 * area);
+}
+
+TEST_F(Mesh, NonManifoldEdgesAreKept) {
+    // Three triangles on one edge (a fin, as scans and CAD exports hold): each is a surface of its own.
+    const auto mesh = tprf::load_mesh(write("fins.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\n"
+                                                         "f 1 2 3\nf 1 2 4\nf 1 2 5\n"),
+                                      Eigen::Matrix4d::Identity(), "scene.json", "objects[0].file");
+    EXPECT_EQ(mesh.faces(), 3u);
+    EXPECT_NEAR(total_area(mesh), 1.5, 1e-12);
 }
 
 TEST_F(Mesh, UnreadableFileNamesTheJsonPath) {

@@ -24,6 +24,8 @@ struct PipelineOptions {
     /// refused before anything heavy is allocated (check_memory); 0: 80% of the memory available
     /// (MemAvailable in /proc/meminfo).
     double max_memory_gb = 0.0;
+    /// `--max-edge L`: replaces the scene's patches.max_edge (metres) when > 0.
+    double max_edge = 0.0;
 };
 
 /// What `tprf info` prints: the scene's size without rendering it.
