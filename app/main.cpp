@@ -2,6 +2,7 @@
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/pipeline/info.h"
+#include "tprf/pipeline/ranks.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/pipeline/sensor_run.h"
 #include "tprf/scene/parse_json.h"
@@ -16,6 +17,7 @@
 #include <optional>
 #include <cstdio>
 #include <exception>
+#include <memory>
 #include <new>
 #include <string>
 #include <string_view>
@@ -186,6 +188,7 @@ void print_warnings(const std::vector<std::string>& warnings) {
 }
 
 int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet, bool progress_lines) {
+    quiet = quiet || options.ranks->rank() != 0;  // rank 0 alone prints
     ProgressBar bar(quiet, progress_lines);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::RenderReport r = tprf::render_file(scene_file, options);
@@ -236,6 +239,8 @@ std::string parse_pixel(const std::string& text, std::optional<std::array<int, 2
 int report_failure() {
     try {
         throw;
+    } catch (const tprf::RankStopped&) {
+        return 2;  // another rank of an MPI run failed first and said why
     } catch (const tprf::Error& e) {
         std::fprintf(stderr, "tprf: error: %s\n", e.what());
         return 2;
@@ -272,9 +277,33 @@ CLI::Validator positive_finite() {
         "POSITIVE");
 }
 
-}  // namespace
+// --plot-pixel X,Y into `target`.
+void add_plot_pixel(CLI::App& command, std::optional<std::array<int, 2>>& target) {
+    command.add_option_function<std::string>(
+        "--plot-pixel",
+        [&target](const std::string& text) {
+            const std::string error = parse_pixel(text, target);
+            if (!error.empty()) throw CLI::ValidationError("--plot-pixel", error);
+        },
+        "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
+}
 
-int main(int argc, char** argv) {
+// The flags of `tprf render` that choose its extra outputs and its memory limit.
+void add_render_flags(CLI::App& rend, tprf::RenderOptions& render) {
+    rend.add_flag("--patch-profiles", render.patch_profiles, "also write patches.csv, patch_transient.npy, patch_steady.npy");
+    rend.add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
+    rend.add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
+    rend.add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
+    rend.add_option("--max-memory", render.max_memory_gb,
+                    "refuse (exit 2, before allocating) a render whose estimated peak memory exceeds GB "
+                    "(default: 80% of the memory available)")
+        ->check(positive_finite());
+    add_plot_pixel(rend, render.plot_pixel);
+}
+
+// Everything but joining the ranks: parse the arguments, run the subcommand, print. `ranks`: the MPI
+// ranks that share a render (docs/mpi.md), or this process alone; rank 0 alone runs info and sensor.
+int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     CLI::App app{"tprf: transient radiosity, light in flight"};
     app.require_subcommand(1);
     app.fallthrough();  // --threads and --quiet may also follow the subcommand
@@ -304,35 +333,21 @@ int main(int argc, char** argv) {
     auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
     rend->add_option("scene", scene_file, "scene JSON file")->required();
     rend->add_option("-o,--output", output, "output directory (created if missing)")->required();
-    rend->add_flag("--patch-profiles", render.patch_profiles, "also write patches.csv, patch_transient.npy, patch_steady.npy");
-    rend->add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
-    rend->add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
-    rend->add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
-    rend->add_option("--max-memory", render.max_memory_gb,
-                     "refuse (exit 2, before allocating) a render whose estimated peak memory exceeds GB "
-                     "(default: 80% of the memory available)")
-        ->check(positive_finite());
-    auto pixel_option = [](std::optional<std::array<int, 2>>& target) {
-        return [&target](const std::string& text) {
-            const std::string error = parse_pixel(text, target);
-            if (!error.empty()) throw CLI::ValidationError("--plot-pixel", error);
-        };
-    };
-    rend->add_option_function<std::string>("--plot-pixel", pixel_option(render.plot_pixel),
-                                           "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
+    add_render_flags(*rend, render);
     tprf::SensorRunOptions sensor;
     std::string render_dir, sensor_file;
     auto* sens = app.add_subcommand("sensor", "apply a sensor block to an existing render: measurements.npy, ...");
     sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
     sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
-    sens->add_option_function<std::string>("--plot-pixel", pixel_option(sensor.plot_pixel),
-                                           "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
+    add_plot_pixel(*sens, sensor.plot_pixel);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
+    if (ranks.rank() != 0 && !rend->parsed()) return 0;
+    render.ranks = &ranks;
     install_signal_handlers();
     try {
         if (info->parsed()) {
@@ -356,4 +371,19 @@ int main(int argc, char** argv) {
     } catch (...) {
         return report_failure();
     }
+}
+
+}  // namespace
+
+// MPI is joined around everything else (under mpirun or srun; a plain run never initialises it) and
+// finalised when the group goes.
+int main(int argc, char** argv) {
+    std::unique_ptr<tprf::RankGroup> ranks;
+    try {
+        ranks = tprf::join_ranks();
+    } catch (const tprf::Error& e) {
+        std::fprintf(stderr, "tprf: error: %s\n", e.what());
+        return 2;
+    }
+    return run_tprf(argc, argv, *ranks);
 }
