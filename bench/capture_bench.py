@@ -3,12 +3,13 @@
 wall, rendered by `tprf render` as a user would, timed from render.json.
 
 Usage: bench/capture_bench.py [--tprf build/bin/tprf] [--grid 64] [--bins 512] [--cell 0.0165]
-                              [--out bench/out] [--threads N] [--skip-all]
+                              [--out bench/out] [--threads N] [--skip-all] [--launcher "mpirun -np 2"]
 
 Runs, each a separate `tprf render` process:
   1. third bounce only (max_bounces 3): laser spot -> hidden surface -> sensor point, no links;
   2. every bounce (max_bounces null): the batched march over hierarchical links;
   3. one laser point with every bounce: what each of GRID x GRID separate renders would cost, for the ratio.
+With --launcher, run 2 is started through it (MPI ranks sharing the laser points, docs/mpi.md).
 Prints the seconds, render.json's phases and peak memory, and writes OUT/capture_bench.json.
 The hidden mesh is scripts/make_statue_mesh.py's bust at --cell (0.0165: about 12k triangles).
 """
@@ -16,6 +17,7 @@ The hidden mesh is scripts/make_statue_mesh.py's bust at --cell (0.0165: about 1
 import argparse
 import json
 import pathlib
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -46,11 +48,11 @@ def scene(mesh, grid, bins, max_bounces, single=False):
     }
 
 
-def render(tprf, workdir, name, body, threads):
+def render(tprf, workdir, name, body, threads, launcher=""):
     path = workdir / f"{name}.json"
     path.write_text(json.dumps(body, indent=1))
     out = workdir / name
-    cmd = [str(tprf), "render", str(path), "-o", str(out), "-q"]
+    cmd = shlex.split(launcher) + [str(tprf), "render", str(path), "-o", str(out), "-q"]
     if threads:
         cmd += ["--threads", str(threads)]
     start = time.perf_counter()
@@ -68,7 +70,7 @@ def describe(name, r):
     return (f"{name:<24} {r['wall_seconds']:8.2f} s  (patches {s['patches']:.2f}, links {s['links']:.2f}, "
             f"views {cs.get('views', 0):.2f}, solve {cs.get('solve', 0):.2f}, gather {cs.get('gather', 0):.2f}, "
             f"write {s['write']:.2f}); peak {r['peak_rss_mb']:.0f} MB; {r['patches']} patches, {r['links']} links, "
-            f"batch {c.get('batch')}, marches {c.get('marches')}")
+            f"batch {c.get('batch')}, marches {c.get('marches')}, ranks {c.get('ranks', 1)}")
 
 
 def main():
@@ -80,6 +82,7 @@ def main():
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "bench" / "out")
     parser.add_argument("--threads", type=int, default=0)
     parser.add_argument("--skip-all", action="store_true", help="only the third-bounce run")
+    parser.add_argument("--launcher", default="", help="put before tprf for the every-bounce run, e.g. 'mpirun -np 2'")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="tprf_capture_bench_") as tmp:
         work = pathlib.Path(tmp)
@@ -93,7 +96,8 @@ def main():
         results["third"] = render(args.tprf, work, "third", scene(mesh, args.grid, args.bins, 3), args.threads)
         print(describe("third bounce only", results["third"]))
         if not args.skip_all:
-            results["all"] = render(args.tprf, work, "all", scene(mesh, args.grid, args.bins, None), args.threads)
+            results["all"] = render(args.tprf, work, "all", scene(mesh, args.grid, args.bins, None), args.threads,
+                                    args.launcher)
             print(describe("every bounce", results["all"]))
             results["single"] = render(args.tprf, work, "single", scene(mesh, args.grid, args.bins, None, True),
                                        args.threads)

@@ -7,6 +7,7 @@
   io/json_records.cpp (writing render.json and sensor.json);
 - only scene/ and pipeline/ include the scene parser (scene/parse_json.h);
 - OpenMP (omp.h) appears in no public header;
+- MPI (mpi.h) appears only in pipeline/ranks_mpi.cpp (pipeline/ranks.h is the interface);
 - no include climbs out of its folder with "../" (which would hide a stage from these checks).
 
     tools/check_layering.py [LIB_DIR]      (default: lib next to this script's folder)
@@ -18,6 +19,7 @@ import sys
 
 STAGES = ["core", "scene", "geometry", "transport", "imaging", "io", "pipeline"]
 JSON_SOURCES = {"io/json_records.cpp"}
+MPI_SOURCES = {"pipeline/ranks_mpi.cpp"}
 
 
 def stage_of(path, lib):
@@ -62,6 +64,8 @@ def main():
                     problems.append(f"{where}: {inc} outside the scene parser and io/json_records.cpp")
             if inc == "omp.h" and public:
                 problems.append(f"{where}: a public header includes omp.h")
+            if inc == "mpi.h" and (public or rel not in MPI_SOURCES):
+                problems.append(f"{where}: mpi.h outside pipeline/ranks_mpi.cpp")
     for p in problems:
         print(p)
     return 1 if problems else 0

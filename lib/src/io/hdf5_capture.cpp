@@ -143,9 +143,15 @@ private:
         });
     }
 
+    // Without modification times (HDF5 stamps every object by default): two renders of one scene give
+    // the same bytes, so that captures can be compared with cmp (and a split render with one process's).
     H5::DataSet create(const char* name, const H5::DataType& type, const H5::DataSpace& space) {
-        return step(std::string("cannot create the dataset ") + name,
-                    [&] { return m_file.createDataSet(name, type, space); });
+        return step(std::string("cannot create the dataset ") + name, [&] {
+            H5::DSetCreatPropList properties;
+            if (H5Pset_obj_track_times(properties.getId(), false) < 0)
+                throw H5::PropListIException("H5Pset_obj_track_times", "cannot turn time tracking off");
+            return m_file.createDataSet(name, type, space, properties);
+        });
     }
 
     void write(const char* name, const H5::DataType& file_type, const H5::DataSpace& space,

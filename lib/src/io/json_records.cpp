@@ -42,6 +42,18 @@ nlohmann::json seconds_json(const PhaseSeconds& s) {
             {"gather", s.gather}, {"write", s.write},     {"total", s.total}};
 }
 
+// A capture's split across ranks: per rank, its laser points [first, last) and what it spent.
+nlohmann::json shares_json(const std::vector<CaptureShare>& shares) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const CaptureShare& s : shares)
+        out.push_back({{"laser_points", {s.first_laser, s.first_laser + s.laser_points}},
+                       {"marches", s.marches},
+                       {"link_bin_updates", s.link_bin_updates},
+                       {"seconds", {{"views", s.seconds_views}, {"solve", s.seconds_solve},
+                                    {"gather", s.seconds_gather}}}});
+    return out;
+}
+
 }  // namespace
 
 void write_render_json(const std::filesystem::path& path, const RenderRecord& r) {
@@ -66,7 +78,9 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
                         {"view_pairs", c->view_pairs},
                         {"link_bin_updates", c->link_bin_updates},
                         {"seconds", {{"views", c->seconds_views}, {"solve", c->seconds_solve},
-                                     {"gather", c->seconds_gather}}}};
+                                     {"gather", c->seconds_gather}, {"exchange", c->seconds_exchange}}},
+                        {"ranks", c->shares.size()},
+                        {"shares", shares_json(c->shares)}};
     j["solver"] = solver_json(r);
     j["seconds"] = seconds_json(r.seconds);
     // The solve's phases (wall times): the long-link pass, the bin-by-bin pass, the output blocks.

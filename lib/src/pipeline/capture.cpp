@@ -4,6 +4,7 @@
 #include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/pipeline/ranks.h"
 #include "tprf/scene/scene.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
@@ -13,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <span>
+#include <utility>
 
 namespace tprf {
 namespace {
@@ -41,6 +43,7 @@ struct CapturePlan {
     bool solve = false;
     int max_bounces = -1;          // the capture's (sensor side)
     std::size_t sensors = 0;       // sensor points
+    std::size_t pair_base = 0;     // the first pair of this rank's rows of H (0: one rank)
     int T = 0;
     double start = 0.0, inv_bin = 0.0;
     double laser_leg(std::size_t l) const { return capture.account_first_and_last_bounces ? points.laser[l].device_leg : 0.0; }
@@ -58,7 +61,7 @@ struct CapturePlan {
 void deposit(std::vector<float>& H, const CapturePlan& p, std::size_t pair, double path, double value) {
     const std::int64_t b = p.bin(path);
     if (b < 0 || b >= p.T || value == 0.0) return;
-    H[pair * std::size_t(p.T) + std::size_t(b)] += float(value);
+    H[(pair - p.pair_base) * std::size_t(p.T) + std::size_t(b)] += float(value);
 }
 
 // Orders 1 and 2: the spot itself where sensor point s's cell holds it, and the spot's light reaching
@@ -230,7 +233,7 @@ private:
         const float f = nearest ? 0.0f : float(lag - double(whole));
         const float w[3] = {float(tap.weight[0] / 3.0), float(tap.weight[1] / 3.0), float(tap.weight[2] / 3.0)};
         const float* in = indirect.data() + std::size_t(tap.patch) * bins * 3;
-        float* out = m_H.data() + pair * std::size_t(m_plan.T);
+        float* out = m_H.data() + (pair - m_plan.pair_base) * std::size_t(m_plan.T);
         for (std::size_t b = 0; b < bins; ++b) {
             const float v = w[0] * in[b * 3] + w[1] * in[b * 3 + 1] + w[2] * in[b * 3 + 2];
             if (v == 0.0f) continue;
@@ -313,45 +316,108 @@ int choose_batch(const CapturePlan& p, const LinkSet& links, const CaptureOption
     return per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
 }
 
+// Laser points [first, last) of `rank`: whole units of `unit` laser points (a batch, so that every rank
+// forms the batches a single process forms; lanes of one march are not bitwise independent of their
+// batch mates), as evenly as the count of units allows, in rank order.
+std::pair<std::size_t, std::size_t> share_of(std::size_t lasers, std::size_t unit, int rank, int ranks) {
+    const std::size_t units = (lasers + unit - 1) / unit;
+    const auto start = [&](int r) { return std::min(lasers, units * std::size_t(r) / std::size_t(ranks) * unit); };
+    return {start(rank), start(rank + 1)};
+}
+
+// Laser points [first, last) into this rank's rows of H: views, the exact orders and, batch by batch,
+// the march. `sensor_views` and `taps_all`: the sensor side of an exhaustive capture.
+void compute_share(const CapturePlan& p, const LinkSet* links, std::size_t first, std::size_t last,
+                   const std::vector<std::vector<PatchView>>& sensor_views,
+                   const std::vector<std::vector<SensorTap>>& taps_all, const CaptureOptions& options,
+                   CaptureResult& result, CaptureShare& share) {
+    const std::size_t step = p.solve ? std::size_t(result.batch) : std::size_t(64);
+    for (std::size_t l0 = first; l0 < last; l0 += step) {
+        const std::size_t l1 = std::min(last, l0 + step);
+        const auto t0 = Clock::now();
+        const std::vector<std::vector<PatchView>> laser_views = view_all(p, p.points.laser, l0, l1, options.threads);
+        share.seconds_views += seconds_from(t0);
+        const auto t1 = Clock::now();
+        parallel_for(l1 - l0, {options.threads, 1, true},
+                     [&](std::size_t k) { add_exact(p, l0 + k, laser_views[k], sensor_views, result.H); });
+        for (std::size_t k = 0; k < l1 - l0 && p.confocal; ++k) share.view_pairs += laser_views[k].size();
+        share.seconds_gather += seconds_from(t1);
+        if (p.solve) solve_batch(p, *links, l0, l1, laser_views, taps_all, options, result);
+        if (options.progress) options.progress("capture", double(l1 - first) / double(last - first));
+    }
+    share.marches = result.marches;
+    share.link_bin_updates = result.link_bin_updates;
+    share.seconds_solve = result.seconds_solve;
+    share.seconds_gather += result.seconds_gather;
+}
+
+// Rank 0 collects every rank's share and rows of H: rank order is laser order, so H is put together in
+// place, the same bytes whatever the timing. The capture's counts become the sums over the ranks.
+void exchange(const RankGroup& ranks, const CaptureShare& mine, CaptureResult& result) {
+    const auto start = Clock::now();
+    if (ranks.size() == 1) {
+        result.shares = {mine};
+        return;
+    }
+    result.shares = ranks.gather(std::span<const CaptureShare>(&mine, 1));
+    result.H = ranks.gather(std::span<const float>(result.H));
+    result.seconds_exchange = seconds_from(start);
+    if (ranks.rank() != 0) return;
+    TPRF_CHECK_EQ(result.H.size(), result.pairs * std::size_t(result.bins));
+    result.marches = 0;
+    result.link_bin_updates = 0;
+    result.view_pairs = 0;
+    for (const CaptureShare& s : result.shares) {
+        result.marches += s.marches;
+        result.link_bin_updates += s.link_bin_updates;
+        result.view_pairs += s.view_pairs;
+    }
+}
+
 }  // namespace
 
 CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const Visibility& visibility,
                               const LinkSet* links, const CaptureOptions& options) {
+    const SingleRank alone;
+    const RankGroup& ranks = options.ranks ? *options.ranks : alone;
     const auto start = Clock::now();
-    const CapturePlan p = make_plan(scene, patches, visibility);
+    CapturePlan p = make_plan(scene, patches, visibility);
     CaptureResult result;
-    result.seconds_views = seconds_from(start);
+    CaptureShare share;
+    share.seconds_views = seconds_from(start);
     result.pairs = p.capture.pairs();
     result.bins = p.T;
     result.solved = p.solve;
-    result.H.assign(result.pairs * std::size_t(p.T), 0.0f);
     if (p.solve) TPRF_CHECK(links != nullptr);
-    // An exhaustive capture pairs every laser point with every sensor point: the sensor side is viewed once.
+    const std::size_t lasers = p.points.laser.size();
+    // The batch is rank 0's choice (from its memory limit), so that every rank forms the same batches.
+    if (p.solve)
+        result.batch = int(std::min<std::int64_t>(
+            ranks.broadcast(ranks.rank() == 0 ? std::int64_t(choose_batch(p, *links, options)) : 0),
+            std::int64_t(lasers)));
+    const auto [first, last] = share_of(lasers, p.solve ? std::size_t(result.batch) : 1, ranks.rank(), ranks.size());
+    share.first_laser = first;
+    share.laser_points = last - first;
+    p.pair_base = p.first_pair(first);
+    result.H.assign((p.first_pair(last) - p.pair_base) * std::size_t(p.T), 0.0f);
+    // An exhaustive capture pairs every laser point with every sensor point: the sensor side is viewed
+    // once (by every rank).
     std::vector<std::vector<PatchView>> sensor_views;
     std::vector<std::vector<SensorTap>> taps_all;
     if (!p.confocal) {
+        const auto t0 = Clock::now();
         sensor_views = view_all(p, p.points.sensor, 0, p.sensors, options.threads);
         if (p.solve)
             for (std::size_t s = 0; s < p.sensors; ++s) taps_all.push_back(sensor_taps(p, s, sensor_views[s]));
+        share.seconds_views += seconds_from(t0);
     }
-    const std::size_t lasers = p.points.laser.size();
-    result.batch = p.solve ? int(std::min<std::size_t>(std::size_t(choose_batch(p, *links, options)), lasers)) : 0;
-    const std::size_t step = p.solve ? std::size_t(result.batch) : std::size_t(64);
-    for (std::size_t l0 = 0; l0 < lasers; l0 += step) {
-        const std::size_t l1 = std::min(lasers, l0 + step);
-        const auto t0 = Clock::now();
-        const std::vector<std::vector<PatchView>> laser_views = view_all(p, p.points.laser, l0, l1, options.threads);
-        result.seconds_views += seconds_from(t0);
-        const auto t1 = Clock::now();
-        parallel_for(l1 - l0, {options.threads, 1, true},
-                     [&](std::size_t k) { add_exact(p, l0 + k, laser_views[k], sensor_views, result.H); });
-        for (std::size_t k = 0; k < l1 - l0 && p.confocal; ++k) result.view_pairs += laser_views[k].size();
-        result.seconds_gather += seconds_from(t1);
-        if (p.solve) solve_batch(p, *links, l0, l1, laser_views, taps_all, options, result);
-        if (options.progress) options.progress("capture", double(l1) / double(lasers));
-    }
+    compute_share(p, links, first, last, sensor_views, taps_all, options, result, share);
+    result.seconds_views = share.seconds_views;
+    result.seconds_gather = share.seconds_gather;
+    result.view_pairs = share.view_pairs;
+    exchange(ranks, share, result);
     for (const auto& v : sensor_views) result.view_pairs += v.size();
-    result.points = p.points;
+    result.points = std::move(p.points);
     return result;
 }
 

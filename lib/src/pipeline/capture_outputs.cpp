@@ -98,6 +98,20 @@ int capture_measurements(const Scene& scene, const RenderOptions& options, const
                                 plot_pixel(std::nullopt, width, height), options, warnings);
 }
 
+// The capture's options for a render: threads, progress, the ranks, and what the march may use: the
+// limit (--max-memory, or 80% of what is available) less what this process has held so far and the
+// capture's H (twice: its copy while written).
+CaptureOptions capture_options(const Scene& scene, const RenderOptions& options) {
+    CaptureOptions capture_options;
+    capture_options.threads = options.threads;
+    capture_options.progress = options.progress;
+    capture_options.ranks = options.ranks;
+    const double held = peak_rss_mb() * 1e6 + 2.0 * 4.0 * double(scene.time.bins) * double(scene.capture->pairs());
+    const double limit = double(memory_limit_bytes(options));
+    if (limit > 0.0) capture_options.memory_bytes = std::size_t(std::max(1.0, limit - held));
+    return capture_options;
+}
+
 }  // namespace
 
 void check_capture_flags(const RenderOptions& options) {
@@ -115,15 +129,7 @@ void check_capture_flags(const RenderOptions& options) {
 CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
                              const Visibility& visibility, const LinkSet* links, Staging& staging,
                              RenderReport& report) {
-    CaptureOptions capture_options;
-    capture_options.threads = options.threads;
-    capture_options.progress = options.progress;
-    // What the march may use: the limit (--max-memory, or 80% of what is available) less what this
-    // process has held so far and the capture's H (twice: its copy while written).
-    const double held = peak_rss_mb() * 1e6 + 2.0 * 4.0 * double(scene.time.bins) * double(scene.capture->pairs());
-    const double limit = double(memory_limit_bytes(options));
-    if (limit > 0.0) capture_options.memory_bytes = std::size_t(std::max(1.0, limit - held));
-    const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options);
+    const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options(scene, options));
     const auto start = std::chrono::steady_clock::now();
     write_capture_files(scene, r, staging);
     if (scene.sensor && !scene.camera)
@@ -145,7 +151,14 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
     record.seconds_views = r.seconds_views;
     record.seconds_solve = r.seconds_solve;
     record.seconds_gather = r.seconds_gather;
+    record.seconds_exchange = r.seconds_exchange;
+    record.shares = r.shares;
     return record;
+}
+
+void share_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
+                   const Visibility& visibility, const LinkSet* links) {
+    compute_capture(scene, patches, visibility, links, capture_options(scene, options));
 }
 
 }  // namespace tprf

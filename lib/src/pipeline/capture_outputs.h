@@ -23,4 +23,9 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
                              const Visibility& visibility, const LinkSet* links, Staging& staging,
                              RenderReport& report);
 
+/// On a rank other than 0 of a split render (pipeline/ranks.h): computes this rank's share of the
+/// capture and sends it to rank 0, which calls render_capture meanwhile. Writes nothing.
+void share_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
+                   const Visibility& visibility, const LinkSet* links);
+
 }  // namespace tprf

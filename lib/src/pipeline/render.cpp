@@ -2,6 +2,7 @@
 
 #include "capture_outputs.h"
 #include "staging.h"
+#include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
@@ -13,6 +14,7 @@
 #include "tprf/io/npy.h"
 #include "tprf/io/sequences.h"
 #include "tprf/pipeline/capture.h"
+#include "tprf/pipeline/ranks.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
@@ -20,7 +22,11 @@
 #include "tprf/transport/solver.h"
 #include "tprf/transport/steady.h"
 
+#include <csignal>
+#include <exception>
 #include <memory>
+#include <new>
+#include <optional>
 #include <sstream>
 
 namespace tprf {
@@ -216,8 +222,9 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
 }
 
 // Everything that can be wrong with the request is found before any work: the scene, the camera,
-// ffmpeg for a video, the plot pixel, the estimated peak memory and the output directory.
-Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options) {
+// ffmpeg for a video, the plot pixel, the estimated peak memory and (`writes`: on the rank that
+// writes) the output directory.
+Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options, bool writes) {
     Scene scene = load_scene(scene_file);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     if (!scene.camera && !scene.capture)
@@ -227,8 +234,49 @@ Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOpt
         throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
     if (scene.camera) plot_pixel(options.plot_pixel, scene.camera->width, scene.camera->height);
     check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
-    check_output_dir(options.output);
+    if (writes) check_output_dir(options.output);
     return scene;
+}
+
+// The scene, loaded and checked on every rank: when any rank fails, every rank stops here, before any
+// collective work. The lowest failing rank throws its error (named by rank unless it is rank 0, which
+// fails first for a bad scene), the others RankStopped.
+Scene load_on_every_rank(const std::filesystem::path& scene_file, const RenderOptions& options,
+                         const RankGroup& ranks) {
+    if (ranks.size() == 1) return load_render_scene(scene_file, options, true);
+    std::optional<Scene> scene;
+    std::exception_ptr failure;
+    try {
+        scene = load_render_scene(scene_file, options, ranks.rank() == 0);
+    } catch (...) {
+        failure = std::current_exception();
+    }
+    const int first = ranks.first_failure(failure != nullptr);
+    if (first == ranks.size()) return std::move(*scene);
+    if (first != ranks.rank()) throw RankStopped("stopped: rank " + std::to_string(first) + " failed");
+    if (first == 0) std::rethrow_exception(failure);
+    try {
+        std::rethrow_exception(failure);
+    } catch (const Error& e) {
+        throw Error("rank " + std::to_string(first) + " of " + std::to_string(ranks.size()) + ": " + e.what());
+    }
+}
+
+// A rank other than 0: the patches, the visibility and (when the capture marches) the links, built as
+// rank 0 builds them, then its share of the capture's laser points, sent to rank 0. No progress, no
+// files.
+void render_share(const Scene& scene, RenderOptions options) {
+    if (!scene.capture) return;
+    options.progress = nullptr;
+    const PatchSet patches = build_patches(scene);
+    const Visibility visibility(patches);
+    LinkSet links;
+    if (capture_needs_links(scene)) {
+        LinkOptions link_options;
+        link_options.threads = options.threads;
+        links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options);
+    }
+    share_capture(scene, options, patches, visibility, capture_needs_links(scene) ? &links : nullptr);
 }
 
 // The camera's outputs: the cubes filled block by block, then the steady image and the views.
@@ -248,12 +296,32 @@ SolveStats render_camera(const Scene& scene, const RenderOptions& options, const
     return stats;
 }
 
-}  // namespace
+// A failure during the shared work (rethrown here): this rank says why, and the launcher ends every
+// rank, with the status that the command gives the failure in one process (app/main.cpp).
+[[noreturn]] void stop_every_rank(const RankGroup& ranks) {
+    const std::string rank = "rank " + std::to_string(ranks.rank()) + " of " + std::to_string(ranks.size()) + ": ";
+    const std::string stopped = " (every rank stopped; nothing of this run was kept)";
+    try {
+        throw;
+    } catch (const Error& e) {
+        ranks.abort(rank + e.what() + stopped, 2);
+    } catch (const Cancelled& e) {
+        ranks.abort(rank + e.what() + stopped, 128 + (e.signal() > 0 ? e.signal() : SIGINT));
+    } catch (const OutputError& e) {
+        ranks.abort(rank + e.what() + stopped, 1);
+    } catch (const std::bad_alloc&) {
+        ranks.abort(rank + "out of memory" + stopped, 1);
+    } catch (const std::exception& e) {
+        ranks.abort(rank + "internal error: " + e.what() + stopped, 1);
+    } catch (...) {
+        ranks.abort(rank + "internal error: an unknown exception" + stopped, 1);
+    }
+}
 
-RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options) {
-    const auto start = Clock::now();
+// Rank 0 (or the only process): everything after loading, every output written.
+RenderReport render_scene(const std::filesystem::path& scene_file, const Scene& scene, const RenderOptions& options,
+                          Clock::time_point start) {
     RenderReport report;
-    const Scene scene = load_render_scene(scene_file, options);
     report.seconds.load = seconds_since(start);
     report.bins = scene.time.bins;
     report.width = scene.camera ? scene.camera->width : 0;
@@ -283,6 +351,24 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     }
     if (options.progress) options.progress("write", 1.0);
     return report;
+}
+
+}  // namespace
+
+RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options) {
+    const auto start = Clock::now();
+    const SingleRank alone;
+    const RankGroup& ranks = options.ranks ? *options.ranks : alone;
+    const Scene scene = load_on_every_rank(scene_file, options, ranks);
+    if (ranks.size() == 1) return render_scene(scene_file, scene, options, start);
+    // From here the ranks wait for each other: a failure on one must end them all, not leave them waiting.
+    try {
+        if (ranks.rank() == 0) return render_scene(scene_file, scene, options, start);
+        render_share(scene, options);
+        return {};
+    } catch (...) {
+        stop_every_rank(ranks);
+    }
 }
 
 }  // namespace tprf

@@ -13,6 +13,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -26,6 +27,16 @@ struct PhaseSeconds {
     double illumination = 0;  ///< the part of `gather` that lights the patches (illuminate())
 };
 
+/// One rank's part of a capture split across ranks (docs/mpi.md): its laser points and what it spent.
+struct CaptureShare {
+    std::size_t first_laser = 0;      ///< laser points [first_laser, first_laser + laser_points)
+    std::size_t laser_points = 0;
+    int marches = 0;
+    std::size_t view_pairs = 0;       ///< (laser point, patch) pairs seen (confocal: the sensor points too)
+    std::uint64_t link_bin_updates = 0;
+    double seconds_views = 0.0, seconds_solve = 0.0, seconds_gather = 0.0;
+};
+
 /// What render.json records of a capture (docs/capture.md).
 struct CaptureRecord {
     std::string type;                 ///< "confocal" or "exhaustive"
@@ -36,7 +47,10 @@ struct CaptureRecord {
     int marches = 0;
     std::size_t view_pairs = 0;       ///< (wall point, patch) pairs seen
     std::uint64_t link_bin_updates = 0;
-    double seconds_views = 0.0, seconds_solve = 0.0, seconds_gather = 0.0;
+    double seconds_views = 0.0, seconds_solve = 0.0, seconds_gather = 0.0;  ///< rank 0's
+    /// Rank 0's wait for the others' shares and their transfer (0 with one rank).
+    double seconds_exchange = 0.0;
+    std::vector<CaptureShare> shares;  ///< one per rank, in rank order (one: a single process)
 };
 
 /// Everything render.json records.

@@ -15,6 +15,7 @@
 
 #include "tprf/core/progress.h"
 #include "tprf/imaging/capture_points.h"
+#include "tprf/io/json_records.h"
 
 #include <cstddef>
 #include <vector>
@@ -25,6 +26,7 @@ struct Scene;
 struct PatchSet;
 struct LinkSet;
 class Visibility;
+class RankGroup;
 
 /// Options of the capture.
 struct CaptureOptions {
@@ -33,24 +35,35 @@ struct CaptureOptions {
     int batch = 0;
     std::size_t memory_bytes = 0;  ///< the memory the batch may use (0: no limit but kMaxBatch)
     ProgressFn progress;       ///< phase "capture"
+    /// The ranks that share the laser points (pipeline/ranks.h; null: this process alone). Every rank
+    /// calls compute_capture with the same scene; each computes whole batches of laser points (the
+    /// batch is rank 0's choice), rank 0 collects H. An exception on one rank leaves the others waiting
+    /// in a collective: the caller ends the group then (render_file does).
+    const RankGroup* ranks = nullptr;
 };
 
 /// A capture's H and what it measured.
 struct CaptureResult {
     CapturePoints points;
     /// pairs x T, float: radiance (the mean of RGB) times seconds per bin, W s / (m^2 sr). Pair index:
-    /// the sensor point s for a confocal capture, l * sensor points + s for an exhaustive one.
+    /// the sensor point s for a confocal capture, l * sensor points + s for an exhaustive one. Empty on
+    /// the ranks other than 0 of a split capture (their rows went to rank 0).
     std::vector<float> H;
     std::size_t pairs = 0;
     int bins = 0;
     bool solved = false;             ///< later bounces marched (max_bounces null or >= 4)
     int batch = 0;                   ///< illuminations per march
-    int marches = 0;                 ///< marches run
-    std::size_t view_pairs = 0;      ///< (sensor point, patch) pairs seen, summed over sensor points
-    std::uint64_t link_bin_updates = 0;  ///< links x bins x layers, summed over marches
-    double seconds_views = 0.0;      ///< locating points and viewing the patches from them
-    double seconds_solve = 0.0;      ///< the marches
-    double seconds_gather = 0.0;     ///< exact first bounces and the marched profiles gathered into H
+    /// Marches run, (sensor point, patch) pairs seen (summed over sensor points) and links x bins x
+    /// layers (summed over marches): on rank 0 of a split capture, summed over the ranks.
+    int marches = 0;
+    std::size_t view_pairs = 0;
+    std::uint64_t link_bin_updates = 0;
+    double seconds_views = 0.0;      ///< locating points and viewing the patches from them (this rank)
+    double seconds_solve = 0.0;      ///< the marches (this rank)
+    double seconds_gather = 0.0;     ///< exact first bounces and the marched profiles gathered into H (this rank)
+    double seconds_exchange = 0.0;   ///< waiting for the other ranks and collecting their rows (0: one rank)
+    /// Rank 0: every rank's laser points and seconds, in rank order; elsewhere: this rank's alone.
+    std::vector<CaptureShare> shares;
 };
 
 /// Computes scene.capture over the built patches (and, when later bounces are asked for, `links`, which

@@ -14,6 +14,8 @@
 
 namespace tprf {
 
+class RankGroup;
+
 /// What `tprf render` writes besides the cube and the steady image (SPEC.md, "Output directory").
 struct RenderOptions : PipelineOptions {
     std::filesystem::path output;   ///< the output directory (created if missing)
@@ -24,6 +26,10 @@ struct RenderOptions : PipelineOptions {
     /// The pixel (column x, row y) of sensor_plot.png when the scene has a sensor block; default:
     /// the image centre.
     std::optional<std::array<int, 2>> plot_pixel;
+    /// The ranks that share the render (pipeline/ranks.h, docs/mpi.md; null: this process alone). Every
+    /// rank calls render_file with the same scene and options; rank 0 renders the camera and writes
+    /// every output, the others compute their share of the capture and write nothing.
+    const RankGroup* ranks = nullptr;
 };
 
 /// What a render did.
@@ -46,6 +52,9 @@ struct RenderReport {
 /// Renders a scene file into options.output: loads and validates the scene (tprf::Error before any
 /// file is written), builds patches and links, solves, gathers the camera's view, and writes every
 /// output under a staging name first, moving them all into place only once all are complete.
+/// With several ranks: a scene that fails on any rank stops every rank before the shared work (the
+/// lowest failing rank throws its Error, the others RankStopped); an exception during the shared work
+/// ends every rank (RankGroup::abort). The report of a rank other than 0 is empty.
 RenderReport render_file(const std::filesystem::path& scene_file, const RenderOptions& options);
 
 }  // namespace tprf
