@@ -234,34 +234,32 @@ std::string parse_pixel(const std::string& text, std::optional<std::array<int, 2
     return "";
 }
 
-// The message and exit status of a run that threw (rethrown here): 2 for bad input, 128 + the signal
-// for a cancelled run, 1 for a failed write, memory or a bug.
+// The message of a run that threw (rethrown here), and its exit status (tprf::exit_status).
 int report_failure() {
+    const int status = tprf::exit_status(std::current_exception());
     try {
         throw;
     } catch (const tprf::RankStopped&) {
-        return 2;  // another rank of an MPI run failed first and said why
+        // another rank of an MPI run failed first and said why
     } catch (const tprf::Error& e) {
         std::fprintf(stderr, "tprf: error: %s\n", e.what());
-        return 2;
     } catch (const tprf::Cancelled& e) {
         std::fprintf(stderr, "tprf: %s in the %s stage: nothing of this run was kept; earlier outputs are untouched\n",
                      e.what(), g_phase.c_str());
-        return 128 + (e.signal() > 0 ? e.signal() : SIGINT);
     } catch (const tprf::OutputError& e) {
         std::fprintf(stderr, "tprf: error: %s; nothing of this run was kept, earlier outputs are untouched\n", e.what());
-        return 1;
     } catch (const std::bad_alloc&) {
         std::fprintf(stderr,
                      "tprf: error: out of memory in the %s stage (the estimate of `tprf info` was exceeded, or other "
                      "processes took the memory); nothing of this run was kept. Lower --max-memory to have such "
                      "renders refused before they start, or make the scene smaller (patches.max_edge, time.bins)\n",
                      g_phase.c_str());
-        return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "tprf: internal error: %s\n", e.what());
-        return 1;
+    } catch (...) {
+        std::fprintf(stderr, "tprf: internal error: an unknown exception\n");
     }
+    return status;
 }
 
 // A flag's number must be positive and finite: "--max-edge: must be a positive, finite number, got -1".

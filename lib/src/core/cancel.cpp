@@ -1,6 +1,5 @@
 #include "tprf/core/cancel.h"
 
-#include <atomic>
 #include <csignal>
 #include <string>
 
@@ -8,10 +7,7 @@ namespace tprf {
 
 namespace {
 
-// 0: no request; a signal number; or kAsked for a request without a signal.
-constexpr int kAsked = -1;
-std::atomic<int> g_request{0};
-static_assert(std::atomic<int>::is_always_lock_free, "request_cancel must be async-signal-safe");
+constexpr int kAsked = -1;  // a request without a signal
 
 std::string describe(int signal) {
     switch (signal) {
@@ -27,15 +23,12 @@ std::string describe(int signal) {
 
 Cancelled::Cancelled(int signal) : std::runtime_error(describe(signal)), m_signal(signal) {}
 
-void request_cancel(int signal) noexcept { g_request.store(signal > 0 ? signal : kAsked, std::memory_order_relaxed); }
-
-void clear_cancel() noexcept { g_request.store(0, std::memory_order_relaxed); }
-
-bool cancel_requested() noexcept { return g_request.load(std::memory_order_relaxed) != 0; }
-
-void check_cancelled() {
-    const int r = g_request.load(std::memory_order_relaxed);
-    if (r != 0) throw Cancelled(r > 0 ? r : 0);
+void request_cancel(int signal) noexcept {
+    detail::cancel_request.store(signal > 0 ? signal : kAsked, std::memory_order_relaxed);
 }
+
+void clear_cancel() noexcept { detail::cancel_request.store(0, std::memory_order_relaxed); }
+
+void detail::throw_cancelled(int request) { throw Cancelled(request > 0 ? request : 0); }
 
 }  // namespace tprf

@@ -1,6 +1,9 @@
 #include "tprf/core/error.h"
 
+#include "tprf/core/cancel.h"
+
 #include <cerrno>
+#include <csignal>
 #include <sstream>
 #include <system_error>
 
@@ -12,6 +15,18 @@ void fail_input(const std::filesystem::path& file, std::string_view json_path, s
     if (!json_path.empty()) msg << json_path << ": ";
     msg << what;
     throw Error(msg.str());
+}
+
+int exit_status(const std::exception_ptr& failure) noexcept {
+    try {
+        std::rethrow_exception(failure);
+    } catch (const Error&) {
+        return 2;
+    } catch (const Cancelled& e) {
+        return 128 + (e.signal() > 0 ? e.signal() : SIGINT);
+    } catch (...) {
+        return 1;
+    }
 }
 
 void fail_output(const std::filesystem::path& file, std::string_view what, int err) {

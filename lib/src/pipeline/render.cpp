@@ -22,7 +22,6 @@
 #include "tprf/transport/solver.h"
 #include "tprf/transport/steady.h"
 
-#include <csignal>
 #include <exception>
 #include <memory>
 #include <new>
@@ -66,7 +65,9 @@ struct Transport {
     Gather gather;
 };
 
-void build_transport(const Scene& scene, const RenderOptions& options, Transport& t, RenderReport& report) {
+// Patches, visibility and (when `links`) the links: what every rank of a split render builds alike.
+void build_geometry(const Scene& scene, const RenderOptions& options, bool links, Transport& t,
+                    RenderReport& report) {
     auto start = Clock::now();
     PatchStats patch_stats;
     t.patches = build_patches(scene, {options.progress}, &patch_stats);
@@ -76,7 +77,7 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
 
     start = Clock::now();
     t.visibility = std::make_unique<Visibility>(t.patches);
-    if (render_needs_links(scene)) {
+    if (links) {
         LinkOptions link_options;
         link_options.threads = options.threads;
         link_options.progress = options.progress;
@@ -84,9 +85,12 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
         report.links = t.links.links.size();
     }
     report.seconds.links = seconds_since(start);
-    if (!scene.camera) return;  // a capture lights the patches from its own laser points
+}
 
-    start = Clock::now();
+void build_transport(const Scene& scene, const RenderOptions& options, Transport& t, RenderReport& report) {
+    build_geometry(scene, options, render_needs_links(scene), t, report);
+    if (!scene.camera) return;  // a capture lights the patches from its own laser points
+    const auto start = Clock::now();
     t.sources = light_sources(scene, t.patches, *t.visibility);
     IlluminationOptions light_options;
     light_options.threads = options.threads;
@@ -268,15 +272,11 @@ Scene load_on_every_rank(const std::filesystem::path& scene_file, const RenderOp
 void render_share(const Scene& scene, RenderOptions options) {
     if (!scene.capture) return;
     options.progress = nullptr;
-    const PatchSet patches = build_patches(scene);
-    const Visibility visibility(patches);
-    LinkSet links;
-    if (capture_needs_links(scene)) {
-        LinkOptions link_options;
-        link_options.threads = options.threads;
-        links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options);
-    }
-    share_capture(scene, options, patches, visibility, capture_needs_links(scene) ? &links : nullptr);
+    const bool links = capture_needs_links(scene);
+    Transport t;
+    RenderReport unused;
+    build_geometry(scene, options, links, t, unused);
+    share_capture(scene, options, t.patches, *t.visibility, links ? &t.links : nullptr);
 }
 
 // The camera's outputs: the cubes filled block by block, then the steady image and the views.
@@ -299,23 +299,26 @@ SolveStats render_camera(const Scene& scene, const RenderOptions& options, const
 // A failure during the shared work (rethrown here): this rank says why, and the launcher ends every
 // rank, with the status that the command gives the failure in one process (app/main.cpp).
 [[noreturn]] void stop_every_rank(const RankGroup& ranks) {
-    const std::string rank = "rank " + std::to_string(ranks.rank()) + " of " + std::to_string(ranks.size()) + ": ";
-    const std::string stopped = " (every rank stopped; nothing of this run was kept)";
+    const int status = exit_status(std::current_exception());
+    std::string what;
     try {
         throw;
     } catch (const Error& e) {
-        ranks.abort(rank + e.what() + stopped, 2);
+        what = e.what();
     } catch (const Cancelled& e) {
-        ranks.abort(rank + e.what() + stopped, 128 + (e.signal() > 0 ? e.signal() : SIGINT));
+        what = e.what();
     } catch (const OutputError& e) {
-        ranks.abort(rank + e.what() + stopped, 1);
+        what = e.what();
     } catch (const std::bad_alloc&) {
-        ranks.abort(rank + "out of memory" + stopped, 1);
+        what = "out of memory";
     } catch (const std::exception& e) {
-        ranks.abort(rank + "internal error: " + e.what() + stopped, 1);
+        what = std::string("internal error: ") + e.what();
     } catch (...) {
-        ranks.abort(rank + "internal error: an unknown exception" + stopped, 1);
+        what = "internal error: an unknown exception";
     }
+    ranks.abort("rank " + std::to_string(ranks.rank()) + " of " + std::to_string(ranks.size()) + ": " + what +
+                    " (every rank stopped; nothing of this run was kept)",
+                status);
 }
 
 // Rank 0 (or the only process): everything after loading, every output written.

@@ -6,6 +6,7 @@
 ///
 /// The request is one process-wide flag: a signal stops every run of the process.
 
+#include <atomic>
 #include <stdexcept>
 
 namespace tprf {
@@ -21,6 +22,13 @@ private:
     int m_signal;
 };
 
+namespace detail {
+/// 0: no request; a signal number; or -1 for a request without a signal.
+inline std::atomic<int> cancel_request{0};
+static_assert(std::atomic<int>::is_always_lock_free, "request_cancel must be async-signal-safe");
+[[noreturn]] void throw_cancelled(int request);
+}  // namespace detail
+
 /// Asks every running stage to stop. Async-signal-safe (one lock-free atomic store): call it from a
 /// signal handler. `signal` is reported by Cancelled::signal().
 void request_cancel(int signal = 0) noexcept;
@@ -30,10 +38,14 @@ void request_cancel(int signal = 0) noexcept;
 /// starts must stop it.
 void clear_cancel() noexcept;
 
-/// True once a stop was asked. One relaxed atomic load: cheap enough for every loop iteration.
-[[nodiscard]] bool cancel_requested() noexcept;
+/// True once a stop was asked. One relaxed atomic load, inline: cheap enough for every loop iteration.
+[[nodiscard]] inline bool cancel_requested() noexcept {
+    return detail::cancel_request.load(std::memory_order_relaxed) != 0;
+}
 
 /// Throws Cancelled when a stop was asked.
-void check_cancelled();
+inline void check_cancelled() {
+    if (const int r = detail::cancel_request.load(std::memory_order_relaxed); r != 0) detail::throw_cancelled(r);
+}
 
 }  // namespace tprf

@@ -6,6 +6,7 @@
 /// status 1. tprf::InternalError is a broken invariant: exit status 1. A cancelled run throws
 /// tprf::Cancelled (core/cancel.h). The library never exits.
 
+#include <exception>
 #include <filesystem>
 #include <sstream>
 #include <stdexcept>
@@ -36,6 +37,11 @@ public:
 /// Throws Error with the message "FILE: PATH: WHAT" (PATH left out when empty).
 [[noreturn]] void fail_input(const std::filesystem::path& file, std::string_view json_path,
                              std::string_view what);
+
+/// The command's exit status for a failure: 2 for bad input (Error), 128 + the signal for a cancelled
+/// run (Cancelled, core/cancel.h; 130 when no signal asked), 1 for anything else (OutputError, out of
+/// memory, a bug). The command line and a split render's abort of every rank both use it.
+int exit_status(const std::exception_ptr& failure) noexcept;
 
 /// Throws OutputError with the message "FILE: WHAT: the system's reason for errno `err`".
 [[noreturn]] void fail_output(const std::filesystem::path& file, std::string_view what, int err);
