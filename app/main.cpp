@@ -144,7 +144,7 @@ void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
 
 int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool quiet,
              bool progress_lines) {
-    tprf::Scene scene = tprf::load_scene(scene_file);
+    tprf::Scene scene = tprf::load_scene(scene_file, options.defines);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     std::printf("scene    %s\n", scene_file.c_str());
     if (meshes_only) {
@@ -286,6 +286,23 @@ void add_plot_pixel(CLI::App& command, std::optional<std::array<int, 2>>& target
         "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
 }
 
+// -D name=value (repeatable) into `target`: the parameters of a Mitsuba XML scene ($name).
+void add_defines(CLI::App& command, tprf::XmlDefines& target) {
+    command
+        .add_option_function<std::vector<std::string>>(
+            "-D",
+            [&target](const std::vector<std::string>& items) {
+                for (const std::string& item : items) {
+                    const std::size_t eq = item.find('=');
+                    if (eq == std::string::npos || eq == 0)
+                        throw CLI::ValidationError("-D", "expected name=value, got \"" + item + "\"");
+                    target[item.substr(0, eq)] = item.substr(eq + 1);
+                }
+            },
+            "name=value: a parameter of a Mitsuba XML scene ($name), over its <default>; repeatable")
+        ->allow_extra_args(false);
+}
+
 // The flags of `tprf render` that choose its extra outputs and its memory limit.
 void add_render_flags(CLI::App& rend, tprf::RenderOptions& render) {
     rend.add_flag("--patch-profiles", render.patch_profiles, "also write patches.csv, patch_transient.npy, patch_steady.npy");
@@ -318,10 +335,11 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
                  "progress as lines, one per stage and per tenth of it, even when stderr is not a terminal (logs)");
     auto* info = app.add_subcommand("info", "print the estimated peak memory and seconds of a render, then the patch "
                                             "count, link count, link memory and the time window");
-    info->add_option("scene", scene_file, "scene JSON file")->required();
+    info->add_option("scene", scene_file, "scene file: JSON, or Mitsuba 3 XML (.xml)")->required();
     tprf::PipelineOptions info_options;
     info->add_option("--max-memory", info_options.max_memory_gb, "the render limit to compare the estimate with, GB")
         ->check(positive_finite());
+    add_defines(*info, info_options.defines);
     bool info_meshes = false;
     info->add_flag("--meshes", info_meshes,
                    "only load the mesh files and print, per mesh, its vertices, faces, triangles, bounding box "
@@ -329,7 +347,8 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     tprf::RenderOptions render;
     std::string output;
     auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
-    rend->add_option("scene", scene_file, "scene JSON file")->required();
+    rend->add_option("scene", scene_file, "scene file: JSON, or Mitsuba 3 XML (.xml)")->required();
+    add_defines(*rend, render.defines);
     rend->add_option("-o,--output", output, "output directory (created if missing)")->required();
     add_render_flags(*rend, render);
     tprf::SensorRunOptions sensor;

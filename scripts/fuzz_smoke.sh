@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 runs=${1:-20000}
-targets=(mesh scene sensor)
+targets=(mesh scene sensor mitsuba)
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -DTPRF_FUZZ=ON -DTPRF_BUILD_TESTS=OFF -DTPRF_BUILD_BENCH=OFF \
     -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 cmake --build build-fuzz -j"$(nproc)" --target "${targets[@]/#/tprf_fuzz_}"

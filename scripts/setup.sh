@@ -9,7 +9,7 @@ build_dir=${1:-build}
 packages=(build-essential cmake pkg-config libopenmesh-dev libeigen3-dev libopenexr-dev libflann-dev
           libembree-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev libgmock-dev
           libbenchmark-dev libpng-dev libhdf5-dev python3-matplotlib python3-numpy python3-pytest
-          python3-h5py python3-yaml libopenmpi-dev openmpi-bin)
+          python3-h5py python3-yaml libopenmpi-dev openmpi-bin libpugixml-dev)
 # The test script's extras: clang and its libFuzzer runtime for the fuzz targets (tools/fuzz).
 if [ "${TPRF_TEST_PACKAGES:-0}" = 1 ]; then packages+=(clang libclang-rt-14-dev); fi
 missing=()

@@ -2,7 +2,8 @@
 """Writes the seed corpora of the fuzz targets into tools/fuzz/corpus/: mesh/ (tprf_fuzz_mesh) holds
 the small sample meshes of meshes/ and a few hand-made variants per format, each seed one byte
 choosing the format (0 .obj, 1 .off, 2 .ply, 3 .stl; mesh_fuzz.cpp) followed by the file; scene/ the
-sample scenes; sensor/ the sample sensor blocks and those inside the sample scenes. Standard library
+sample scenes; sensor/ the sample sensor blocks and those inside the sample scenes; mitsuba/ the sample
+Mitsuba XML scenes and a seed with every element of the XML subset. Standard library
 only; rerun it to reproduce the corpora."""
 import json
 import pathlib
@@ -53,6 +54,52 @@ HAND_MADE = {
 }
 
 
+# Mitsuba 3 XML seeds beside meshes/cornell-box.xml: every element and attribute of the subset
+# (docs/mitsuba.md) once, with meshes that the fuzz target finds in meshes/.
+MITSUBA = {
+    "subset.xml": b"""<scene version="3.0.0">
+  <default name="res" value="8"/>
+  <default name="depth" value="4"/>
+  <integrator type="transient_path">
+    <integer name="max_depth" value="$depth"/><integer name="rr_depth" value="5"/>
+    <boolean name="camera_unwarp" value="true"/>
+    <string name="temporal_filter" value="box"/><float name="gaussian_stddev" value="2"/>
+  </integrator>
+  <sensor type="perspective" id="cam">
+    <float name="fov" value="45"/><string name="fov_axis" value="smaller"/>
+    <float name="near_clip" value="0.1"/><float name="far_clip" value="100"/>
+    <float name="focus_distance" value="3"/>
+    <transform name="to_world"><rotate y="1" angle="180"/><translate value="0 0.5 3"/></transform>
+    <sampler type="stratified"><integer name="sample_count" value="4"/><integer name="seed" value="1"/></sampler>
+    <film type="transient_hdr_film">
+      <integer name="width" value="$res"/><integer name="height" value="6"/>
+      <integer name="temporal_bins" value="32"/><float name="start_opl" value="1"/>
+      <float name="bin_width_opl" value="0.25"/><rfilter type="box"/>
+    </film>
+  </sensor>
+  <bsdf type="twosided" id="paper"><bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.4, 0.6"/></bsdf></bsdf>
+  <shape type="cube" id="box">
+    <transform name="to_world"><scale x="0.3" y="0.2" z="0.1"/><rotate value="1, 1, 0" angle="30"/></transform>
+    <ref id="paper" name="bsdf"/>
+  </shape>
+  <shape type="rectangle">
+    <transform name="to_world"><matrix value="1 0 0 0 0 0 1 0 0 -1 0 0 0 0 0 1"/></transform>
+    <bsdf type="diffuse"><float name="reflectance" value="0.5"/></bsdf>
+    <emitter type="area"><rgb name="radiance" value="2"/></emitter>
+  </shape>
+  <shape type="obj">
+    <string name="filename" value="tetra.obj"/><boolean name="face_normals" value="true"/>
+    <transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform>
+  </shape>
+  <shape type="ply"><string name="filename" value="tetra.ply"/><ref id="paper"/></shape>
+  <emitter type="point"><point name="position" x="0" y="1" z="1"/><rgb name="intensity" value="1, 2, 3"/></emitter>
+  <emitter type="point"><transform name="to_world"><translate x="1"/></transform>
+    <float name="intensity" value="1"/></emitter>
+</scene>
+""",
+}
+
+
 def mesh_files(scene):
     return [o["file"] for o in json.loads(scene.read_bytes()).get("objects", []) if o.get("type") == "mesh"]
 
@@ -81,6 +128,9 @@ def main():
         if "sensor" in json.loads(data):
             sensors["in-" + name] = json.dumps(json.loads(data)["sensor"], indent=1).encode()
     write("sensor", sensors)
+    mitsuba = dict(MITSUBA)
+    mitsuba.update({p.name: p.read_bytes() for p in samples if p.suffix == ".xml"})
+    write("mitsuba", mitsuba)
 
 
 if __name__ == "__main__":

@@ -229,7 +229,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
 // ffmpeg for a video, the plot pixel, the estimated peak memory and (`writes`: on the rank that
 // writes) the output directory.
 Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options, bool writes) {
-    Scene scene = load_scene(scene_file);
+    Scene scene = load_scene(scene_file, options.defines);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     if (!scene.camera && !scene.capture)
         fail_input(scene_file, "camera", "missing: tprf render needs a camera (or a capture block)");

@@ -4,6 +4,7 @@
 #include "tprf/scene/validate.h"
 #include "json_node.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstddef>
 #include <initializer_list>
@@ -253,7 +254,13 @@ Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
     return scene;
 }
 
-Scene load_scene(const std::filesystem::path& file) {
+Scene load_scene(const std::filesystem::path& file) { return load_scene(file, XmlDefines{}); }
+
+Scene load_scene(const std::filesystem::path& file, const XmlDefines& defines) {
+    std::string extension = file.extension().string();
+    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (extension == ".xml") return load_mitsuba_scene(file, defines);
+    if (!defines.empty()) fail_input(file, "", "-D applies to Mitsuba XML scenes only");
     Scene scene = build_scene(read_json_file(file, "scene file"), file);
     validate(scene);
     return scene;

@@ -5,6 +5,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/io/json_records.h"
+#include "tprf/scene/parse_mitsuba.h"
 #include "tprf/scene/scene.h"
 
 #include <cstdint>
@@ -26,6 +27,8 @@ struct PipelineOptions {
     double max_memory_gb = 0.0;
     /// `--max-edge L`: replaces the scene's patches.max_edge (metres) when > 0.
     double max_edge = 0.0;
+    /// `-D name=value`: parameters of a Mitsuba XML scene (scene/parse_mitsuba.h); must be empty for JSON.
+    XmlDefines defines;
 };
 
 /// What `tprf info` prints: the scene's size without rendering it.

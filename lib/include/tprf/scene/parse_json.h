@@ -9,6 +9,7 @@
 /// here exposes it.
 
 #include "tprf/core/time_axis.h"
+#include "tprf/scene/parse_mitsuba.h"
 #include "tprf/scene/scene.h"
 #include "tprf/scene/sensor_settings.h"
 
@@ -19,8 +20,13 @@
 namespace tprf {
 
 /// Reads a scene file and validates the Scene. Throws tprf::Error naming the file, the JSON path and
-/// the problem.
+/// the problem. A file whose name ends in ".xml" (any case) is read as Mitsuba 3 XML
+/// (scene/parse_mitsuba.h), any other as JSON.
 Scene load_scene(const std::filesystem::path& file);
+
+/// load_scene with the command line's `-D name=value`s for a Mitsuba XML scene; for a JSON scene,
+/// non-empty `defines` are an Error.
+Scene load_scene(const std::filesystem::path& file, const XmlDefines& defines);
 
 /// Parses scene JSON text and validates the Scene; `file` is used in messages and to resolve relative
 /// mesh paths.

@@ -1,0 +1,472 @@
+// Mitsuba 3 XML scenes (SPEC.md v2, "Mitsuba 3 scenes"; docs/mitsuba.md): every element and attribute of
+// the subset against an answer fixed by Mitsuba's definitions, the errors, and meshes/cornell-box.xml
+// against meshes/cornell-box.json.
+#include "tprf/core/error.h"
+#include "tprf/imaging/camera.h"
+#include "tprf/io/npy.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/scene/parse_mitsuba.h"
+
+#include "test_process.h"
+#include "test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+using tprf::Vec3;
+
+const fs::path kSource(TPRF_SOURCE_DIR);
+
+struct TempDir : tprf::test::MeshDir {
+    TempDir() : tprf::test::MeshDir("tprf_mitsuba_test_") {}
+};
+
+// A sensor and film that every scene below can share, around `body` (one rectangle when empty), which
+// starts on line 12.
+std::string scene_xml(const std::string& body, const std::string& sensor_extra = "") {
+    return R"(<scene version="3.0.0">
+  <sensor type="perspective">
+    <float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>)" +
+           sensor_extra + R"(
+    <film type="transient_hdr_film">
+      <integer name="width" value="8"/>
+      <integer name="height" value="8"/>
+      <integer name="temporal_bins" value="16"/>
+      <float name="bin_width_opl" value="0.1"/>
+    </film>
+  </sensor>
+)" + (body.empty() ? "<shape type=\"rectangle\"/>" : body) + "\n</scene>\n";
+}
+
+tprf::Scene parse(const std::string& text, const TempDir& dir, const tprf::XmlDefines& defines = {}) {
+    return tprf::parse_mitsuba_scene(text, dir.path / "scene.xml", defines);
+}
+
+// The message of the Error that parsing `text` throws ("" when it parses).
+std::string error_of(const std::string& text, const TempDir& dir, const tprf::XmlDefines& defines = {}) {
+    try {
+        parse(text, dir, defines);
+    } catch (const tprf::Error& e) {
+        return e.what();
+    }
+    return "";
+}
+
+const tprf::RectangleShape& rect(const tprf::Object& o) { return std::get<tprf::RectangleShape>(o.shape); }
+const tprf::MeshShape& mesh(const tprf::Object& o) { return std::get<tprf::MeshShape>(o.shape); }
+Vec3 normal(const tprf::RectangleShape& r) { return r.u.cross(r.v).normalized(); }
+
+const std::string kWhite = R"(<bsdf type="diffuse"><float name="reflectance" value="0.5"/></bsdf>)";
+
+}  // namespace
+
+// Mitsuba's rectangle is [-1, 1]^2 at z = 0 with its front +z: scale (2, 3) then translate (1, 2, 3)
+// puts corner (-1, -1) at (-1, -1, 3), with edges 4 along x and 6 along y.
+TEST(Mitsuba, RectangleCornersAreTheMappedUnitSquare) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(<shape type="rectangle"><transform name="to_world">
+        <scale x="2" y="3"/><translate value="1 2 3"/></transform></shape>)"),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 1u);
+    const tprf::RectangleShape& r = rect(s.objects[0]);
+    EXPECT_EQ(r.origin, Vec3(-1, -1, 3));
+    EXPECT_EQ(r.u, Vec3(4, 0, 0));
+    EXPECT_EQ(r.v, Vec3(0, 6, 0));
+    EXPECT_EQ(s.objects[0].albedo.matrix(), Vec3::Constant(0.5));  // Mitsuba's default BSDF
+    EXPECT_EQ(s.objects[0].json_path, "shape at line 12");
+}
+
+// Mitsuba transforms a rectangle's normal by the inverse transpose: a mirror in x keeps it +z (while
+// u x v of the mapped corners would turn to -z), a mirror in z turns it to -z.
+TEST(Mitsuba, MirroredRectangleKeepsMitsubasFront) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="rectangle"><transform name="to_world"><scale x="-1"/></transform></shape>
+      <shape type="rectangle"><transform name="to_world"><scale z="-1"/></transform></shape>)"),
+                                dir);
+    EXPECT_TRUE(normal(rect(s.objects[0])).isApprox(Vec3(0, 0, 1)));
+    EXPECT_TRUE(normal(rect(s.objects[1])).isApprox(Vec3(0, 0, -1)));
+}
+
+// Mitsuba's cube is [-1, 1]^3 with outward normals: scaled by 0.5 and moved to (1, 1, 1), six unit
+// squares whose centres sit 0.5 from (1, 1, 1) along their outward normals.
+TEST(Mitsuba, CubeIsSixOutwardUnitFaces) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(<shape type="cube"><transform name="to_world">
+        <scale value="0.5"/><translate value="1"/></transform>)" + kWhite + "</shape>"),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 6u);
+    std::vector<Vec3> normals;
+    for (const tprf::Object& o : s.objects) {
+        const tprf::RectangleShape& r = rect(o);
+        EXPECT_DOUBLE_EQ(r.u.norm(), 1.0);
+        EXPECT_DOUBLE_EQ(r.v.norm(), 1.0);
+        const Vec3 n = normal(r);
+        const Vec3 centre = r.origin + 0.5 * (r.u + r.v);
+        EXPECT_TRUE((centre - Vec3(1, 1, 1)).isApprox(0.5 * n)) << o.json_path;
+        normals.push_back(n);
+    }
+    EXPECT_TRUE(normals[0].isApprox(Vec3(1, 0, 0)));
+    EXPECT_TRUE(normals[1].isApprox(Vec3(-1, 0, 0)));
+    EXPECT_TRUE(normals[5].isApprox(Vec3(0, 0, -1)));
+    EXPECT_NE(s.objects[0].json_path.find("cube face +x"), std::string::npos);
+}
+
+// Each operation applies after the ones above it: translate then rotate 90 degrees about z takes the
+// origin to (0, 1, 0); rotate then translate takes it to (1, 0, 0). A matrix is row-major.
+TEST(Mitsuba, TransformsComposeInDocumentOrder) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="obj"><string name="filename" value="meshes/tri.obj"/>
+        <transform name="to_world"><translate x="1"/><rotate z="1" angle="90"/></transform></shape>
+      <shape type="obj"><string name="filename" value="meshes/tri.obj"/>
+        <transform name="to_world"><rotate value="0 0 1" angle="90"/><translate x="1"/></transform></shape>
+      <shape type="ply"><string name="filename" value="meshes/tri.obj"/>
+        <transform name="to_world"><matrix value="1 0 0 5  0 1 0 6  0 0 1 7  0 0 0 1"/></transform></shape>)"),
+                                dir);
+    const auto origin = [](const tprf::Object& o) { return Vec3(mesh(o).transform.block<3, 1>(0, 3)); };
+    EXPECT_TRUE(origin(s.objects[0]).isApprox(Vec3(0, 1, 0)));
+    EXPECT_LT(std::abs(origin(s.objects[0]).x()), 1e-15);
+    EXPECT_EQ(origin(s.objects[1]), Vec3(1, 0, 0));
+    EXPECT_EQ(origin(s.objects[2]), Vec3(5, 6, 7));
+    EXPECT_EQ(mesh(s.objects[0]).file, dir.path / "meshes/tri.obj");
+}
+
+// fov_axis x (the default) is horizontal: on a 2:1 film, 90 degrees across is 2 atan(tan(45) / 2) =
+// 53.1301 degrees vertically; y is vertical; smaller is y and larger is x on a wide film; diagonal: 2
+// atan(tan(45) * 1 / sqrt(5)) = 48.1897 degrees.
+TEST(Mitsuba, FovAxisBecomesTheVerticalFov) {
+    TempDir dir;
+    const auto vertical = [&](const std::string& axis) {
+        std::string xml = scene_xml("", axis.empty() ? "" : "<string name=\"fov_axis\" value=\"" + axis + "\"/>");
+        xml.replace(xml.find("value=\"40\""), 10, "value=\"90\"");
+        xml.replace(xml.find("name=\"width\" value=\"8\""), 22, "name=\"width\" value=\"16\"");
+        return parse(xml, dir).camera->fov_deg;
+    };
+    EXPECT_NEAR(vertical(""), 53.13010235415598, 1e-12);
+    EXPECT_NEAR(vertical("x"), 53.13010235415598, 1e-12);
+    EXPECT_EQ(vertical("y"), 90.0);
+    EXPECT_EQ(vertical("smaller"), 90.0);
+    EXPECT_NEAR(vertical("larger"), 53.13010235415598, 1e-12);
+    EXPECT_NEAR(vertical("diagonal"), 48.18968510422141, 1e-12);
+    EXPECT_NE(error_of(scene_xml("", "<string name=\"fov_axis\" value=\"z\"/>"), dir).find("unknown fov_axis"),
+              std::string::npos);
+}
+
+// Mitsuba's camera +x points to the image's left. mitransient's Cornell box looks from z = -800 toward
+// +z with +y up, and its red wall (x = 556) is on the left of the image: the left edge of ours must look
+// toward +x. A general to_world (rotated 180 degrees about y: looking along -z) agrees with its lookat.
+TEST(Mitsuba, CameraSeesMitsubasImageNotItsMirror) {
+    TempDir dir;
+    std::string xml = scene_xml("");
+    xml.replace(xml.find("<lookat"), xml.find("/></transform>") - xml.find("<lookat"),
+                R"(<lookat origin="278, 273, -800" target="278, 273, -799" up="0, 1, 0")");
+    const tprf::Camera c = *parse(xml, dir).camera;
+    EXPECT_EQ(c.position, Vec3(278, 273, -800));
+    EXPECT_GT(tprf::camera_ray(c, 0.0, 4.0).x(), 0.0);   // left edge, middle row
+    EXPECT_LT(tprf::camera_ray(c, 8.0, 4.0).x(), 0.0);   // right edge
+    EXPECT_GT(tprf::camera_ray(c, 4.0, 0.0).y(), 0.0);   // top row looks up
+    std::string rotated = scene_xml("");
+    rotated.replace(rotated.find("<lookat"), rotated.find("/></transform>") - rotated.find("<lookat"),
+                    R"(<rotate y="1" angle="180"/><translate z="5")");
+    const tprf::Camera r = *parse(rotated, dir).camera;
+    const tprf::Camera l = *parse(scene_xml(""), dir).camera;
+    EXPECT_TRUE(tprf::camera_ray(r, 0.0, 4.0).isApprox(tprf::camera_ray(l, 0.0, 4.0)));
+    EXPECT_LT(tprf::camera_ray(l, 0.0, 4.0).x(), 0.0);  // looking along -z, the left is -x
+}
+
+TEST(Mitsuba, MirroringOrScaledCameraIsRefused) {
+    TempDir dir;
+    std::string xml = scene_xml("");
+    xml.replace(xml.find("<lookat"), 0, R"(<scale x="-1"/>)");
+    const std::string e = error_of(xml, dir);
+    EXPECT_NE(e.find("scene.xml:4: <transform name=\"to_world\">: mirrors the image"), std::string::npos) << e;
+    xml = scene_xml("");
+    xml.replace(xml.find("<lookat"), 0, R"(<scale value="2"/>)");
+    EXPECT_NE(error_of(xml, dir).find("scale or shear"), std::string::npos);
+}
+
+// <default> gives $name a value; -D overrides it; an undefined $name is an error.
+TEST(Mitsuba, DefaultsAndDefinesSubstitute) {
+    TempDir dir;
+    std::string xml = scene_xml("");
+    xml.replace(xml.find("<sensor"), 0, R"(<default name="res" value="12"/><default name="r" value="3"/>
+      )");
+    xml.replace(xml.find("name=\"width\" value=\"8\""), 22, "name=\"width\" value=\"$res\"");
+    xml.replace(xml.find("name=\"height\" value=\"8\""), 23, "name=\"height\" value=\"$r$r\"");
+    tprf::Scene s = parse(xml, dir);
+    EXPECT_EQ(s.camera->width, 12);   // $res is not $r followed by "es"
+    EXPECT_EQ(s.camera->height, 33);
+    s = parse(xml, dir, {{"res", "20"}, {"r", "1"}});
+    EXPECT_EQ(s.camera->width, 20);
+    EXPECT_EQ(s.camera->height, 11);
+    const std::string e = error_of(scene_xml(R"(<shape type="$what"/>)"), dir);
+    EXPECT_NE(e.find("scene.xml:12: <shape type=\"$what\">: undefined parameter"), std::string::npos) << e;
+}
+
+// A top-level BSDF with an id, reached by <ref>; twosided around diffuse is tprf's two_sided.
+TEST(Mitsuba, RefAndTwosided) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="rectangle"><ref id="paper" name="bsdf"/></shape>
+      <bsdf type="twosided" id="paper"><bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.2, 0.3"/></bsdf></bsdf>
+      <shape type="rectangle"><bsdf type="diffuse"><float name="reflectance" value="0.25"/></bsdf></shape>)"),
+                                dir);
+    EXPECT_EQ(s.objects[0].albedo.matrix(), Vec3(0.1, 0.2, 0.3));
+    EXPECT_TRUE(s.objects[0].two_sided);
+    EXPECT_EQ(s.objects[1].albedo.matrix(), Vec3::Constant(0.25));
+    EXPECT_FALSE(s.objects[1].two_sided);
+}
+
+TEST(Mitsuba, AreaAndPointEmitters) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter></shape>
+      <emitter type="point"><point name="position" x="1" y="2" z="3"/><rgb name="intensity" value="4"/></emitter>
+      <emitter type="point"><transform name="to_world"><translate value="-1 0 2"/></transform>
+        <float name="intensity" value="0.5"/></emitter>)"),
+                                dir);
+    EXPECT_EQ(s.objects[0].emission.matrix(), Vec3(1, 2, 3));
+    ASSERT_EQ(s.lights.size(), 2u);
+    const auto& p0 = std::get<tprf::PointLight>(s.lights[0]);
+    const auto& p1 = std::get<tprf::PointLight>(s.lights[1]);
+    EXPECT_EQ(p0.position, Vec3(1, 2, 3));
+    EXPECT_EQ(p0.intensity.matrix(), Vec3::Constant(4));
+    EXPECT_EQ(p1.position, Vec3(-1, 0, 2));
+    EXPECT_EQ(p1.intensity.matrix(), Vec3::Constant(0.5));
+}
+
+// mitransient's film: temporal_bins bins of bin_width_opl from start_opl, optical path in scene units;
+// max_depth m is m - 1 bounces (-1: all), camera_unwarp is camera.unwarp, sample_count is spp.
+TEST(Mitsuba, TimeAxisDepthAndSamples) {
+    TempDir dir;
+    std::string xml = scene_xml(R"(<shape type="rectangle"/><integrator type="transient_path">
+        <integer name="max_depth" value="$depth"/><boolean name="camera_unwarp" value="true"/>
+        <string name="temporal_filter" value="box"/><float name="gaussian_stddev" value="2"/>
+      </integrator>)",
+                                R"(<sampler type="independent"><integer name="sample_count" value="9"/></sampler>)");
+    xml.replace(xml.find("<float name=\"bin_width_opl\""), 0, R"(<float name="start_opl" value="5.25"/>)");
+    tprf::Scene s = parse(xml, dir, {{"depth", "8"}});
+    EXPECT_EQ(s.time.bins, 16);
+    EXPECT_EQ(s.time.bin_width, 0.1);
+    EXPECT_EQ(s.time.start, 5.25);
+    EXPECT_EQ(s.time.unit, tprf::TimeUnit::Metres);
+    EXPECT_EQ(s.solver.max_bounces, 7);
+    EXPECT_TRUE(s.camera->unwarp);
+    EXPECT_EQ(s.camera->spp, 9);
+    EXPECT_EQ(parse(xml, dir, {{"depth", "-1"}}).solver.max_bounces, -1);
+    EXPECT_EQ(parse(xml, dir, {{"depth", "1"}}).solver.max_bounces, 0);
+    EXPECT_NE(error_of(xml, dir, {{"depth", "0"}}).find("must be -1 (all bounces) or >= 1"), std::string::npos);
+}
+
+// Each refusal names file:line, the element and what is wrong.
+TEST(Mitsuba, UnsupportedInputNamesFileLineAndElement) {
+    TempDir dir;
+    const auto expect_error = [&](const std::string& body, const std::string& expected) {
+        const std::string e = error_of(scene_xml(body), dir);
+        EXPECT_NE(e.find(expected), std::string::npos) << "got: " << e;
+        EXPECT_NE(e.find("scene.xml:12: "), std::string::npos) << "got: " << e;
+    };
+    expect_error(R"(<bsdf type="roughplastic" id="a"/>)", "<bsdf type=\"roughplastic\" id=\"a\">: unsupported BSDF type");
+    expect_error(R"(<medium type="homogeneous"/>)", "<medium type=\"homogeneous\">: unsupported element");
+    expect_error(R"(<shape type="rectangle" flavour="x"/>)", "unknown attribute \"flavour\"");
+    expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><float name="roughness" value="1"/></bsdf></shape>)",
+                 "<float name=\"roughness\">: unknown property");
+    expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"/></bsdf></shape>)",
+                 "<texture type=\"bitmap\" name=\"reflectance\">: unsupported inside <bsdf type=\"diffuse\">");
+    expect_error(R"(<shape type="sphere"/>)", "unsupported shape type \"sphere\"");
+    expect_error(R"(<emitter type="constant"/>)", "unsupported emitter type \"constant\"");
+    expect_error(R"(<integrator type="transient_nlos_path"/>)", "NLOS");
+    expect_error(R"(<shape type="rectangle"><ref id="nowhere"/></shape>)", "no element has this id");
+    expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><spectrum name="reflectance" value="0.5"/></bsdf></shape>)",
+                 "give the colour as <rgb> or <float>");
+    expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1.5"/></bsdf></shape>)",
+                 "must lie in [0, 1]");
+    std::string film = scene_xml("");
+    film.replace(film.find("transient_hdr_film"), 18, "hdrfilm");
+    EXPECT_NE(error_of(film, dir).find("scene.xml:5: <film type=\"hdrfilm\">: unsupported film type"), std::string::npos);
+    EXPECT_NE(error_of("<scene version=\"3.0.0\">\n<shape", dir).find("scene.xml:2: malformed XML"), std::string::npos);
+}
+
+// The structure of mitransient's examples/transient/cornell-box/cbox_diffuse.xml (written out here in
+// other words and numbers): defaults used in the integrator's type, a sensor with clip planes and a
+// focus distance, obj shapes with referenced and nested BSDFs and an area light moved by a translate.
+TEST(Mitsuba, MitransientDiffuseSceneParsesUnchanged) {
+    TempDir dir;
+    const std::string xml = R"(<scene version="3.3.0">
+    <default name="spp" value="64"/>
+    <default name="res" value="32"/>
+    <default name="integrator" value="transient_path"/>
+    <integrator type='$integrator'>
+      <boolean name="camera_unwarp" value="false"/>
+      <integer name="max_depth" value="5"/>
+      <string name="temporal_filter" value="box"/>
+      <float name="gaussian_stddev" value="1.5"/>
+    </integrator>
+    <sensor type="perspective" id="camera">
+        <string name="fov_axis" value="smaller"/>
+        <float name="near_clip" value="1"/>
+        <float name="far_clip" value="100"/>
+        <float name="focus_distance" value="10"/>
+        <float name="fov" value="30"/>
+        <transform name="to_world">
+            <lookat origin="1, 2, -10" target="1, 2, -9" up="0, 1, 0"/>
+        </transform>
+        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+        <film type="transient_hdr_film">
+            <integer name="width" value="$res"/>
+            <integer name="height" value="$res"/>
+            <integer name="temporal_bins" value="100"/>
+            <float name="start_opl" value="8"/>
+            <float name="bin_width_opl" value="0.25"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <bsdf type="diffuse" id="grey"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf>
+    <shape type="obj" id="lamp">
+        <string name="filename" value="meshes/tri.obj"/>
+        <transform name="to_world"><translate x="0" y="-0.25" z="0"/></transform>
+        <ref id="grey"/>
+        <emitter type="area"><rgb name="radiance" value="10, 8, 3"/></emitter>
+    </shape>
+    <shape type="obj" id="wall">
+        <string name="filename" value="meshes/tri.obj"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.1, 0.1"/></bsdf>
+    </shape>
+</scene>
+)";
+    const tprf::Scene s = parse(xml, dir);
+    ASSERT_EQ(s.objects.size(), 2u);
+    EXPECT_EQ(s.objects[0].emission.matrix(), Vec3(10, 8, 3));
+    EXPECT_EQ(mesh(s.objects[0]).transform(1, 3), -0.25);
+    EXPECT_EQ(s.objects[1].albedo.matrix(), Vec3(0.5, 0.1, 0.1));
+    EXPECT_EQ(s.solver.max_bounces, 4);
+    EXPECT_EQ(s.camera->spp, 64);
+    EXPECT_EQ(s.camera->fov_deg, 30.0);
+    EXPECT_EQ(s.time.start, 8.0);
+    // Mitsuba's own path integrator has no camera_unwarp: it refuses the file so switched, and so does tprf.
+    EXPECT_NE(error_of(xml, dir, {{"integrator", "path"}}).find("<boolean name=\"camera_unwarp\">: unknown property"),
+              std::string::npos);
+}
+
+// meshes/cornell-box.xml is meshes/cornell-box.json to the last bit: the same corners, mesh transforms,
+// camera ray directions, samples and time axis.
+TEST(Mitsuba, CornellBoxXmlIsTheJsonScene) {
+    const tprf::Scene x = tprf::load_scene(kSource / "meshes" / "cornell-box.xml");
+    const tprf::Scene j = tprf::load_scene(kSource / "meshes" / "cornell-box.json");
+    ASSERT_EQ(x.objects.size(), j.objects.size());
+    for (std::size_t i = 0; i < x.objects.size(); ++i) {
+        EXPECT_EQ(x.objects[i].albedo.matrix(), j.objects[i].albedo.matrix()) << i;
+        EXPECT_EQ(x.objects[i].emission.matrix(), j.objects[i].emission.matrix()) << i;
+        if (const auto* r = std::get_if<tprf::RectangleShape>(&x.objects[i].shape)) {
+            const tprf::RectangleShape& q = rect(j.objects[i]);
+            EXPECT_EQ(r->origin, q.origin) << i;
+            EXPECT_EQ(r->u, q.u) << i;
+            EXPECT_EQ(r->v, q.v) << i;
+        } else {
+            EXPECT_EQ(mesh(x.objects[i]).transform, mesh(j.objects[i]).transform) << i;
+            EXPECT_EQ(fs::weakly_canonical(mesh(x.objects[i]).file), fs::weakly_canonical(mesh(j.objects[i]).file));
+        }
+    }
+    for (const Vec3& at : {Vec3(0.0, 0.0, 0), Vec3(64.5, 64.5, 0), Vec3(127.0, 3.0, 0)})
+        EXPECT_EQ(tprf::camera_ray(*x.camera, at.x(), at.y()), tprf::camera_ray(*j.camera, at.x(), at.y()));
+    EXPECT_EQ(x.camera->spp, j.camera->spp);
+    EXPECT_EQ(x.time.bins, j.time.bins);
+    EXPECT_EQ(x.time.bin_width, j.time.bin_width);
+    EXPECT_EQ(x.solver.max_bounces, j.solver.max_bounces);
+}
+
+TEST(Mitsuba, JsonSceneRefusesDefines) {
+    try {
+        tprf::load_scene(kSource / "meshes" / "corner.json", tprf::XmlDefines{{"a", "1"}});
+        FAIL() << "no error";
+    } catch (const tprf::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("-D applies to Mitsuba XML scenes only"), std::string::npos);
+    }
+}
+
+namespace {
+
+// The largest difference of two float arrays relative to the largest magnitude of the first.
+double relative_difference(const fs::path& a, const fs::path& b) {
+    const tprf::NpyArray x = tprf::read_npy(a), y = tprf::read_npy(b);
+    EXPECT_EQ(x.shape, y.shape);
+    if (x.shape != y.shape) return 1.0;
+    double diff = 0.0, scale = 0.0;
+    for (std::size_t i = 0; i < x.data.size(); ++i) {
+        diff = std::max(diff, double(std::abs(x.data[i] - y.data[i])));
+        scale = std::max(scale, double(std::abs(x.data[i])));
+    }
+    EXPECT_GT(scale, 0.0) << a;  // a comparison of two black images would prove nothing
+    return scale > 0.0 ? diff / scale : 1.0;
+}
+
+// `text` with the first `from` replaced by `to`.
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+    const std::size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+    return text;
+}
+
+}  // namespace
+
+// Both Cornell boxes rendered by the command line at 24 x 24 pixels (and the same patch size):
+// the geometry is the same to the bit, so the images agree to float rounding; 1e-6 of the maximum
+// leaves room only for a different order of summation.
+TEST(MitsubaCli, CornellBoxXmlRendersAsTheJson) {
+    TempDir dir;
+    fs::copy_file(kSource / "meshes" / "block.obj", dir.path / "block.obj");
+    std::string json = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.json");
+    json = replaced(json, "\"width\": 128, \"height\": 128", "\"width\": 24, \"height\": 24");
+    std::ofstream(dir.path / "box.json") << json;
+    std::string xml = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.xml");
+    xml = replaced(xml, "name=\"res\" value=\"128\"", "name=\"res\" value=\"24\"");
+    std::ofstream(dir.path / "box.xml") << xml;
+    for (const char* name : {"box.json", "box.xml"}) {
+        const tprf::test::Outcome r = tprf::test::run_tprf("render " + (dir.path / name).string() + " --max-edge 0.1 -o " +
+                                                           (dir.path / (std::string(name) + ".out")).string());
+        ASSERT_EQ(r.status, 0) << r.err;
+    }
+    for (const char* file : {"steady.npy", "transient.npy"})
+        EXPECT_LE(relative_difference(dir.path / "box.json.out" / file, dir.path / "box.xml.out" / file), 1e-6) << file;
+}
+
+// -D reaches the scene through `tprf render` and `tprf info`.
+TEST(MitsubaCli, DefinesReachTheScene) {
+    TempDir dir;
+    const std::string scene = (kSource / "meshes" / "cornell-box.xml").string();
+    const tprf::test::Outcome bad = tprf::test::run_tprf("info " + scene + " -D res=0");
+    EXPECT_EQ(bad.status, 2);
+    EXPECT_NE(bad.err.find("cornell-box.xml:"), std::string::npos) << bad.err;
+    EXPECT_NE(bad.err.find("must be > 0"), std::string::npos) << bad.err;
+    const tprf::test::Outcome ok = tprf::test::run_tprf("render " + scene + " -D res=6 -Dbins=32 --max-edge 0.25 -o " +
+                                                        (dir.path / "out").string());
+    ASSERT_EQ(ok.status, 0) << ok.err;
+    EXPECT_EQ(tprf::read_npy(dir.path / "out" / "transient.npy").shape, (std::vector<std::size_t>{6, 6, 32, 3}));
+    const tprf::test::Outcome json = tprf::test::run_tprf("info " + (kSource / "meshes" / "corner.json").string() + " -D a=1");
+    EXPECT_EQ(json.status, 2);
+    EXPECT_NE(json.err.find("-D applies to Mitsuba XML scenes only"), std::string::npos) << json.err;
+}
+
+TEST(MitsubaCli, BadElementExitsTwoWithFileLineAndWritesNothing) {
+    TempDir dir;
+    std::ofstream(dir.path / "bad.xml") << scene_xml(R"(<shape type="rectangle"><bsdf type="conductor"/></shape>)");
+    const tprf::test::Outcome r =
+        tprf::test::run_tprf("render " + (dir.path / "bad.xml").string() + " -o " + (dir.path / "out").string());
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("bad.xml:12: <bsdf type=\"conductor\">: unsupported BSDF type"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(fs::exists(dir.path / "out"));
+}
