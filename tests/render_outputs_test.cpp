@@ -7,6 +7,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/io/npy.h"
+#include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 
 #include <gtest/gtest.h>
@@ -472,6 +473,48 @@ TEST_F(RenderOutputs, OneAndTwoThreadsWriteIdenticalFiles) {
     ASSERT_FALSE(h1.empty());
     ASSERT_FALSE(h2.empty());
     expect_identical_renders(h1, h2);
+}
+
+// tprf::render_scene (the Python module's render) keeps in memory exactly the arrays that `tprf render`
+// writes: every .npy, bit for bit, on a scene with a point light, a laser, an emissive rectangle, a
+// mesh, per-bounce cubes, patch profiles and a sensor block; tprf::measure applies the block again to
+// the result as `tprf sensor` would.
+TEST_F(RenderOutputs, InMemoryRenderHoldsTheFilesArraysBitForBit) {
+    json scene = corner(48, 0.05);
+    scene["objects"].push_back({{"type", "mesh"}, {"file", std::string(TPRF_SOURCE_DIR) + "/meshes/block.obj"},
+                                {"albedo", 0.7}, {"transform", {{"scale", 0.2}, {"translate", {0.5, 0.5, 0}}}}});
+    scene["camera"]["width"] = 16;
+    scene["camera"]["height"] = 12;
+    scene["lights"].push_back(
+        {{"type", "laser"}, {"origin", {1.2, 0.8, 0.9}}, {"target", {0, 0.6, 0.4}}, {"power", 0.5}});
+    scene["objects"].push_back({{"type", "rectangle"}, {"origin", {0.3, 0.4, 0.9}}, {"u", {0, 0.2, 0}},
+                                {"v", {0.2, 0, 0}}, {"albedo", 0.2}, {"emission", {2, 1.5, 1}}});
+    scene["solver"] = {{"bounces", true}, {"max_bounces", 3}};
+    scene["sensor"] = {{"exposure", {{"type", "amcw"}, {"frequency_mhz", 30}, {"phases_deg", {0, 90, 180, 270}}}},
+                       {"noise", {{"sigma", 0.001}, {"seed", 3}}}};
+    const fs::path out = render("files", scene, "--patch-profiles");
+    ASSERT_FALSE(out.empty());
+    tprf::RenderOptions options;
+    options.patch_profiles = true;
+    options.threads = 2;
+    const tprf::RenderResult r = tprf::render_scene(tprf::load_scene(write_json("memory", scene)), options);
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(out))
+        if (e.path().extension() == ".npy") names.insert(e.path().stem().string());
+    EXPECT_EQ(names.size(), 10u);  // transient, steady, 4 bounce cubes, 2 patch arrays, measurements, depth
+    EXPECT_EQ(names.size(), r.arrays.size());
+    for (const std::string& name : names) {
+        const auto it = r.arrays.find(name);
+        ASSERT_NE(it, r.arrays.end()) << name;
+        const tprf::NpyArray file = tprf::read_npy(out / (name + ".npy"));
+        EXPECT_EQ(it->second.shape, file.shape) << name;
+        EXPECT_TRUE(it->second.data == file.data) << name << " differs from " << name << ".npy";
+    }
+    EXPECT_EQ(json::parse(r.record)["patches"], json::parse(std::ifstream(out / "render.json"))["patches"]);
+    const auto measured = tprf::measure(tprf::load_scene(write_json("memory", scene)).sensor.value(), r, 1);
+    ASSERT_EQ(measured.count("depth"), 1u);
+    EXPECT_TRUE(measured.at("measurements").data == r.arrays.at("measurements").data);
+    EXPECT_TRUE(measured.at("depth").data == r.arrays.at("depth").data);
 }
 
 void expect_identical_renders(const fs::path& one, const fs::path& two) {

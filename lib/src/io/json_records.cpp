@@ -56,7 +56,7 @@ nlohmann::json shares_json(const std::vector<CaptureShare>& shares) {
 
 }  // namespace
 
-void write_render_json(const std::filesystem::path& path, const RenderRecord& r) {
+std::string render_json_text(const RenderRecord& r) {
     nlohmann::json j;
     j["version"] = TPRF_VERSION;
     j["scene"] = r.scene_file.string();
@@ -103,7 +103,11 @@ void write_render_json(const std::filesystem::path& path, const RenderRecord& r)
                                {"repairs", {{"zero_area_faces", m.repairs.zero_area_faces},
                                             {"duplicate_faces", m.repairs.duplicate_faces},
                                             {"unreferenced_vertices", m.repairs.unreferenced_vertices}}}});
-    write_text_file(path, j.dump(2) + "\n");
+    return j.dump(2) + "\n";
+}
+
+void write_render_json(const std::filesystem::path& path, const RenderRecord& r) {
+    write_text_file(path, render_json_text(r));
 }
 
 void write_sensor_json(const std::filesystem::path& path, const SensorSettings& sensor, const TimeAxis& time,

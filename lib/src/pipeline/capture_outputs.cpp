@@ -65,37 +65,38 @@ std::vector<std::size_t> capture_shape(const Capture& c, int bins) {
     return {n(bins), n(c.laser_grid.nu), n(c.laser_grid.nv), n(c.sensor_grid.nu), n(c.sensor_grid.nv)};
 }
 
-void write_capture_files(const Scene& scene, const CaptureResult& r, Staging& staging) {
+// capture.hdf5 (files only) and capture.npy: H time first. Returns that array.
+FloatArray write_capture(const Scene& scene, const CaptureResult& r, Arrays& arrays) {
     const Capture& c = *scene.capture;
-    const std::vector<float> H = time_first(r);
-    CaptureFile file;
-    file.confocal = c.type == CaptureType::Confocal;
-    file.shape = capture_shape(c, r.bins);
-    file.H = H.data();
-    file.sensor_grid = grid_data(c.sensor_grid, r.points.sensor);
-    file.laser_grid = grid_data(c.laser_grid, r.points.laser);
-    file.sensor_xyz = c.sensor_position;
-    file.laser_xyz = c.laser_position;
-    file.delta_t = scene.time.bin_width_m();
-    file.t_start = scene.time.start_m();
-    file.t_accounts_first_and_last_bounces = c.account_first_and_last_bounces;
-    file.scene_info = scene_info(scene);
-    write_capture_hdf5(staging.path("capture.hdf5"), file);
-    write_npy(staging.path("capture.npy"), file.shape, H.data());
+    FloatArray H{capture_shape(c, r.bins), time_first(r)};
+    if (Staging* staging = arrays.staging()) {
+        CaptureFile file;
+        file.confocal = c.type == CaptureType::Confocal;
+        file.shape = H.shape;
+        file.H = H.data.data();
+        file.sensor_grid = grid_data(c.sensor_grid, r.points.sensor);
+        file.laser_grid = grid_data(c.laser_grid, r.points.laser);
+        file.sensor_xyz = c.sensor_position;
+        file.laser_xyz = c.laser_position;
+        file.delta_t = scene.time.bin_width_m();
+        file.t_start = scene.time.start_m();
+        file.t_accounts_first_and_last_bounces = c.account_first_and_last_bounces;
+        file.scene_info = scene_info(scene);
+        write_capture_hdf5(staging->path("capture.hdf5"), file);
+    }
+    arrays.put("capture", H.shape, H.data.data());
+    return H;
 }
 
-// A sensor block on a capture without a camera: the capture as a cube of (rows, nv_s) "pixels", each
-// sensor point's profile in every colour, so that the camera's sensor model applies unchanged.
-int capture_measurements(const Scene& scene, const RenderOptions& options, const CaptureResult& r,
-                         Staging& staging, std::vector<std::string>& warnings) {
-    const std::size_t T = std::size_t(r.bins);
-    const int width = scene.capture->sensor_grid.nv;
-    const int height = int(r.pairs / std::size_t(width));
-    std::vector<float> cube(r.pairs * T * 3);
-    for (std::size_t i = 0; i < r.pairs * T; ++i)
-        for (std::size_t c = 0; c < 3; ++c) cube[i * 3 + c] = r.H[i];
-    return write_sensor_outputs(staging, *scene.sensor, scene.time, cube.data(), height, width,
-                                plot_pixel(std::nullopt, width, height), options, warnings);
+// A sensor block on a capture without a camera: the capture as a cube of (rows, nv_s) "pixels"
+// (capture_cube), so that the camera's sensor model applies unchanged.
+int capture_measurements(const Scene& scene, const RenderOptions& options, const FloatArray& H, Arrays& arrays,
+                         std::vector<std::string>& warnings) {
+    const CaptureCube c = capture_cube(H);
+    if (Staging* staging = arrays.staging())
+        return write_sensor_outputs(*staging, *scene.sensor, scene.time, c.cube.data(), c.height, c.width,
+                                    plot_pixel(std::nullopt, c.width, c.height), options, warnings);
+    return measure_cube(*scene.sensor, scene.time, c.cube.data(), c.height, c.width, options.threads, arrays).K;
 }
 
 // The capture's options for a render: threads, progress, the ranks, and what the march may use: the
@@ -127,13 +128,13 @@ void check_capture_flags(const RenderOptions& options) {
 }
 
 CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
-                             const Visibility& visibility, const LinkSet* links, Staging& staging,
+                             const Visibility& visibility, const LinkSet* links, Arrays& arrays,
                              RenderReport& report) {
     const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options(scene, options));
     const auto start = std::chrono::steady_clock::now();
-    write_capture_files(scene, r, staging);
+    const FloatArray H = write_capture(scene, r, arrays);
     if (scene.sensor && !scene.camera)
-        report.measurements = capture_measurements(scene, options, r, staging, report.warnings);
+        report.measurements = capture_measurements(scene, options, H, arrays, report.warnings);
     report.seconds.write += seconds_since(start);
     report.seconds.solve += r.seconds_solve;
     report.seconds.gather += r.seconds_views + r.seconds_gather;

@@ -2,7 +2,7 @@
 // Private to the pipeline: what `tprf render` writes for a scene's capture block (capture.hdf5,
 // capture.npy, and the sensor's measurements of the capture when the scene has no camera).
 
-#include "staging.h"
+#include "arrays.h"
 #include "tprf/io/json_records.h"
 #include "tprf/pipeline/render.h"
 
@@ -17,10 +17,10 @@ class Visibility;
 /// flags for a scene that has only a capture.
 void check_capture_flags(const RenderOptions& options);
 
-/// Computes the scene's capture (pipeline/capture.h) and stages its outputs; adds its seconds to
-/// report.seconds. `links` may be null when the capture needs none (capture_needs_links).
+/// Computes the scene's capture (pipeline/capture.h) and puts its outputs into `arrays` (files: also
+/// capture.hdf5, and the sensor's files); adds its seconds to report.seconds. `links` may be null when the capture needs none (capture_needs_links).
 CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
-                             const Visibility& visibility, const LinkSet* links, Staging& staging,
+                             const Visibility& visibility, const LinkSet* links, Arrays& arrays,
                              RenderReport& report);
 
 /// On a rank other than 0 of a split render (pipeline/ranks.h): computes this rank's share of the

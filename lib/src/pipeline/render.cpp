@@ -1,5 +1,6 @@
 #include "tprf/pipeline/render.h"
 
+#include "arrays.h"
 #include "capture_outputs.h"
 #include "staging.h"
 #include "tprf/core/cancel.h"
@@ -16,6 +17,7 @@
 #include "tprf/pipeline/capture.h"
 #include "tprf/pipeline/ranks.h"
 #include "tprf/scene/parse_json.h"
+#include "tprf/scene/validate.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
 #include "tprf/transport/link_set.h"
@@ -106,35 +108,32 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
 }
 
 // The cubes the solve fills block by block: the transient cube, the per-bounce cubes and the patch
-// profiles, each a memory-mapped .npy in the staging folder, with the films that fill them.
+// profiles (Arrays: memory-mapped .npy files in the staging folder, or a result's memory), with the
+// films that fill them.
 struct Cubes {
-    std::unique_ptr<NpyMap> cube;
+    float* cube = nullptr;
     std::unique_ptr<TransientFilm> film;
-    std::vector<std::unique_ptr<NpyMap>> term_cubes;
     std::vector<std::unique_ptr<TransientFilm>> term_films;
-    std::unique_ptr<NpyMap> patch_cube;
+    float* patch_cube = nullptr;
 };
 
 // Per-bounce terms asked for by `solver.bounces`: every order up to max_bounces, or orders 0..3 and
 // the tail of all later ones.
 int bounce_terms(const SolverSettings& s) { return s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0; }
 
-void open_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Staging& staging, Cubes& c) {
+void open_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays, Cubes& c) {
     const Camera& camera = *scene.camera;
     const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
-    c.cube = std::make_unique<NpyMap>(staging.path("transient.npy"), std::vector<std::size_t>{H, W, T, 3});
-    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube->data(),
-                                             -1, false, options.threads);
-    if (options.patch_profiles)
-        c.patch_cube = std::make_unique<NpyMap>(staging.path("patch_transient.npy"),
-                                                std::vector<std::size_t>{t.patches.size(), T, 3});
+    c.cube = arrays.open("transient", {H, W, T, 3});
+    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube, -1,
+                                             false, options.threads);
+    if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
     const int terms = bounce_terms(scene.solver);
     for (int k = 0; k < terms; ++k) {
-        c.term_cubes.push_back(std::make_unique<NpyMap>(staging.path("transient_bounce_" + std::to_string(k) + ".npy"),
-                                                        std::vector<std::size_t>{H, W, T, 3}));
+        float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
         const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
         c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
-                                                               c.term_cubes.back()->data(), k, tail, options.threads));
+                                                               term, k, tail, options.threads));
     }
 }
 
@@ -158,7 +157,7 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
         if (c.patch_cube)
             for (std::size_t i = 0; i < N; ++i)
                 std::copy_n(b.radiosity + i * std::size_t(b.bins) * 3, std::size_t(b.bins) * 3,
-                            c.patch_cube->data() + (i * T + std::size_t(b.first_bin)) * 3);
+                            c.patch_cube + (i * T + std::size_t(b.first_bin)) * 3);
         sink_seconds += seconds_since(s0);
     });
     report.link_bin_updates = stats.link_bin_updates;
@@ -170,38 +169,48 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     return stats;
 }
 
-// steady.npy, steady.exr and preview.png; with patch profiles also patch_steady.npy and patches.csv.
-void write_steady(const Scene& scene, const RenderOptions& options, const Transport& t, Staging& staging) {
+// steady.npy, steady.exr and preview.png (the images: files only); with patch profiles also
+// patch_steady.npy and patches.csv.
+void write_steady(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays) {
     const Camera& camera = *scene.camera;
     const std::size_t H = std::size_t(camera.height), W = std::size_t(camera.width), N = t.patches.size();
     const std::vector<Rgb> steady = solve_steady(t.patches, t.links, t.illumination, scene.solver.max_bounces);
     const std::vector<float> image = steady_image(t.gather, t.illumination, steady);
-    write_npy(staging.path("steady.npy"), {H, W, 3}, image.data());
-    write_exr(staging.path("steady.exr"), camera.width, camera.height, image.data());
-    const std::vector<std::uint8_t> preview = tonemap(camera.width, camera.height, image.data());
-    write_png(staging.path("preview.png"), camera.width, camera.height, preview.data());
+    arrays.put("steady", {H, W, 3}, image.data());
+    if (Staging* staging = arrays.staging()) {
+        write_exr(staging->path("steady.exr"), camera.width, camera.height, image.data());
+        const std::vector<std::uint8_t> preview = tonemap(camera.width, camera.height, image.data());
+        write_png(staging->path("preview.png"), camera.width, camera.height, preview.data());
+    }
     if (!options.patch_profiles) return;
     std::vector<float> flat(N * 3);
     for (std::size_t i = 0; i < N; ++i)
         for (int ch = 0; ch < 3; ++ch) flat[i * 3 + std::size_t(ch)] = float(steady[i][ch]);
-    write_npy(staging.path("patch_steady.npy"), {N, 3}, flat.data());
-    write_patches_csv(staging.path("patches.csv"), t.patches);
+    arrays.put("patch_steady", {N, 3}, flat.data());
+    if (Staging* staging = arrays.staging()) write_patches_csv(staging->path("patches.csv"), t.patches);
 }
 
-// Frames, streaks, the sensor's measurements and the video: views of the finished cube.
-void write_views(const Scene& scene, const RenderOptions& options, const float* cube, Staging& staging,
+// Frames, streaks, the sensor's measurements and the video: views of the finished cube. In memory,
+// only the sensor's measurements.
+void write_views(const Scene& scene, const RenderOptions& options, const float* cube, Arrays& arrays,
                  RenderReport& report) {
     const Camera& camera = *scene.camera;
     const int bins = scene.time.bins;
-    if (options.frames) write_frames(staging.path("frames"), cube, camera.height, camera.width, bins);
-    if (options.streaks) write_streaks(staging.path("streaks"), cube, camera.height, camera.width, bins);
+    Staging* staging = arrays.staging();
+    if (!staging) {
+        if (scene.sensor) report.measurements = measure_cube(*scene.sensor, scene.time, cube, camera.height,
+                                                             camera.width, options.threads, arrays).K;
+        return;
+    }
+    if (options.frames) write_frames(staging->path("frames"), cube, camera.height, camera.width, bins);
+    if (options.streaks) write_streaks(staging->path("streaks"), cube, camera.height, camera.width, bins);
     if (scene.sensor)
-        report.measurements = write_sensor_outputs(staging, *scene.sensor, scene.time, cube, camera.height,
+        report.measurements = write_sensor_outputs(*staging, *scene.sensor, scene.time, cube, camera.height,
                                                    camera.width, plot_pixel(options.plot_pixel, camera.width,
                                                                             camera.height),
                                                    options, report.warnings);
     if (options.video) {
-        const std::filesystem::path mp4 = staging.path("light_in_flight.mp4");
+        const std::filesystem::path mp4 = staging->path("light_in_flight.mp4");
         write_video(mp4, mp4.parent_path() / ".video-frames", cube, camera.height, camera.width, bins);
     }
 }
@@ -281,17 +290,15 @@ void render_share(const Scene& scene, RenderOptions options) {
 
 // The camera's outputs: the cubes filled block by block, then the steady image and the views.
 SolveStats render_camera(const Scene& scene, const RenderOptions& options, const Transport& transport,
-                         Staging& staging, RenderReport& report) {
+                         Arrays& arrays, RenderReport& report) {
     Cubes cubes;
-    open_cubes(scene, options, transport, staging, cubes);
+    open_cubes(scene, options, transport, arrays, cubes);
     const SolveStats stats = solve_into_cubes(scene, options, transport, cubes, report);
     const auto write_start = Clock::now();
     if (options.progress) options.progress("write", 0.0);
-    write_steady(scene, options, transport, staging);
-    write_views(scene, options, cubes.cube->data(), staging, report);
-    cubes.cube->commit();
-    if (cubes.patch_cube) cubes.patch_cube->commit();
-    for (auto& c : cubes.term_cubes) c->commit();
+    write_steady(scene, options, transport, arrays);
+    write_views(scene, options, cubes.cube, arrays, report);
+    arrays.commit();
     report.seconds.write += seconds_since(write_start);
     return stats;
 }
@@ -321,31 +328,38 @@ SolveStats render_camera(const Scene& scene, const RenderOptions& options, const
                 status);
 }
 
-// Rank 0 (or the only process): everything after loading, every output written.
-RenderReport render_scene(const std::filesystem::path& scene_file, const Scene& scene, const RenderOptions& options,
-                          Clock::time_point start) {
-    RenderReport report;
+// The stages after loading, with the arrays going to `arrays` (files or memory); returns what
+// render.json records.
+RenderRecord run_stages(const std::filesystem::path& scene_file, const Scene& scene, const RenderOptions& options,
+                        Clock::time_point start, Arrays& arrays, RenderReport& report) {
     report.seconds.load = seconds_since(start);
     report.bins = scene.time.bins;
     report.width = scene.camera ? scene.camera->width : 0;
     report.height = scene.camera ? scene.camera->height : 0;
+    Transport transport;
+    build_transport(scene, options, transport, report);
+    SolveStats stats;
+    if (scene.camera) stats = render_camera(scene, options, transport, arrays, report);
+    std::optional<CaptureRecord> capture;
+    if (scene.capture)
+        capture = render_capture(scene, options, transport.patches, *transport.visibility,
+                                 render_needs_links(scene) ? &transport.links : nullptr, arrays, report);
+    report.seconds.total = seconds_since(start);
+    report.peak_rss_mb = peak_rss_mb();
+    RenderRecord record = render_record(scene_file, scene, stats, report);
+    record.capture = capture;
+    return record;
+}
 
+// Rank 0 (or the only process): everything after loading, every output written.
+RenderReport render_into_directory(const std::filesystem::path& scene_file, const Scene& scene,
+                                   const RenderOptions& options, Clock::time_point start) {
+    RenderReport report;
     // Before any heavy work: a second run into the same directory is refused now, not at the end.
     Staging staging(options.output);
     try {
-        Transport transport;
-        build_transport(scene, options, transport, report);
-        SolveStats stats;
-        if (scene.camera) stats = render_camera(scene, options, transport, staging, report);
-        std::optional<CaptureRecord> capture;
-        if (scene.capture)
-            capture = render_capture(scene, options, transport.patches, *transport.visibility,
-                                     render_needs_links(scene) ? &transport.links : nullptr, staging,
-                                     report);
-        report.seconds.total = seconds_since(start);
-        report.peak_rss_mb = peak_rss_mb();
-        RenderRecord record = render_record(scene_file, scene, stats, report);
-        record.capture = capture;
+        Arrays arrays(staging);
+        const RenderRecord record = run_stages(scene_file, scene, options, start, arrays, report);
         write_render_json(staging.path("render.json"), record);
         staging.publish(render_outputs());
         report.written = staging.names();
@@ -363,15 +377,48 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
     const SingleRank alone;
     const RankGroup& ranks = options.ranks ? *options.ranks : alone;
     const Scene scene = load_on_every_rank(scene_file, options, ranks);
-    if (ranks.size() == 1) return render_scene(scene_file, scene, options, start);
+    if (ranks.size() == 1) return render_into_directory(scene_file, scene, options, start);
     // From here the ranks wait for each other: a failure on one must end them all, not leave them waiting.
     try {
-        if (ranks.rank() == 0) return render_scene(scene_file, scene, options, start);
+        if (ranks.rank() == 0) return render_into_directory(scene_file, scene, options, start);
         render_share(scene, options);
         return {};
     } catch (...) {
         stop_every_rank(ranks);
     }
+}
+
+RenderResult render_scene(const Scene& given, const RenderOptions& options) {
+    const auto start = Clock::now();
+    Scene scene = given;
+    if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
+    if (!scene.camera && !scene.capture)
+        fail_input(scene.file, "camera", "missing: a render needs a camera (or a capture block)");
+    check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
+    RenderResult result;
+    result.time = scene.time;
+    Arrays arrays(result);
+    const RenderRecord record = run_stages(scene.file, scene, options, start, arrays, result.report);
+    result.record = render_json_text(record);
+    if (options.progress) options.progress("write", 1.0);
+    return result;
+}
+
+std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const RenderResult& result, int threads) {
+    validate_sensor(sensor, result.time);
+    RenderResult out;
+    Arrays arrays(out);
+    const auto cube = result.arrays.find("transient");
+    if (cube != result.arrays.end()) {
+        const std::vector<std::size_t>& shape = cube->second.shape;
+        measure_cube(sensor, result.time, cube->second.data.data(), int(shape[0]), int(shape[1]), threads, arrays);
+        return std::move(out.arrays);
+    }
+    const auto capture = result.arrays.find("capture");
+    if (capture == result.arrays.end()) throw Error("the result has neither a transient cube nor a capture to measure");
+    const CaptureCube c = capture_cube(capture->second);
+    measure_cube(sensor, result.time, c.cube.data(), c.height, c.width, threads, arrays);
+    return std::move(out.arrays);
 }
 
 }  // namespace tprf

@@ -1,5 +1,6 @@
 #include "staging.h"
 
+#include "arrays.h"
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/imaging/sensor_model.h"
@@ -129,22 +130,14 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
 int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
                          int height, int width, std::array<int, 2> pixel, const PipelineOptions& run,
                          std::vector<std::string>& warnings) {
-    const int K = measurement_count(sensor, time);
-    const std::size_t H = std::size_t(height), W = std::size_t(width);
-    NpyMap measurements(staging.path("measurements.npy"), {H, W, std::size_t(K), 3});
-    std::unique_ptr<NpyMap> depth;
-    if (sensor.exposure.type == ExposureType::Amcw)
-        depth = std::make_unique<NpyMap>(staging.path("depth.npy"), std::vector<std::size_t>{H, W});
-    SensorOptions options;
-    options.threads = run.threads;
-    apply_sensor(sensor, time, cube, height, width, measurements.data(), depth ? depth->data() : nullptr, options);
-    const std::size_t p = std::size_t(pixel[1]) * W + std::size_t(pixel[0]);
+    Arrays arrays(staging);
+    const auto [K, measurements] = measure_cube(sensor, time, cube, height, width, run.threads, arrays);
+    const std::size_t p = std::size_t(pixel[1]) * std::size_t(width) + std::size_t(pixel[0]);
     const std::filesystem::path data = staging.path("sensor_plot.json");
     write_sensor_plot_json(data, sensor_plot(sensor, time, cube + p * std::size_t(time.bins) * 3,
-                                             measurements.data() + p * std::size_t(K) * 3, pixel[0], pixel[1]));
+                                             measurements + p * std::size_t(K) * 3, pixel[0], pixel[1]));
     write_sensor_json(staging.path("sensor.json"), sensor, time, K, pixel);
-    measurements.commit();
-    if (depth) depth->commit();
+    arrays.commit();
     // The figure last: it is the one output that needs Python, and its absence is not an error. A
     // caller that draws nothing itself keeps sensor_plot.json.
     if (!run.draw_plots) return K;

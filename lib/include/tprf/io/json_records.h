@@ -71,6 +71,9 @@ struct RenderRecord {
     std::vector<MeshReport> meshes;       ///< one per mesh object
 };
 
+/// render.json's text (JSON, indented, ending in a newline).
+std::string render_json_text(const RenderRecord& record);
+
 /// Writes render.json.
 void write_render_json(const std::filesystem::path& path, const RenderRecord& record);
 

@@ -8,6 +8,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +49,37 @@ struct RenderReport {
     std::vector<std::string> written;  ///< files and folders written, relative to the output directory
     std::vector<std::string> warnings; ///< lines for the user (a figure not drawn, and how to draw it)
 };
+
+/// A float32 array, C order (the last index varies fastest).
+struct FloatArray {
+    std::vector<std::size_t> shape;  ///< numpy's shape
+    std::vector<float> data;         ///< product(shape) values
+};
+
+/// What render_scene computes, kept in memory: the arrays that render_file writes as .npy files, by
+/// the files' names without ".npy" (SPEC.md, "Output directory"): "transient" (H, W, T, 3), "steady"
+/// (H, W, 3), "transient_bounce_K" (solver.bounces), "patch_transient" (N, T, 3) and "patch_steady"
+/// (N, 3) (RenderOptions::patch_profiles), "capture" (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s), and
+/// for a sensor block "measurements" (H, W, K, 3) and "depth" (H, W, amcw). The values are those of
+/// render_file's files, bit for bit.
+struct RenderResult {
+    RenderReport report;
+    TimeAxis time;                              ///< the scene's time axis
+    std::map<std::string, FloatArray> arrays;   ///< by name, as above
+    std::string record;                         ///< render.json's text
+};
+
+/// Renders a loaded, validated scene into memory: the stages of render_file and the same numbers, no
+/// file written and no output directory (RenderOptions::output, frames, streaks, video and
+/// plot_pixel are not used). Throws Error when the scene has neither camera nor capture or would
+/// exceed the memory limit (before anything heavy is allocated), Cancelled when cancelled.
+RenderResult render_scene(const Scene& scene, const RenderOptions& options);
+
+/// A sensor block applied to a result, as `tprf sensor` applies it to a render directory: to the
+/// camera's cube, or (a capture without a camera) to the capture's sensor points as rows of pixels.
+/// Returns "measurements" (H, W, K, 3) and, for amcw, "depth" (H, W). Throws Error when the block
+/// does not fit the result's time axis or image.
+std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const RenderResult& result, int threads = 0);
 
 /// Renders a scene file into options.output: loads and validates the scene (tprf::Error before any
 /// file is written), builds patches and links, solves, gathers the camera's view, and writes every

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Makes light-in-flight figures from a tprf render directory.
 
-Usage: scripts/make_figures.py OUTDIR FIGDIR PREFIX [--frames N] [--energy F] [--scale S]
+Usage: python/make_figures.py OUTDIR FIGDIR PREFIX [--frames N] [--energy F] [--scale S]
                                [--bins-per-frame K] [--row Y] [--streak-energy G]
 
 OUTDIR is a directory written by `tprf render` (transient.npy, preview.png, render.json).

@@ -1,0 +1,70 @@
+#include "arrays.h"
+
+#include "tprf/imaging/sensor_model.h"
+
+#include <algorithm>
+#include <functional>
+#include <numeric>
+
+namespace tprf {
+namespace {
+
+std::size_t elements(const std::vector<std::size_t>& shape) {
+    return std::accumulate(shape.begin(), shape.end(), std::size_t(1), std::multiplies<>());
+}
+
+}  // namespace
+
+float* Arrays::open(const std::string& name, const std::vector<std::size_t>& shape) {
+    if (m_staging) {
+        m_maps.push_back(std::make_unique<NpyMap>(m_staging->path(name + ".npy"), shape));
+        return m_maps.back()->data();
+    }
+    FloatArray& a = m_result->arrays[name];
+    a.shape = shape;
+    a.data.assign(elements(shape), 0.0f);
+    return a.data.data();
+}
+
+void Arrays::put(const std::string& name, const std::vector<std::size_t>& shape, const float* data) {
+    if (m_staging) {
+        write_npy(m_staging->path(name + ".npy"), shape, data);
+        return;
+    }
+    FloatArray& a = m_result->arrays[name];
+    a.shape = shape;
+    a.data.assign(data, data + elements(shape));
+}
+
+void Arrays::commit() {
+    for (auto& map : m_maps) map->commit();
+    m_maps.clear();
+}
+
+Measured measure_cube(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
+                      int threads, Arrays& out) {
+    const int K = measurement_count(sensor, time);
+    const std::size_t H = std::size_t(height), W = std::size_t(width);
+    float* measurements = out.open("measurements", {H, W, std::size_t(K), 3});
+    float* depth = sensor.exposure.type == ExposureType::Amcw ? out.open("depth", {H, W}) : nullptr;
+    SensorOptions options;
+    options.threads = threads;
+    apply_sensor(sensor, time, cube, height, width, measurements, depth, options);
+    return {K, measurements};
+}
+
+CaptureCube capture_cube(const FloatArray& capture) {
+    const std::vector<std::size_t>& shape = capture.shape;
+    const std::size_t T = shape[0];
+    const std::size_t pairs = T ? capture.data.size() / T : 0;
+    CaptureCube c;
+    c.width = int(shape.back());
+    c.height = int(pairs / shape.back());
+    c.cube.resize(pairs * T * 3);
+    for (std::size_t pair = 0; pair < pairs; ++pair)
+        for (std::size_t t = 0; t < T; ++t)
+            for (std::size_t ch = 0; ch < 3; ++ch) c.cube[(pair * T + t) * 3 + ch] = capture.data[t * pairs + pair];
+    return c;
+}
+
+}  // namespace tprf

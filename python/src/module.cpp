@@ -1,0 +1,335 @@
+// The Python module `tprf` (SPEC.md v2, "Python"; docs/python.md): the library's entry points for
+// scenes, estimates, renders and sensors, with numpy arrays that share the result's memory.
+//
+// Every long call runs on a thread of its own with the GIL released; the calling thread hands the
+// progress events to the Python callback in order and checks for Ctrl-C, which cancels the work
+// through tprf::request_cancel (the flag every stage checks) and is raised as KeyboardInterrupt once
+// the work has stopped.
+
+#include "tprf/core/cancel.h"
+#include "tprf/core/error.h"
+#include "tprf/pipeline/info.h"
+#include "tprf/pipeline/render.h"
+#include "tprf/scene/parse_json.h"
+#include "tprf/scene/validate.h"
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <csignal>
+#include <deque>
+#include <cmath>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <utility>
+
+namespace py = pybind11;
+
+namespace {
+
+/// tprf.Scene: a loaded, validated scene.
+struct PyScene {
+    std::shared_ptr<const tprf::Scene> scene;
+};
+
+/// tprf.Result: what a render computed; its arrays share this memory.
+struct PyResult {
+    std::shared_ptr<const tprf::RenderResult> result;
+};
+
+// The cancellation flag is process-wide: two long calls at once would cancel each other's Ctrl-C
+// wrongly, and clear each other's request. One at a time, then.
+std::mutex g_one_call;
+
+// Runs `work(progress)` on a thread of its own (see the top of this file). Returns its value or
+// rethrows its exception; a KeyboardInterrupt or an exception of the callback wins over the work's
+// own Cancelled.
+template <class Work>
+auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tprf::ProgressFn{})) {
+    using T = decltype(work(tprf::ProgressFn{}));
+    std::unique_lock<std::mutex> one;
+    {
+        py::gil_scoped_release nogil;
+        one = std::unique_lock<std::mutex>(g_one_call);
+    }
+    std::mutex m;
+    std::condition_variable cv;
+    bool done = false;
+    std::deque<std::pair<std::string, double>> events;
+    tprf::ProgressFn progress;
+    if (!callback.is_none())
+        progress = [&](std::string_view phase, double fraction) {
+            const std::lock_guard<std::mutex> lock(m);
+            events.emplace_back(std::string(phase), fraction);
+            cv.notify_one();
+        };
+    std::optional<T> value;
+    std::exception_ptr failure;
+    tprf::clear_cancel();
+    std::thread worker([&] {
+        try {
+            value.emplace(work(progress));
+        } catch (...) {
+            failure = std::current_exception();
+        }
+        const std::lock_guard<std::mutex> lock(m);
+        done = true;
+        cv.notify_one();
+    });
+    std::optional<py::error_already_set> interrupt;
+    for (bool finished = false; !finished;) {
+        std::deque<std::pair<std::string, double>> batch;
+        {
+            py::gil_scoped_release nogil;
+            std::unique_lock<std::mutex> lock(m);
+            cv.wait_for(lock, std::chrono::milliseconds(50), [&] { return done || !events.empty(); });
+            batch.swap(events);
+            finished = done;
+        }
+        if (interrupt) continue;  // cancelled: waiting for the work to stop
+        try {
+            for (const auto& [phase, fraction] : batch) callback(phase, fraction);
+            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+        } catch (py::error_already_set& e) {
+            interrupt.emplace(std::move(e));
+            tprf::request_cancel(SIGINT);
+        }
+    }
+    {
+        py::gil_scoped_release nogil;
+        worker.join();
+    }
+    tprf::clear_cancel();
+    if (interrupt) throw std::move(*interrupt);
+    if (failure) std::rethrow_exception(failure);
+    return std::move(*value);
+}
+
+// A numpy view of `a`, which lives as long as `owner`: no copy.
+template <class Owner>
+py::array share(const std::shared_ptr<Owner>& owner, const tprf::FloatArray& a) {
+    auto* keep = new std::shared_ptr<Owner>(owner);
+    py::capsule base(keep, [](void* p) { delete static_cast<std::shared_ptr<Owner>*>(p); });
+    std::vector<py::ssize_t> shape(a.shape.begin(), a.shape.end());
+    return py::array_t<float>(shape, a.data.data(), base);
+}
+
+py::object array_or_none(const PyResult& r, const std::string& name) {
+    const auto it = r.result->arrays.find(name);
+    if (it == r.result->arrays.end()) return py::none();
+    return share(r.result, it->second);
+}
+
+py::dict arrays_dict(const std::shared_ptr<const tprf::RenderResult>& r) {
+    py::dict d;
+    for (const auto& [name, a] : r->arrays) d[py::str(name)] = share(r, a);
+    return d;
+}
+
+// A scene (or sensor) given as a dict: its JSON text through Python's json module, so that the
+// parser sees exactly what a file with the same content would hold.
+std::string json_text(const py::dict& d) {
+    return py::module_::import("json").attr("dumps")(d, py::arg("allow_nan") = true).cast<std::string>();
+}
+
+PyScene load_scene(const py::object& source, std::optional<double> max_edge, const py::object& base,
+                   const tprf::XmlDefines& defines) {
+    tprf::Scene scene;
+    if (py::isinstance<py::dict>(source)) {
+        if (!defines.empty()) throw tprf::Error("defines: apply to Mitsuba XML scene files only, not to a dict");
+        const std::filesystem::path dir = base.is_none() ? std::filesystem::path() : base.cast<std::filesystem::path>();
+        scene = tprf::parse_scene(json_text(source.cast<py::dict>()), dir / "<dict>");
+    } else {
+        scene = tprf::load_scene(source.cast<std::filesystem::path>(), defines);
+    }
+    if (max_edge) {
+        if (!(std::isfinite(*max_edge) && *max_edge > 0.0))
+            throw tprf::Error("max_edge: must be a positive number of metres, not " + std::to_string(*max_edge));
+        scene.max_edge = *max_edge;
+    }
+    return {std::make_shared<const tprf::Scene>(std::move(scene))};
+}
+
+py::dict time_dict(const tprf::TimeAxis& t) {
+    py::dict d;
+    d["bins"] = t.bins;
+    d["bin_width"] = t.bin_width;
+    d["start"] = t.start;
+    d["unit"] = t.unit == tprf::TimeUnit::Metres ? "m" : "ps";
+    return d;
+}
+
+py::dict phase_seconds(const tprf::PhaseSeconds& s) {
+    py::dict d;
+    d["load"] = s.load;
+    d["patches"] = s.patches;
+    d["links"] = s.links;
+    d["gather"] = s.gather;
+    d["solve"] = s.solve;
+    d["write"] = s.write;
+    d["total"] = s.total;
+    return d;
+}
+
+py::dict estimate_dict(const tprf::ResourceEstimate& e) {
+    py::dict d;
+    d["patches"] = e.patches;
+    d["links"] = e.links;
+    d["peak_bytes"] = e.peak_bytes;
+    d["peak_stage"] = e.peak_stage;
+    d["link_bytes"] = e.link_bytes;
+    d["cube_bytes"] = e.cube_bytes;
+    d["solver_bytes"] = e.solver_bytes;
+    d["seconds"] = phase_seconds(e.seconds);
+    return d;
+}
+
+// tprf.info: the estimate (before anything heavy), then the patches and links built and counted,
+// as `tprf info` prints them; `links=False` stops after the estimate.
+py::dict info(const PyScene& s, int threads, bool links, const py::object& progress, double max_memory_gb) {
+    tprf::PipelineOptions options;
+    options.threads = threads;
+    options.max_memory_gb = max_memory_gb;
+    const tprf::Scene& scene = *s.scene;
+    py::dict d;
+    d["scene"] = scene.file.string();
+    d["time"] = time_dict(scene.time);
+    d["time_text"] = tprf::describe_time(scene.time);
+    const tprf::ResourceEstimate e = tprf::estimate_resources(scene, options);
+    d["estimate"] = estimate_dict(e);
+    d["memory_limit_bytes"] = tprf::memory_limit_bytes(options);
+    if (!links || e.link_stage_bytes > tprf::memory_limit_bytes(options)) return d;
+    const tprf::SceneSummary summary = run_cancellable(
+        [&](const tprf::ProgressFn& p) {
+            tprf::PipelineOptions o = options;
+            o.progress = p;
+            return tprf::describe_scene(scene, o);
+        },
+        progress);
+    d["patches"] = summary.patches;
+    d["max_edge"] = summary.max_edge;
+    d["links"] = summary.links;
+    d["link_bytes"] = summary.link_bytes;
+    d["clusters"] = summary.clusters;
+    d["seconds"] = py::dict(py::arg("patches") = summary.seconds_patches, py::arg("links") = summary.seconds_links);
+    return d;
+}
+
+PyResult render(const PyScene& s, int threads, const py::object& progress, bool patch_profiles,
+                double max_memory_gb) {
+    tprf::RenderOptions options;
+    options.threads = threads;
+    options.patch_profiles = patch_profiles;
+    options.max_memory_gb = max_memory_gb;
+    options.draw_plots = false;
+    auto result = run_cancellable(
+        [&](const tprf::ProgressFn& p) {
+            tprf::RenderOptions o = options;
+            o.progress = p;
+            return tprf::render_scene(*s.scene, o);
+        },
+        progress);
+    return {std::make_shared<const tprf::RenderResult>(std::move(result))};
+}
+
+// tprf.apply_sensor: a sensor block (a dict, or a file path) applied to a result.
+py::dict apply_sensor(const PyResult& r, const py::object& sensor, int threads) {
+    const tprf::SensorSettings settings =
+        py::isinstance<py::dict>(sensor)
+            ? tprf::parse_sensor_block(json_text(sensor.cast<py::dict>()), "<dict>", "sensor")
+            : tprf::load_sensor(sensor.cast<std::filesystem::path>());
+    auto out = std::make_shared<tprf::RenderResult>();
+    out->arrays = run_cancellable([&](const tprf::ProgressFn&) { return tprf::measure(settings, *r.result, threads); },
+                                  py::none());
+    return arrays_dict(out);
+}
+
+py::object scene_camera(const PyScene& s) {
+    if (!s.scene->camera) return py::none();
+    const tprf::Camera& c = *s.scene->camera;
+    py::dict d;
+    d["width"] = c.width;
+    d["height"] = c.height;
+    d["spp"] = c.spp;
+    d["fov"] = c.fov_deg;
+    d["unwarp"] = c.unwarp;
+    return d;
+}
+
+void translate_exceptions(py::module_& m) {
+    // tprf.Error is a ValueError: bad input, with the command line's message.
+    static py::exception<tprf::Error> error(m, "Error", PyExc_ValueError);
+    py::register_exception_translator([](std::exception_ptr p) {
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const tprf::Error& e) {
+            error(e.what());
+        } catch (const tprf::OutputError& e) {
+            PyErr_SetString(PyExc_OSError, e.what());
+        } catch (const tprf::Cancelled& e) {
+            PyErr_SetString(PyExc_KeyboardInterrupt, e.what());
+        }
+    });
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_tprf, m) {
+    m.doc() = "tprf: transient radiosity renderer (docs/python.md)";
+    m.attr("__version__") = TPRF_VERSION;
+    translate_exceptions(m);
+
+    py::class_<PyScene>(m, "Scene", "A loaded, validated scene (tprf.load_scene).")
+        .def_property_readonly("file", [](const PyScene& s) { return s.scene->file.string(); })
+        .def_property_readonly("time", [](const PyScene& s) { return time_dict(s.scene->time); })
+        .def_property_readonly("camera", &scene_camera)
+        .def_property_readonly("has_capture", [](const PyScene& s) { return s.scene->capture.has_value(); })
+        .def_property_readonly("objects", [](const PyScene& s) { return s.scene->objects.size(); })
+        .def_property_readonly("max_edge", [](const PyScene& s) { return s.scene->max_edge; })
+        .def("__repr__", [](const PyScene& s) {
+            return "<tprf.Scene '" + s.scene->file.string() + "': " + std::to_string(s.scene->objects.size()) +
+                   " objects, " + tprf::describe_time(s.scene->time) + ">";
+        });
+
+    py::class_<PyResult>(m, "Result", "What tprf.render computed. Arrays share the result's memory.")
+        .def_property_readonly("transient", [](const PyResult& r) { return array_or_none(r, "transient"); },
+                               "float32 (H, W, T, 3): radiance per pixel and time bin")
+        .def_property_readonly("steady", [](const PyResult& r) { return array_or_none(r, "steady"); },
+                               "float32 (H, W, 3): steady-state radiance")
+        .def_property_readonly("patch_transient", [](const PyResult& r) { return array_or_none(r, "patch_transient"); },
+                               "float32 (N, T, 3): radiosity per patch and bin (render(patch_profiles=True))")
+        .def_property_readonly("patch_steady", [](const PyResult& r) { return array_or_none(r, "patch_steady"); },
+                               "float32 (N, 3): steady radiosity per patch (render(patch_profiles=True))")
+        .def_property_readonly("capture", [](const PyResult& r) { return array_or_none(r, "capture"); },
+                               "float32 (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s): the capture's H")
+        .def_property_readonly("measurements", [](const PyResult& r) { return array_or_none(r, "measurements"); },
+                               "float32 (H, W, K, 3): the scene's sensor block")
+        .def_property_readonly("depth", [](const PyResult& r) { return array_or_none(r, "depth"); },
+                               "float32 (H, W): an amcw sensor's depth")
+        .def_property_readonly("arrays", [](const PyResult& r) { return arrays_dict(r.result); },
+                               "every array by its output file's name (without .npy)")
+        .def_property_readonly("time", [](const PyResult& r) { return time_dict(r.result->time); })
+        .def_property_readonly("record", [](const PyResult& r) { return r.result->record; },
+                               "render.json's text");
+
+    m.def("load_scene", &load_scene, py::arg("scene"), py::arg("max_edge") = py::none(), py::arg("base") = py::none(),
+          py::arg("defines") = tprf::XmlDefines{},
+          "Loads a scene from a file path (JSON, or Mitsuba 3 XML with `defines` as -D name=value) or a dict "
+          "(SPEC.md's scene JSON); `base`: the folder that a dict's relative mesh paths start from (default: the "
+          "working directory). Raises tprf.Error (a ValueError).");
+    m.def("info", &info, py::arg("scene"), py::arg("threads") = 0, py::arg("links") = true,
+          py::arg("progress") = py::none(), py::arg("max_memory_gb") = 0.0,
+          "The estimate of a render and (links=True) the patches and links built and counted.");
+    m.def("render", &render, py::arg("scene"), py::arg("threads") = 0, py::arg("progress") = py::none(),
+          py::arg("patch_profiles") = false, py::arg("max_memory_gb") = 0.0,
+          "Renders in memory; progress(phase, fraction) is called in order on this thread. Ctrl-C cancels.");
+    m.def("apply_sensor", &apply_sensor, py::arg("result"), py::arg("sensor"), py::arg("threads") = 0,
+          "A sensor block (a dict or a file) applied to a result: {'measurements': ..., 'depth': ...}.");
+}
