@@ -22,17 +22,17 @@ Writes into FIGDIR:
 The streak image uses the same exposure rule applied to its own slice (so a dim middle row is
 still visible). Tone mapping: linear scale, clip to [0, 1], sRGB encoding, 8 bits.
 Images narrower than 200 pixels are enlarged x2 with nearest-neighbour sampling unless
---scale is given. Uses only numpy and the standard library.
+--scale is given. Uses numpy and matplotlib (python3-numpy, python3-matplotlib).
 """
 
 import argparse
 import json
 import pathlib
 import shutil
-import struct
 import sys
-import zlib
 
+import matplotlib
+import matplotlib.image
 import numpy as np
 
 LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
@@ -41,81 +41,25 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 # ----------------------------------------------------------------------------------------- PNG I/O
 
 def write_png(path, rgb8):
-    """Writes an (H, W, 3) uint8 array as an 8-bit RGB PNG (atomically)."""
+    """Writes an (H, W, 3) uint8 array as an 8-bit RGB PNG (atomically), through matplotlib."""
     rgb8 = np.ascontiguousarray(rgb8, dtype=np.uint8)
-    h, w, c = rgb8.shape
-    assert c == 3
-    raw = np.zeros((h, 1 + 3 * w), dtype=np.uint8)  # filter byte 0 (None) on every row
-    raw[:, 1:] = rgb8.reshape(h, 3 * w)
-
-    def chunk(tag, data):
-        body = tag + data
-        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
-
-    png = (b"\x89PNG\r\n\x1a\n"
-           + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-           + chunk(b"IDAT", zlib.compress(raw.tobytes(), 9))
-           + chunk(b"IEND", b""))
+    assert rgb8.ndim == 3 and rgb8.shape[2] == 3
     path = pathlib.Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(png)
+    matplotlib.image.imsave(tmp, rgb8, format="png")
     tmp.replace(path)
 
 
 def read_png(path):
-    """Reads an 8-bit, non-interlaced grey/grey+alpha/RGB/RGBA PNG into (H, W, 3) uint8."""
-    data = pathlib.Path(path).read_bytes()
-    if data[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError(f"{path}: not a PNG")
-    pos, idat, ihdr = 8, [], None
-    while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        pos += 12 + n
-        if tag == b"IHDR":
-            ihdr = struct.unpack(">IIBBBBB", body)
-        elif tag == b"IDAT":
-            idat.append(body)
-        elif tag == b"IEND":
-            break
-    w, h, depth, ctype, _, _, interlace = ihdr
-    channels = {0: 1, 2: 3, 4: 2, 6: 4}.get(ctype)
-    if depth != 8 or channels is None or interlace:
-        raise ValueError(f"{path}: unsupported PNG (depth {depth}, colour type {ctype})")
-    raw = np.frombuffer(zlib.decompress(b"".join(idat)), dtype=np.uint8)
-    stride = w * channels
-    out = np.zeros((h, stride), dtype=np.uint8)
-    prev = np.zeros(stride, dtype=np.int32)
-    for y in range(h):
-        ftype = raw[y * (stride + 1)]
-        line = raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)].astype(np.int32)
-        cur = np.zeros(stride, dtype=np.int32)
-        if ftype == 0:
-            cur = line
-        elif ftype == 2:
-            cur = (line + prev) & 0xFF
-        elif ftype in (1, 3, 4):
-            for i in range(stride):  # left-dependent filters: byte by byte
-                a = cur[i - channels] if i >= channels else 0
-                b = prev[i]
-                c = prev[i - channels] if i >= channels else 0
-                if ftype == 1:
-                    pred = a
-                elif ftype == 3:
-                    pred = (a + b) // 2
-                else:
-                    p = a + b - c
-                    pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-                    pred = a if (pa <= pb and pa <= pc) else (b if pb <= pc else c)
-                cur[i] = (line[i] + pred) & 0xFF
-        else:
-            raise ValueError(f"{path}: bad PNG filter {ftype}")
-        out[y] = cur
-        prev = cur
-    img = out.reshape(h, w, channels)
-    if channels in (1, 2):
+    """Reads a PNG into (H, W, 3) uint8 (grey is repeated, alpha dropped), through matplotlib."""
+    img = matplotlib.image.imread(path)
+    if img.dtype != np.uint8:  # PNGs come as floats in [0, 1]
+        img = np.rint(np.clip(img, 0.0, 1.0) * 255.0).astype(np.uint8)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    if img.shape[2] in (1, 2):
         return np.repeat(img[:, :, :1], 3, axis=2)
-    return img[:, :, :3].copy()
+    return np.ascontiguousarray(img[:, :, :3])
 
 
 # ------------------------------------------------------------------------------------ tone mapping
