@@ -325,7 +325,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     std::string scene_file;
     int threads = 0;
     bool quiet = false;
-    app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
+    app.add_option("--threads", threads, "worker threads (0: all cores)")->check(CLI::Range(0, 4096));
     app.add_flag("-q,--quiet", quiet, "no progress bar");
     double max_edge = 0.0;
     app.add_option("--max-edge", max_edge, "patch size L in metres: replaces the scene's patches.max_edge")

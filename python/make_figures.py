@@ -41,7 +41,8 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 # ----------------------------------------------------------------------------------------- PNG I/O
 
 def write_png(path, rgb8):
-    """Writes an (H, W, 3) uint8 array as an 8-bit RGB PNG (atomically), through matplotlib."""
+    """Writes an (H, W, 3) uint8 array as an 8-bit PNG (atomically), through matplotlib (which stores it
+    as RGBA with opaque alpha; the colours are the array's)."""
     rgb8 = np.ascontiguousarray(rgb8, dtype=np.uint8)
     assert rgb8.ndim == 3 and rgb8.shape[2] == 3
     path = pathlib.Path(path)

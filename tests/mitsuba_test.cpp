@@ -186,6 +186,20 @@ TEST(Mitsuba, CameraSeesMitsubasImageNotItsMirror) {
     EXPECT_LT(tprf::camera_ray(l, 0.0, 4.0).x(), 0.0);  // looking along -z, the left is -x
 }
 
+// A zero `up` is no up (Mitsuba's lookat builds its frame around the direction, as without one).
+TEST(Mitsuba, LookatWithZeroUpIsLookatWithoutUp) {
+    TempDir dir;
+    const auto camera_with = [&](const std::string& up) {
+        std::string xml = scene_xml("");
+        xml.replace(xml.find("<lookat"), xml.find("/></transform>") - xml.find("<lookat"),
+                    R"(<lookat origin="1, 2, 3" target="1, 2.5, 0")" + up);
+        return *parse(xml, dir).camera;
+    };
+    const tprf::Camera none = camera_with(""), zero = camera_with(R"( up="0, 0, 0")");
+    EXPECT_EQ(none.up, zero.up);
+    EXPECT_TRUE(tprf::camera_ray(none, 1.0, 2.0).isApprox(tprf::camera_ray(zero, 1.0, 2.0)));
+}
+
 TEST(Mitsuba, MirroringOrScaledCameraIsRefused) {
     TempDir dir;
     std::string xml = scene_xml("");
@@ -293,6 +307,9 @@ TEST(Mitsuba, UnsupportedInputNamesFileLineAndElement) {
                  "give the colour as <rgb> or <float>");
     expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1.5"/></bsdf></shape>)",
                  "must lie in [0, 1]");
+    expect_error(R"(<shape type="rectangle"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf>)"
+                 R"(<emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>)",
+                 "an area emitter on a shape with a twosided BSDF");
     std::string film = scene_xml("");
     film.replace(film.find("transient_hdr_film"), 18, "hdrfilm");
     EXPECT_NE(error_of(film, dir).find("scene.xml:5: <film type=\"hdrfilm\">: unsupported film type"), std::string::npos);

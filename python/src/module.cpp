@@ -18,6 +18,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <csignal>
@@ -28,6 +29,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <utility>
 
 namespace py = pybind11;
@@ -45,8 +47,41 @@ struct PyResult {
 };
 
 // The cancellation flag is process-wide: two long calls at once would cancel each other's Ctrl-C
-// wrongly, and clear each other's request. One at a time, then.
+// wrongly, and clear each other's request. One at a time, then; a call made from inside another's
+// progress callback (the same thread) is refused, since it would wait for itself.
 std::mutex g_one_call;
+std::atomic<std::thread::id> g_caller{};
+
+// Takes g_one_call, waiting in steps of 50 ms with the GIL released and checking for Ctrl-C between.
+std::unique_lock<std::mutex> one_call_at_a_time() {
+    if (g_caller.load() == std::this_thread::get_id())
+        throw std::runtime_error("tprf: a tprf call from inside a progress callback of another (calls cannot nest)");
+    std::unique_lock<std::mutex> lock(g_one_call, std::defer_lock);
+    while (!lock.try_lock()) {
+        {
+            py::gil_scoped_release nogil;
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+        if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    }
+    g_caller.store(std::this_thread::get_id());
+    return lock;
+}
+
+// Whatever leaves run_cancellable while its worker runs (an exception of Python's or of ours) first
+// stops the worker and waits for it: a joinable std::thread must not be destroyed.
+struct StopAndJoin {
+    std::thread& worker;
+    ~StopAndJoin() {
+        if (worker.joinable()) {
+            tprf::request_cancel(SIGINT);
+            py::gil_scoped_release nogil;
+            worker.join();
+        }
+        tprf::clear_cancel();
+        g_caller.store(std::thread::id());
+    }
+};
 
 // Runs `work(progress)` on a thread of its own (see the top of this file). Returns its value or
 // rethrows its exception; a KeyboardInterrupt or an exception of the callback wins over the work's
@@ -54,11 +89,7 @@ std::mutex g_one_call;
 template <class Work>
 auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tprf::ProgressFn{})) {
     using T = decltype(work(tprf::ProgressFn{}));
-    std::unique_lock<std::mutex> one;
-    {
-        py::gil_scoped_release nogil;
-        one = std::unique_lock<std::mutex>(g_one_call);
-    }
+    const std::unique_lock<std::mutex> one = one_call_at_a_time();
     std::mutex m;
     std::condition_variable cv;
     bool done = false;
@@ -83,6 +114,7 @@ auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tpr
         done = true;
         cv.notify_one();
     });
+    const StopAndJoin guard{worker};
     std::optional<py::error_already_set> interrupt;
     for (bool finished = false; !finished;) {
         std::deque<std::pair<std::string, double>> batch;
@@ -106,19 +138,29 @@ auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tpr
         py::gil_scoped_release nogil;
         worker.join();
     }
-    tprf::clear_cancel();
     if (interrupt) throw std::move(*interrupt);
     if (failure) std::rethrow_exception(failure);
     return std::move(*value);
 }
 
-// A numpy view of `a`, which lives as long as `owner`: no copy.
+// A numpy view of `a`, which lives as long as `owner`: no copy. Read-only where the owner is const
+// (a Result's arrays: every access must see what the render computed).
 template <class Owner>
 py::array share(const std::shared_ptr<Owner>& owner, const tprf::FloatArray& a) {
     auto* keep = new std::shared_ptr<Owner>(owner);
     py::capsule base(keep, [](void* p) { delete static_cast<std::shared_ptr<Owner>*>(p); });
     std::vector<py::ssize_t> shape(a.shape.begin(), a.shape.end());
-    return py::array_t<float>(shape, a.data.data(), base);
+    py::array_t<float> view(shape, a.data.data(), base);
+    if (std::is_const_v<Owner>) view.attr("flags").attr("writeable") = false;
+    return view;
+}
+
+// The common options, checked as the command line checks its flags.
+void check_options(int threads, double max_memory_gb) {
+    if (threads < 0 || threads > 4096)
+        throw tprf::Error("threads: must be 0 (all cores) to 4096, not " + std::to_string(threads));
+    if (!(std::isfinite(max_memory_gb) && max_memory_gb >= 0.0))
+        throw tprf::Error("max_memory_gb: must be 0 (80% of the memory available) or a positive number of GB");
 }
 
 py::object array_or_none(const PyResult& r, const std::string& name) {
@@ -127,7 +169,8 @@ py::object array_or_none(const PyResult& r, const std::string& name) {
     return share(r.result, it->second);
 }
 
-py::dict arrays_dict(const std::shared_ptr<const tprf::RenderResult>& r) {
+template <class Owner>
+py::dict arrays_dict(const std::shared_ptr<Owner>& r) {
     py::dict d;
     for (const auto& [name, a] : r->arrays) d[py::str(name)] = share(r, a);
     return d;
@@ -194,6 +237,7 @@ py::dict estimate_dict(const tprf::ResourceEstimate& e) {
 // tprf.info: the estimate (before anything heavy), then the patches and links built and counted,
 // as `tprf info` prints them; `links=False` stops after the estimate.
 py::dict info(const PyScene& s, int threads, bool links, const py::object& progress, double max_memory_gb) {
+    check_options(threads, max_memory_gb);
     tprf::PipelineOptions options;
     options.threads = threads;
     options.max_memory_gb = max_memory_gb;
@@ -224,6 +268,7 @@ py::dict info(const PyScene& s, int threads, bool links, const py::object& progr
 
 PyResult render(const PyScene& s, int threads, const py::object& progress, bool patch_profiles,
                 double max_memory_gb) {
+    check_options(threads, max_memory_gb);
     tprf::RenderOptions options;
     options.threads = threads;
     options.patch_profiles = patch_profiles;
@@ -241,6 +286,7 @@ PyResult render(const PyScene& s, int threads, const py::object& progress, bool 
 
 // tprf.apply_sensor: a sensor block (a dict, or a file path) applied to a result.
 py::dict apply_sensor(const PyResult& r, const py::object& sensor, int threads) {
+    check_options(threads, 0.0);
     const tprf::SensorSettings settings =
         py::isinstance<py::dict>(sensor)
             ? tprf::parse_sensor_block(json_text(sensor.cast<py::dict>()), "<dict>", "sensor")

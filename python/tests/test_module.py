@@ -79,6 +79,9 @@ def test_arrays_have_the_spec_shapes_and_share_the_results_memory():
     assert result.capture is None and result.measurements is None
     for a in (result.transient, result.steady, result.patch_transient):
         assert not a.flags.owndata and a.flags.c_contiguous
+        assert not a.flags.writeable  # what the render computed, for every later access
+    with pytest.raises(ValueError):
+        result.steady[0, 0, 0] = 7.0
     # Every access is a view of the same memory, not a copy.
     first, second = result.transient, result.transient
     assert np.shares_memory(first, second)
@@ -117,6 +120,20 @@ def test_bad_input_raises_valueerror_with_the_command_lines_message(tmp_path):
         tprf.load_scene(CORNER, max_edge=-1.0)
     with pytest.raises(ValueError, match="pulse"):
         tprf.apply_sensor(tprf.render(tprf.load_scene(CORNER)), {"pulse": {"shape": "triangle"}})
+
+
+def test_bad_options_and_nested_calls_raise():
+    scene = tprf.load_scene(CORNER)
+    for kwargs in ({"threads": -1}, {"threads": 100000}, {"max_memory_gb": float("nan")}, {"max_memory_gb": -1}):
+        with pytest.raises(ValueError, match=next(iter(kwargs))):
+            tprf.render(scene, **kwargs)
+
+    def nested(phase, fraction):
+        tprf.info(scene)
+
+    with pytest.raises(RuntimeError, match="cannot nest"):
+        tprf.render(scene, progress=nested)
+    assert tprf.render(scene).steady.shape == (16, 24, 3)
 
 
 def test_dict_scenes_read_meshes_relative_to_base():

@@ -36,6 +36,17 @@ void Arrays::put(const std::string& name, const std::vector<std::size_t>& shape,
     a.data.assign(data, data + elements(shape));
 }
 
+const FloatArray& Arrays::keep(const std::string& name, FloatArray&& array) {
+    if (m_staging) {
+        write_npy(m_staging->path(name + ".npy"), array.shape, array.data.data());
+        m_kept.push_back(std::make_unique<FloatArray>(std::move(array)));
+        return *m_kept.back();
+    }
+    FloatArray& kept = m_result->arrays[name];
+    kept = std::move(array);
+    return kept;
+}
+
 void Arrays::commit() {
     for (auto& map : m_maps) map->commit();
     m_maps.clear();

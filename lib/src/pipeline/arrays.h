@@ -27,6 +27,9 @@ public:
     float* open(const std::string& name, const std::vector<std::size_t>& shape);
     /// A finished array: written (files) or copied into the result (memory).
     void put(const std::string& name, const std::vector<std::size_t>& shape, const float* data);
+    /// A finished array handed over: written and kept here (files) or moved into the result (memory).
+    /// The returned array lives as long as this Arrays (files) or the result (memory).
+    const FloatArray& keep(const std::string& name, FloatArray&& array);
     /// Files: every open() array flushed and moved to its staging name. Memory: nothing to do.
     void commit();
 
@@ -38,6 +41,7 @@ private:
     Staging* m_staging = nullptr;
     RenderResult* m_result = nullptr;
     std::vector<std::unique_ptr<NpyMap>> m_maps;
+    std::vector<std::unique_ptr<FloatArray>> m_kept;
 };
 
 /// A sensor block applied to a cube (height, width, T, 3): "measurements" (height, width, K, 3) and,

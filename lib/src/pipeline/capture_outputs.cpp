@@ -65,8 +65,8 @@ std::vector<std::size_t> capture_shape(const Capture& c, int bins) {
     return {n(bins), n(c.laser_grid.nu), n(c.laser_grid.nv), n(c.sensor_grid.nu), n(c.sensor_grid.nv)};
 }
 
-// capture.hdf5 (files only) and capture.npy: H time first. Returns that array.
-FloatArray write_capture(const Scene& scene, const CaptureResult& r, Arrays& arrays) {
+// capture.hdf5 (files only) and capture.npy: H time first. Returns that array (kept by `arrays`).
+const FloatArray& write_capture(const Scene& scene, const CaptureResult& r, Arrays& arrays) {
     const Capture& c = *scene.capture;
     FloatArray H{capture_shape(c, r.bins), time_first(r)};
     if (Staging* staging = arrays.staging()) {
@@ -84,8 +84,7 @@ FloatArray write_capture(const Scene& scene, const CaptureResult& r, Arrays& arr
         file.scene_info = scene_info(scene);
         write_capture_hdf5(staging->path("capture.hdf5"), file);
     }
-    arrays.put("capture", H.shape, H.data.data());
-    return H;
+    return arrays.keep("capture", std::move(H));
 }
 
 // A sensor block on a capture without a camera: the capture as a cube of (rows, nv_s) "pixels"
@@ -132,7 +131,7 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
                              RenderReport& report) {
     const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options(scene, options));
     const auto start = std::chrono::steady_clock::now();
-    const FloatArray H = write_capture(scene, r, arrays);
+    const FloatArray& H = write_capture(scene, r, arrays);
     if (scene.sensor && !scene.camera)
         report.measurements = capture_measurements(scene, options, H, arrays, report.warnings);
     report.seconds.write += seconds_since(start);

@@ -83,18 +83,18 @@ Eigen::Vector3d named_vector(const XmlSource& src, const pugi::xml_node& op, con
     return {to_number(src, op, t[0]), to_number(src, op, t[1]), to_number(src, op, t[2])};
 }
 
-// Mitsuba's look_at: columns left = normalize(up x dir), up' = dir x left, dir, origin. Without `up`, the
-// first axis of the frame Mitsuba builds around dir (Duff et al. 2017, "Building an orthonormal basis").
+// Mitsuba's look_at: columns left = normalize(up x dir), up' = dir x left, dir, origin. Without `up` (or
+// with a zero one), the first axis of the frame Mitsuba builds around dir (Duff et al. 2017, "Building an
+// orthonormal basis").
 Eigen::Matrix4d look_at(const XmlSource& src, const pugi::xml_node& op) {
     check_attributes(src, op, {"origin", "target", "up"});
     const Eigen::Vector3d origin = named_vector(src, op, "origin");
     const Eigen::Vector3d target = named_vector(src, op, "target");
     const Eigen::Vector3d dir = (target - origin).normalized();
     if ((target - origin).norm() == 0.0 || !dir.allFinite()) src.fail(op, "origin and target are the same point");
-    Eigen::Vector3d up;
-    if (op.attribute("up")) {
-        up = named_vector(src, op, "up");
-    } else {
+    // An `up` of zero is no up at all (Mitsuba builds the frame around dir then too).
+    Eigen::Vector3d up = op.attribute("up") ? named_vector(src, op, "up") : Eigen::Vector3d::Zero();
+    if (up.squaredNorm() == 0.0) {
         const double sign = std::copysign(1.0, dir.z()), a = -1.0 / (sign + dir.z()), b = dir.x() * dir.y() * a;
         up = {1.0 + sign * dir.x() * dir.x() * a, sign * b, -sign * dir.x()};
     }

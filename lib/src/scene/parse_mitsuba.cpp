@@ -155,6 +155,11 @@ void parse_shape(const Context& ctx, const pugi::xml_node& node, std::vector<Obj
     if (std::abs(m.block<3, 3>(0, 0).determinant()) == 0.0) ctx.src.fail(p.find("to_world"), "is singular");
     Surface surface;
     parse_material(ctx, p, surface, o.emission);
+    // Mitsuba's area emitter lights the front alone, whatever the BSDF; a two-sided tprf object would
+    // emit from both sides.
+    if (surface.two_sided && (o.emission.array() > 0.0).any())
+        ctx.src.fail(node, "an area emitter on a shape with a twosided BSDF: Mitsuba lights its front alone, a "
+                           "two-sided tprf surface would emit from both sides (use a one-sided diffuse BSDF)");
     o.albedo = surface.albedo;
     o.two_sided = surface.two_sided;
     if (type == "obj" || type == "ply") {
