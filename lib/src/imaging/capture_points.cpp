@@ -140,7 +140,8 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
         v.patch = std::uint32_t(j);
         bool seen = false;
         for (int s = 0; s < kViewSamples; ++s) {
-            const Vec3 y = patch_point(patches, j, (s % kViewSide + 0.5) / kViewSide, (s / kViewSide + 0.5) / kViewSide);
+            const double u = (s % kViewSide + 0.5) / kViewSide, t = (s / kViewSide + 0.5) / kViewSide;
+            const Vec3 y = patch_point(patches, j, u, t);
             double g = 0.0, path = 0.0;
             if (one_ray) {
                 const Vec3 d = probe.position - y;
@@ -153,6 +154,13 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
             if (!(g > 0.0)) continue;
             v.path[std::size_t(s)] = float(path);
             v.g[std::size_t(s)] = float(g);
+            // The cell's half-axes (central differences of the patch's map over the cell's width).
+            const double half = 0.5 / kViewSide;
+            const Vec3 hu = 0.5 * (patch_point(patches, j, u + half, t) - patch_point(patches, j, u - half, t));
+            const Vec3 hv = 0.5 * (patch_point(patches, j, u, t + half) - patch_point(patches, j, u, t - half));
+            const Vec3 dir = (y - probe.position).normalized();
+            v.du[std::size_t(s)] = float(dir.dot(hu));
+            v.dv[std::size_t(s)] = float(dir.dot(hv));
             seen = true;
         }
         if (seen && one_ray && visibility.occluded(patches.centroid[j] + visibility.epsilon() * n, probe.position))

@@ -64,6 +64,22 @@ void deposit(std::vector<float>& H, const CapturePlan& p, std::size_t pair, doub
     H[(pair - p.pair_base) * std::size_t(p.T) + std::size_t(b)] += float(value);
 }
 
+// `value` spread evenly over the paths [lo, hi] (metres), each bin taking its share of the interval.
+void deposit_box(std::vector<float>& H, const CapturePlan& p, std::size_t pair, double lo, double hi, double value) {
+    const std::int64_t b0 = std::max<std::int64_t>(p.bin(lo), 0), b1 = std::min<std::int64_t>(p.bin(hi), p.T - 1);
+    if (p.bin(lo) == p.bin(hi) || !(hi > lo)) {
+        deposit(H, p, pair, lo, value);
+        return;
+    }
+    const double per_metre = value / (hi - lo), width = 1.0 / p.inv_bin;
+    float* row = H.data() + (pair - p.pair_base) * std::size_t(p.T);
+    for (std::int64_t b = b0; b <= b1; ++b) {
+        const double start = p.start + double(b) * width;
+        const double overlap = std::min(hi, start + width) - std::max(lo, start);
+        if (overlap > 0.0) row[b] += float(per_metre * overlap);
+    }
+}
+
 // Orders 1 and 2: the spot itself where sensor point s's cell holds it, and the spot's light reaching
 // s straight (a relay surface that is not planar).
 void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair, std::vector<float>& H) {
@@ -85,7 +101,20 @@ void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::siz
     deposit(H, p, pair, a.path + p.sensor_leg(s), mean3(radiance));
 }
 
-// Order 3: spot -> patch j -> sensor point, over the samples that both ends see, each at its own path.
+// The shortest path from l to s by way of the plane of patch j, both in front of it: the path to the
+// mirror image of s, |l - s'|^2 = |l - s|^2 + 4 d_l d_s (d: heights above the plane). No path through
+// the patch is shorter.
+double shortest_by_plane(const PatchSet& patches, std::uint32_t j, const Vec3& l, const Vec3& s) {
+    const Vec3& n = patches.normal[j];
+    const double dl = std::max(0.0, n.dot(l - patches.centroid[j])), ds = std::max(0.0, n.dot(s - patches.centroid[j]));
+    return std::sqrt((l - s).squaredNorm() + 4.0 * dl * ds);
+}
+
+// Order 3: spot -> patch j -> sensor point, over the samples that both ends see. Each sample's light is
+// spread over the paths of its cell: its exact path +- the first-order change across the cell, the
+// start clamped at the shortest path by way of the patch's plane. The path is convex in the point of
+// the patch, so the tangent's minimum over the cell is never later than the cell's true first light:
+// onsets are never late, and early only by the path's curvature across a cell (docs/capture.md).
 // Views are in patch order, so the patches both see are found by one merge.
 void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair,
                       const std::vector<PatchView>& from_laser, const std::vector<PatchView>& from_sensor,
@@ -106,10 +135,14 @@ void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::s
         }
         const std::uint32_t j = a->patch;
         const double scale = mean3(ends * p.patches.albedo[j]) * p.patches.area[j];
-        for (int k = 0; k < kViewSamples; ++k) {
-            const double g = double(a->g[std::size_t(k)]) * double(b->g[std::size_t(k)]);
-            if (g > 0.0) deposit(H, p, pair, legs + double(a->path[std::size_t(k)]) + double(b->path[std::size_t(k)]),
-                                 scale * g);
+        const double first = legs + shortest_by_plane(p.patches, j, p.points.laser[l].point, p.points.sensor[s].point);
+        for (std::size_t k = 0; k < std::size_t(kViewSamples); ++k) {
+            const double g = double(a->g[k]) * double(b->g[k]);
+            if (!(g > 0.0)) continue;
+            const double path = legs + double(a->path[k]) + double(b->path[k]);
+            const double spread = std::abs(double(a->du[k]) + double(b->du[k])) +
+                                  std::abs(double(a->dv[k]) + double(b->dv[k]));
+            deposit_box(H, p, pair, std::min(path, std::max(first, path - spread)), path + spread, scale * g);
         }
         ++a;
         ++b;

@@ -49,12 +49,18 @@ CapturePoints locate_capture_points(const Scene& scene, const PatchSet& patches,
 inline constexpr int kViewSide = 2;
 inline constexpr int kViewSamples = kViewSide * kViewSide;
 
-/// What a wall point sees of one patch: at each stratified sample y of the patch, the kernel
-/// g = V cos(at the wall) cos(at y) / |y - x|^2 (m^-2, 0 where hidden or behind) and the path |y - x|.
+/// What a wall point x sees of one patch: at each stratified sample y of the patch, the kernel
+/// g = V cos(at the wall) cos(at y) / |y - x|^2 (m^-2, 0 where hidden or behind) and the path |y - x|;
+/// and how the path changes across the sample's cell (the quarter of the patch it stands for): along
+/// the cell's half-axes h_u, h_v, the path's gradient (y - x) / |y - x| dotted with them. A cell's paths
+/// from x then lie within path +- (|du| + |dv|) to first order, which times the cell's light as a box in
+/// path length instead of one point (docs/capture.md, "Onsets").
 struct PatchView {
     std::uint32_t patch = 0;
     std::array<float, kViewSamples> path{};  ///< metres
     std::array<float, kViewSamples> g{};     ///< m^-2
+    std::array<float, kViewSamples> du{};    ///< metres: (y - x) / |y - x| . h_u
+    std::array<float, kViewSamples> dv{};    ///< metres: (y - x) / |y - x| . h_v
 };
 
 /// The laser spot that wall point w is when a laser of `power` (W per channel) lights it, its light
