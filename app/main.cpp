@@ -124,6 +124,9 @@ tprf::ResourceEstimate print_estimate(const tprf::Scene& scene, const tprf::Pipe
     const tprf::PhaseSeconds& s = e.seconds;
     std::printf("estimate seconds: patches %.2f, links %.2f, gather %.2f, solve %.2f, write %.2f, total %.2f\n",
                 s.patches, s.links, s.gather, s.solve, s.write, s.total);
+    if (e.capture_batch > 0)
+        std::printf("estimate capture: %zu marches of up to %d laser points each (the batch that fits the limit)\n",
+                    e.capture_marches, e.capture_batch);
     std::fflush(stdout);
     return e;
 }

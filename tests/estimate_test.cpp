@@ -143,6 +143,41 @@ TEST(ResourceEstimate, CountsTheNearFieldOfHierarchicalLinks) {
     EXPECT_GT(e.peak_bytes, std::size_t(20e9));
 }
 
+// A capture without a camera that marches solves its laser points in batches: 12 x 12 = 144 points make
+// 9 marches of 16 with room to spare, the solver's bytes growing by one illumination's lanes a laser point
+// in the batch; a limit with room for about 4 illuminations beside the rest gives batches of 4 (36
+// marches); with no room for one, a batch of 1 and a peak over the limit (refused). A capture that stops
+// at the third bounce marches nothing.
+TEST(ResourceEstimate, ModelsTheBatchesOfACapture) {
+    tprf::Scene scene = tprf::load_scene(std::string(TPRF_SOURCE_DIR) + "/examples/nlos/letter.json");
+    ASSERT_TRUE(scene.capture);
+    scene.capture->laser_grid.nu = scene.capture->laser_grid.nv = 12;
+    scene.capture->sensor_grid = scene.capture->laser_grid;
+    EXPECT_EQ(tprf::estimate_resources(scene, {}).capture_batch, 0);  // max_bounces 3: no march
+    scene.capture->max_bounces = -1;
+    tprf::PipelineOptions roomy;
+    roomy.max_memory_gb = 1000.0;
+    const tprf::ResourceEstimate all = tprf::estimate_resources(scene, roomy);
+    EXPECT_EQ(all.capture_batch, 16);
+    EXPECT_EQ(all.capture_marches, 9u);
+    tprf::PipelineOptions one = roomy;
+    one.max_memory_gb = 1e-6;
+    const tprf::ResourceEstimate single = tprf::estimate_resources(scene, one);
+    EXPECT_EQ(single.capture_batch, 1);
+    EXPECT_EQ(single.capture_marches, 144u);
+    EXPECT_GT(single.peak_bytes, std::size_t(1000));
+    const double per_illumination = double(all.solver_bytes - single.solver_bytes) / 15.0;
+    ASSERT_GT(per_illumination, 0.0);
+    tprf::PipelineOptions four = roomy;
+    four.max_memory_gb = (double(single.peak_bytes) + 3.5 * per_illumination) / 1e9;
+    const tprf::ResourceEstimate some = tprf::estimate_resources(scene, four);
+    EXPECT_EQ(some.capture_batch, 4);
+    EXPECT_EQ(some.capture_marches, 36u);
+    EXPECT_LE(some.peak_bytes, std::size_t(four.max_memory_gb * 1e9));
+    // Four times the marches of four lanes cost more than nine of sixteen (a march of B lanes: 1 + (B - 1) / 15).
+    EXPECT_GT(some.seconds.solve, all.seconds.solve);
+}
+
 // The estimate against what a render measures (render.json's peak_rss_mb), in a process of its own.
 TEST_F(Estimate, IsWithinAFactorTwoOfTheMeasuredPeak) {
 #if defined(__SANITIZE_ADDRESS__)

@@ -231,6 +231,8 @@ py::dict estimate_dict(const tprf::ResourceEstimate& e) {
     d["cube_bytes"] = e.cube_bytes;
     d["solver_bytes"] = e.solver_bytes;
     d["seconds"] = phase_seconds(e.seconds);
+    d["capture_batch"] = e.capture_batch;
+    d["capture_marches"] = e.capture_marches;
     return d;
 }
 

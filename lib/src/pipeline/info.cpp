@@ -354,8 +354,9 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
 }
 
 // The march: rings of every node that sends (the largest delay is the scene's diagonal), block buffers,
-// the lists of links shorter than a block and the films' block scratch.
-void estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
+// the lists of links shorter than a block and the films' block scratch. Returns the part that grows
+// with the lanes (rings and blocks): the bytes of one illumination's C lanes.
+double estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
     const auto [layers, terms, cubes] = bounce_layout(scene.solver);
     const double bin_m = scene.time.bin_width_m();
     const int max_lag = int(std::min(census.diagonal / bin_m, 1e8));
@@ -378,6 +379,7 @@ void estimate_solver(const Scene& scene, const PatchCensus& census, const PairSh
     // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
     if (scene.links.method == LinkMethod::Hierarchical)
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * n * scene.time.bins);
+    return rings + blocks;
 }
 
 // The memory-mapped cubes the solve fills (the transient cube, per-bounce cubes, patch profiles), and
@@ -401,15 +403,33 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
 
 // The peak: the largest sum of what is held at once, stage by stage in the order of a render.
 // A capture's H (and its time-first copy while it is written); a scene with only a capture that stops at
-// the third bounce builds no links and marches nothing. The batch's rings (one lane per illumination)
-// are not modelled yet (docs/capture.md, Limits).
-void estimate_capture(const Scene& scene, ResourceEstimate& e) {
+// the third bounce builds no links and marches nothing. A capture that marches solves its laser points
+// in batches of B illuminations, as pipeline/capture.cpp chooses B: the most, up to kMaxBatch, whose
+// lanes fit in the limit beside everything else held then (B = 1 when none fit: the peak then exceeds
+// the limit and the render is refused). A march of B lanes costs about 1 + (B - 1) / 15 single marches
+// (a 16-lane march measured 2x one lane, bench/capture_bench.py); ceil(L / B) marches are run.
+void estimate_capture(const Scene& scene, const PipelineOptions& options, double per_illumination,
+                      ResourceEstimate& e) {
     if (!scene.capture) return;
     e.cube_bytes += to_size(2.0 * double(scene.capture->pairs()) * scene.time.bins * 4);
-    if (render_needs_links(scene)) return;
-    e.links = 0;
-    e.link_bytes = e.link_build_bytes = e.solver_bytes = 0;
-    e.seconds.links = e.seconds.solve = 0.0;
+    if (!render_needs_links(scene)) {
+        e.links = 0;
+        e.link_bytes = e.link_build_bytes = e.solver_bytes = 0;
+        e.seconds.links = e.seconds.solve = 0.0;
+        return;
+    }
+    if (scene.camera) return;  // the camera's render is estimated; the capture's marches come on top
+    const std::size_t limit = memory_limit_bytes(options);
+    const double fixed = double(e.solver_bytes) - per_illumination;
+    const double held = double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes) +
+                        fixed + per_illumination;
+    const double room = limit > 0 ? double(limit) - held : INFINITY;
+    const int batch = int(std::clamp(1.0 + std::floor(room / std::max(per_illumination, 1.0)), 1.0, double(kMaxBatch)));
+    const std::size_t lasers = scene.capture->laser_grid.size();
+    e.capture_batch = batch;
+    e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
+    e.solver_bytes = to_size(fixed + batch * per_illumination);
+    e.seconds.solve *= double(e.capture_marches) * (1.0 + (batch - 1) / 15.0);
 }
 
 void sum_peak(ResourceEstimate& e) {
@@ -512,9 +532,9 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     e.facing_fraction = shares.facing;
     estimate_links(scene, census, shares, e);
     estimate_camera(scene, census, shares, e);
-    estimate_solver(scene, census, shares, e);
+    const double per_illumination = estimate_solver(scene, census, shares, e);
     estimate_outputs(scene, census, patch_profiles, e);
-    estimate_capture(scene, e);
+    estimate_capture(scene, options, per_illumination, e);
     sum_peak(e);
     // The throughputs are for 2 threads; every stage but loading the meshes runs in parallel.
     const double scale = 2.0 / double(thread_count(options.threads));

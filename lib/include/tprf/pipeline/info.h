@@ -91,6 +91,9 @@ struct ResourceEstimate {
     std::size_t link_stage_bytes = 0;    ///< the peak up to the end of the link stage (what `tprf info` builds)
     std::string peak_stage;              ///< where the peak is: "patches", "links", "gather", "solve" or "write"
 
+    int capture_batch = 0;               ///< a capture that marches: illuminations per march (0: none)
+    std::size_t capture_marches = 0;     ///< ... and the marches, ceil(laser points / capture_batch)
+
     PhaseSeconds seconds;                ///< load, patches, links, solve, gather, write, total
     std::vector<MeshReport> meshes;      ///< the mesh files, as loaded to count their triangles
 };
