@@ -31,21 +31,24 @@ Neighbours radius_search(const std::vector<Vec3>& points, const std::vector<Vec3
     flann::Matrix<double> data(xyz.data(), points.size(), 3);
     flann::KDTreeSingleIndex<flann::L2_Simple<double>> tree(data, flann::KDTreeSingleIndexParams(12));
     tree.buildIndex();
-    // One thread inside FLANN (its own OpenMP region would end in std::terminate on an exception);
-    // the chunks run in parallel here instead. The tree is read-only while searched.
-    flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
-    params.cores = 1;
-    const float r2 = float(radius * radius);
+    // The queries run in parallel here, each through the tree's own search with a result set of ours:
+    // FLANN's radiusSearch opens an OpenMP region of its own (even for one thread) in which an
+    // exception ends in std::terminate, so an allocation failing there (under ulimit -v, say) aborted
+    // the process. The same result set, radius and (unsorted) order as radiusSearch gives. The tree is
+    // read-only while searched; no point is ever removed, so its indices are the points' own.
+    const flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, false);
+    const double r2 = double(float(radius * radius));
     const std::size_t chunks = (queries.size() + kQueryChunk - 1) / kQueryChunk;
     parallel_for(chunks, {threads, 1, true}, [&](std::size_t c) {
         const std::size_t q0 = c * kQueryChunk, q1 = std::min(queries.size(), q0 + kQueryChunk);
-        flann::Matrix<double> query(qxyz.data() + 3 * q0, q1 - q0, 3);
-        std::vector<std::vector<std::size_t>> index;
-        std::vector<std::vector<double>> d2;
-        tree.radiusSearch(query, index, d2, r2, params);
+        flann::RadiusResultSet<double> result(r2);
         for (std::size_t q = q0; q < q1; ++q) {
-            found.index[q] = std::move(index[q - q0]);
-            found.distance2[q] = std::move(d2[q - q0]);
+            result.clear();
+            tree.findNeighbors(result, qxyz.data() + 3 * q, params);
+            const std::size_t n = result.size();
+            found.index[q].resize(n);
+            found.distance2[q].resize(n);
+            if (n > 0) result.copy(found.index[q].data(), found.distance2[q].data(), n, params.sorted);
         }
     });
     return found;
