@@ -104,7 +104,9 @@ auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tpr
     std::optional<T> value;
     std::exception_ptr failure;
     tprf::clear_cancel();
-    std::thread worker([&] {
+    std::thread worker;
+    const StopAndJoin guard{worker};  // also when the thread cannot be started
+    worker = std::thread([&] {
         try {
             value.emplace(work(progress));
         } catch (...) {
@@ -114,7 +116,6 @@ auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tpr
         done = true;
         cv.notify_one();
     });
-    const StopAndJoin guard{worker};
     std::optional<py::error_already_set> interrupt;
     for (bool finished = false; !finished;) {
         std::deque<std::pair<std::string, double>> batch;
