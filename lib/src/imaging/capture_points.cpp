@@ -121,7 +121,27 @@ constexpr double kOneRayAngle = 0.1;
 
 }  // namespace
 
-std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility) {
+ViewCells view_cells(const PatchSet& patches) {
+    ViewCells c;
+    const std::size_t n = patches.size() * std::size_t(kViewSamples);
+    c.point.resize(n);
+    c.hu.resize(n);
+    c.hv.resize(n);
+    // The cell's half-axes: central differences of the patch's map over the cell's width.
+    const double half = 0.5 / kViewSide;
+    for (std::size_t j = 0; j < patches.size(); ++j)
+        for (int s = 0; s < kViewSamples; ++s) {
+            const double u = (s % kViewSide + 0.5) / kViewSide, t = (s / kViewSide + 0.5) / kViewSide;
+            const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
+            c.point[at] = patch_point(patches, j, u, t);
+            c.hu[at] = 0.5 * (patch_point(patches, j, u + half, t) - patch_point(patches, j, u - half, t));
+            c.hv[at] = 0.5 * (patch_point(patches, j, u, t + half) - patch_point(patches, j, u, t - half));
+        }
+    return c;
+}
+
+std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility,
+                                    const ViewCells& cells) {
     // A probe whose intensity toward a direction is the cosine at the wall: arrive() then gives
     // cos cos / r^2 and the exact path, with its shadow ray, as for any point source.
     PointSource probe;
@@ -140,8 +160,8 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
         v.patch = std::uint32_t(j);
         bool seen = false;
         for (int s = 0; s < kViewSamples; ++s) {
-            const double u = (s % kViewSide + 0.5) / kViewSide, t = (s / kViewSide + 0.5) / kViewSide;
-            const Vec3 y = patch_point(patches, j, u, t);
+            const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
+            const Vec3& y = cells.point[at];
             double g = 0.0, path = 0.0;
             if (one_ray) {
                 const Vec3 d = probe.position - y;
@@ -154,13 +174,9 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
             if (!(g > 0.0)) continue;
             v.path[std::size_t(s)] = float(path);
             v.g[std::size_t(s)] = float(g);
-            // The cell's half-axes (central differences of the patch's map over the cell's width).
-            const double half = 0.5 / kViewSide;
-            const Vec3 hu = 0.5 * (patch_point(patches, j, u + half, t) - patch_point(patches, j, u - half, t));
-            const Vec3 hv = 0.5 * (patch_point(patches, j, u, t + half) - patch_point(patches, j, u, t - half));
-            const Vec3 dir = (y - probe.position).normalized();
-            v.du[std::size_t(s)] = float(dir.dot(hu));
-            v.dv[std::size_t(s)] = float(dir.dot(hv));
+            const Vec3 dir = (y - probe.position) / path;
+            v.du[std::size_t(s)] = float(dir.dot(cells.hu[at]));
+            v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
             seen = true;
         }
         if (seen && one_ray && visibility.occluded(patches.centroid[j] + visibility.epsilon() * n, probe.position))

@@ -39,6 +39,7 @@ struct CapturePlan {
     const PatchSet& patches;
     const Visibility& visibility;
     CapturePoints points;
+    ViewCells cells{};             // every patch's samples and cells, shared by all views
     bool confocal = true;
     bool solve = false;
     int max_bounces = -1;          // the capture's (sensor side)
@@ -216,7 +217,7 @@ std::vector<std::vector<PatchView>> view_all(const CapturePlan& p, const std::ve
                                              std::size_t to, int threads) {
     std::vector<std::vector<PatchView>> views(to - from);
     parallel_for(to - from, {threads, 1, true},
-                 [&](std::size_t k) { views[k] = view_patches(points[from + k], p.patches, p.visibility); });
+                 [&](std::size_t k) { views[k] = view_patches(points[from + k], p.patches, p.visibility, p.cells); });
     return views;
 }
 
@@ -282,6 +283,7 @@ private:
 
 CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
     CapturePlan p{scene, *scene.capture, patches, visibility, locate_capture_points(scene, patches, visibility)};
+    p.cells = view_cells(patches);
     p.confocal = p.capture.type == CaptureType::Confocal;
     p.max_bounces = p.capture.max_bounces;
     p.solve = capture_needs_links(scene);

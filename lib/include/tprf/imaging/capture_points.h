@@ -69,8 +69,20 @@ inline LaserSpot wall_spot(const WallPoint& w, const Rgb& power, double path) {
     return {true, w.patch, w.point, path, power};
 }
 
+/// The stratified samples of every patch and their cells' half-axes, the same for every wall point:
+/// patch j's sample k at index j * kViewSamples + k.
+struct ViewCells {
+    std::vector<Vec3> point;  ///< the sample y, metres
+    std::vector<Vec3> hu;     ///< the cell's half-axis along the patch's u, metres
+    std::vector<Vec3> hv;     ///< ... and along its v
+};
+
+/// The samples and cells of every patch (for view_patches).
+ViewCells view_cells(const PatchSet& patches);
+
 /// Every patch that wall point w sees (some sample with g > 0), in increasing patch order.
-std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility);
+std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility,
+                                    const ViewCells& cells);
 
 /// The sensor cell of `grid` (index a * nv + b) that holds x, or -1 when x is off the grid's plane (by
 /// more than `tolerance` metres) or outside it.
