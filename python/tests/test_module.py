@@ -230,9 +230,15 @@ def test_a_capture_equals_the_command_lines_capture(tmp_path):
     scene = json.loads((SOURCE / "examples" / "nlos" / "letter.json").read_text())
     scene["capture"]["grid"]["nu"] = scene["capture"]["grid"]["nv"] = 6
     scene["time"]["bins"] = 300
+    scene["sensor"] = GATES
     path = write_scene(tmp_path, scene)
     cli("render", path, "-o", tmp_path / "out", "--quiet")
     result = tprf.render(tprf.load_scene(path))
     assert result.transient is None
     assert result.capture.shape == (300, 6, 6)
     assert np.array_equal(result.capture, np.load(tmp_path / "out" / "capture.npy"))
+    # The sensor block on the capture's points, in the render and applied afterwards.
+    on_disk = np.load(tmp_path / "out" / "measurements.npy")
+    assert on_disk.shape == (6, 6, 20, 3)
+    assert np.array_equal(result.measurements, on_disk)
+    assert np.array_equal(tprf.apply_sensor(result, GATES)["measurements"], on_disk)
