@@ -140,6 +140,33 @@ TEST(Capture, ConfocalOnsetsAtAPatchEdgeAreNotLate) {
     EXPECT_GE(checked, 10);  // 3 of the 14 paths lie on a bin edge (1.45 m, 1.25 m, 1.68003 m)
 }
 
+// Exhaustive onsets: laser point l and sensor point s apart, the first light by way of the hidden plane
+// arrives along the shortest path l -> plane -> s, the straight line from l to the mirror image of s
+// across the plane (found here by reflecting s, independently of the capture's formula), to the bin.
+TEST(Capture, ExhaustiveOnsetsFollowTheMirrorImageOfTheSensorPoint) {
+    const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]}, "grid": {"origin": [-0.45, -0.45, 0], "u": [0.9, 0, 0],
+        "v": [0, 0.9, 0], "nu": 3, "nv": 3}, "sensor_grid": {"origin": [-0.3, -0.3, 0], "u": [0.6, 0, 0],
+        "v": [0, 0.6, 0], "nu": 4, "nv": 4}, "max_bounces": 3})";
+    const Built b(scene_text(std::string(kWall) + "," + kTiltedPlane, capture, R"({"bins": 500, "bin_width": 0.01})"));
+    const CaptureResult r = b.capture();
+    ASSERT_EQ(r.pairs, 9u * 16u);
+    const Vec3 n = Vec3(0.8, 0.0, -4.0).normalized(), on_plane(-1, -1, 0.4);
+    int checked = 0;
+    for (std::size_t l = 0; l < 9; ++l)
+        for (std::size_t s = 0; s < 16; ++s) {
+            const Vec3 x = r.points.laser[l].point, y = r.points.sensor[s].point;
+            const Vec3 mirrored = y - 2.0 * n.dot(y - on_plane) * n;
+            const auto expected = bin_of((x - mirrored).norm(), 0.01);
+            if (!expected) continue;
+            ++checked;
+            const float* H = r.H.data() + (l * 16 + s) * std::size_t(r.bins);
+            // Bin 0 may hold the spot itself (when it lies in s's cell): the hidden plane's light comes later.
+            EXPECT_EQ(first_lit(H, 1, std::size_t(r.bins)), *expected) << "laser " << l << " sensor " << s;
+        }
+    EXPECT_GE(checked, 130);  // 138 of 144: the rest lie within 1e-4 m of a bin edge
+}
+
 TEST(Capture, ConfocalOnsetsAreTwiceTheDistanceToTheHiddenPlane) { check_confocal_onsets(false); }
 
 TEST(Capture, ConfocalOnsetsAddTheDeviceLegsWhenAccounted) { check_confocal_onsets(true); }
