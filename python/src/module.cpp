@@ -24,6 +24,7 @@
 #include <csignal>
 #include <deque>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -366,7 +367,18 @@ PYBIND11_MODULE(_tprf, m) {
                                "every array by its output file's name (without .npy)")
         .def_property_readonly("time", [](const PyResult& r) { return time_dict(r.result->time); })
         .def_property_readonly("record", [](const PyResult& r) { return r.result->record; },
-                               "render.json's text");
+                               "render.json's text")
+        .def("__repr__", [](const PyResult& r) {
+            std::string text = "<tprf.Result:";
+            for (const auto& [name, a] : r.result->arrays) {
+                text += " " + name + " (";
+                for (std::size_t k = 0; k < a.shape.size(); ++k) text += (k ? ", " : "") + std::to_string(a.shape[k]);
+                text += ")";
+            }
+            char seconds[32];
+            std::snprintf(seconds, sizeof seconds, "%.2f", r.result->report.seconds.total);
+            return text + "; " + std::to_string(r.result->report.patches) + " patches, " + seconds + " s>";
+        });
 
     m.def("load_scene", &load_scene, py::arg("scene"), py::arg("max_edge") = py::none(), py::arg("base") = py::none(),
           py::arg("defines") = tprf::XmlDefines{},

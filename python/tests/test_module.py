@@ -77,6 +77,7 @@ def test_arrays_have_the_spec_shapes_and_share_the_results_memory():
     assert result.steady.shape == (H, W, 3) and result.steady.dtype == np.float32
     assert result.patch_transient.shape[1:] == (T, 3) and result.patch_steady.shape[1:] == (3,)
     assert result.capture is None and result.measurements is None
+    assert "transient (16, 24, 300, 3)" in repr(result) and "800 patches" in repr(result)
     for a in (result.transient, result.steady, result.patch_transient):
         assert not a.flags.owndata and a.flags.c_contiguous
         assert not a.flags.writeable  # what the render computed, for every later access
