@@ -252,8 +252,9 @@ py::dict info(const PyScene& s, int threads, bool links, const py::object& progr
     d["time_text"] = tprf::describe_time(scene.time);
     const tprf::ResourceEstimate e = tprf::estimate_resources(scene, options);
     d["estimate"] = estimate_dict(e);
-    d["memory_limit_bytes"] = tprf::memory_limit_bytes(options);
-    if (!links || e.link_stage_bytes > tprf::memory_limit_bytes(options)) return d;
+    const std::size_t limit = tprf::memory_limit_bytes(options);
+    d["memory_limit_bytes"] = limit;
+    if (!links || e.link_stage_bytes > limit) return d;
     const tprf::SceneSummary summary = run_cancellable(
         [&](const tprf::ProgressFn& p) {
             tprf::PipelineOptions o = options;

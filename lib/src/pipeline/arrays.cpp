@@ -26,17 +26,7 @@ float* Arrays::open(const std::string& name, const std::vector<std::size_t>& sha
     return a.data.data();
 }
 
-void Arrays::put(const std::string& name, const std::vector<std::size_t>& shape, const float* data) {
-    if (m_staging) {
-        write_npy(m_staging->path(name + ".npy"), shape, data);
-        return;
-    }
-    FloatArray& a = m_result->arrays[name];
-    a.shape = shape;
-    a.data.assign(data, data + elements(shape));
-}
-
-const FloatArray& Arrays::keep(const std::string& name, FloatArray&& array) {
+const FloatArray& Arrays::put(const std::string& name, FloatArray&& array) {
     if (m_staging) {
         write_npy(m_staging->path(name + ".npy"), array.shape, array.data.data());
         m_kept.push_back(std::make_unique<FloatArray>(std::move(array)));

@@ -25,11 +25,9 @@ public:
     /// A zeroed array of `shape` (float32, C order) for the caller to fill; it stays valid until
     /// commit() (files) or as long as the result (memory).
     float* open(const std::string& name, const std::vector<std::size_t>& shape);
-    /// A finished array: written (files) or copied into the result (memory).
-    void put(const std::string& name, const std::vector<std::size_t>& shape, const float* data);
     /// A finished array handed over: written and kept here (files) or moved into the result (memory).
     /// The returned array lives as long as this Arrays (files) or the result (memory).
-    const FloatArray& keep(const std::string& name, FloatArray&& array);
+    const FloatArray& put(const std::string& name, FloatArray&& array);
     /// Files: every open() array flushed and moved to its staging name. Memory: nothing to do.
     void commit();
 

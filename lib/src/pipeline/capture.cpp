@@ -67,14 +67,14 @@ void deposit(std::vector<float>& H, const CapturePlan& p, std::size_t pair, doub
 
 // `value` spread evenly over the paths [lo, hi] (metres), each bin taking its share of the interval.
 void deposit_box(std::vector<float>& H, const CapturePlan& p, std::size_t pair, double lo, double hi, double value) {
-    const std::int64_t b0 = std::max<std::int64_t>(p.bin(lo), 0), b1 = std::min<std::int64_t>(p.bin(hi), p.T - 1);
-    if (p.bin(lo) == p.bin(hi) || !(hi > lo)) {
+    const std::int64_t first = p.bin(lo), last = p.bin(hi);
+    if (first == last || !(hi > lo)) {
         deposit(H, p, pair, lo, value);
         return;
     }
     const double per_metre = value / (hi - lo), width = 1.0 / p.inv_bin;
     float* row = H.data() + (pair - p.pair_base) * std::size_t(p.T);
-    for (std::int64_t b = b0; b <= b1; ++b) {
+    for (std::int64_t b = std::max<std::int64_t>(first, 0); b <= std::min<std::int64_t>(last, p.T - 1); ++b) {
         const double start = p.start + double(b) * width;
         const double overlap = std::min(hi, start + width) - std::max(lo, start);
         if (overlap > 0.0) row[b] += float(per_metre * overlap);

@@ -84,7 +84,7 @@ const FloatArray& write_capture(const Scene& scene, const CaptureResult& r, Arra
         file.scene_info = scene_info(scene);
         write_capture_hdf5(staging->path("capture.hdf5"), file);
     }
-    return arrays.keep("capture", std::move(H));
+    return arrays.put("capture", std::move(H));
 }
 
 // A sensor block on a capture without a camera: the capture as a cube of (rows, nv_s) "pixels"

@@ -420,9 +420,9 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
     }
     if (scene.camera) return;  // the camera's render is estimated; the capture's marches come on top
     const std::size_t limit = memory_limit_bytes(options);
-    const double fixed = double(e.solver_bytes) - per_illumination;
-    const double held = double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes) +
-                        fixed + per_illumination;
+    const double fixed = double(e.solver_bytes) - per_illumination;  // what does not grow with the batch
+    const double held =
+        double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes + e.solver_bytes);
     const double room = limit > 0 ? double(limit) - held : INFINITY;
     const int batch = int(std::clamp(1.0 + std::floor(room / std::max(per_illumination, 1.0)), 1.0, double(kMaxBatch)));
     const std::size_t lasers = scene.capture->laser_grid.size();

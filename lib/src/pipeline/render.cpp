@@ -175,18 +175,18 @@ void write_steady(const Scene& scene, const RenderOptions& options, const Transp
     const Camera& camera = *scene.camera;
     const std::size_t H = std::size_t(camera.height), W = std::size_t(camera.width), N = t.patches.size();
     const std::vector<Rgb> steady = solve_steady(t.patches, t.links, t.illumination, scene.solver.max_bounces);
-    const std::vector<float> image = steady_image(t.gather, t.illumination, steady);
-    arrays.put("steady", {H, W, 3}, image.data());
+    const std::vector<float>& image =
+        arrays.put("steady", {{H, W, 3}, steady_image(t.gather, t.illumination, steady)}).data;
     if (Staging* staging = arrays.staging()) {
         write_exr(staging->path("steady.exr"), camera.width, camera.height, image.data());
         const std::vector<std::uint8_t> preview = tonemap(camera.width, camera.height, image.data());
         write_png(staging->path("preview.png"), camera.width, camera.height, preview.data());
     }
     if (!options.patch_profiles) return;
-    std::vector<float> flat(N * 3);
+    FloatArray flat{{N, 3}, std::vector<float>(N * 3)};
     for (std::size_t i = 0; i < N; ++i)
-        for (int ch = 0; ch < 3; ++ch) flat[i * 3 + std::size_t(ch)] = float(steady[i][ch]);
-    arrays.put("patch_steady", {N, 3}, flat.data());
+        for (int ch = 0; ch < 3; ++ch) flat.data[i * 3 + std::size_t(ch)] = float(steady[i][ch]);
+    arrays.put("patch_steady", std::move(flat));
     if (Staging* staging = arrays.staging()) write_patches_csv(staging->path("patches.csv"), t.patches);
 }
 
@@ -234,19 +234,25 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     return r;
 }
 
-// Everything that can be wrong with the request is found before any work: the scene, the camera,
-// ffmpeg for a video, the plot pixel, the estimated peak memory and (`writes`: on the rank that
-// writes) the output directory.
-Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options, bool writes) {
-    Scene scene = load_scene(scene_file, options.defines);
+// Everything that can be wrong with a render of `scene` is found before any work: --max-edge applied,
+// the camera or capture, ffmpeg for a video, the plot pixel and the estimated peak memory. The same
+// checks for a render into a directory and one in memory.
+void check_render(Scene& scene, const RenderOptions& options) {
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     if (!scene.camera && !scene.capture)
-        fail_input(scene_file, "camera", "missing: tprf render needs a camera (or a capture block)");
+        fail_input(scene.file, "camera", "missing: tprf render needs a camera (or a capture block)");
     if (!scene.camera) check_capture_flags(options);
     if (options.video && !have_ffmpeg())
         throw Error("--video needs ffmpeg on the PATH (Debian: apt-get install ffmpeg); nothing was rendered");
     if (scene.camera) plot_pixel(options.plot_pixel, scene.camera->width, scene.camera->height);
     check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
+}
+
+// The scene, loaded and checked (check_render), and (`writes`: on the rank that writes) the output
+// directory.
+Scene load_render_scene(const std::filesystem::path& scene_file, const RenderOptions& options, bool writes) {
+    Scene scene = load_scene(scene_file, options.defines);
+    check_render(scene, options);
     if (writes) check_output_dir(options.output);
     return scene;
 }
@@ -391,10 +397,7 @@ RenderReport render_file(const std::filesystem::path& scene_file, const RenderOp
 RenderResult render_scene(const Scene& given, const RenderOptions& options) {
     const auto start = Clock::now();
     Scene scene = given;
-    if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
-    if (!scene.camera && !scene.capture)
-        fail_input(scene.file, "camera", "missing: a render needs a camera (or a capture block)");
-    check_memory(scene, options, options.patch_profiles);  // before anything heavy is allocated
+    check_render(scene, options);
     RenderResult result;
     result.time = scene.time;
     Arrays arrays(result);
@@ -406,18 +409,22 @@ RenderResult render_scene(const Scene& given, const RenderOptions& options) {
 
 std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const RenderResult& result, int threads) {
     validate_sensor(sensor, result.time);
+    // The camera's cube, or the capture's points as one (capture_cube).
+    CaptureCube c;
+    const float* cube = nullptr;
+    if (const auto camera = result.arrays.find("transient"); camera != result.arrays.end()) {
+        cube = camera->second.data.data();
+        c.height = int(camera->second.shape[0]);
+        c.width = int(camera->second.shape[1]);
+    } else if (const auto capture = result.arrays.find("capture"); capture != result.arrays.end()) {
+        c = capture_cube(capture->second);
+        cube = c.cube.data();
+    } else {
+        throw Error("the result has neither a transient cube nor a capture to measure");
+    }
     RenderResult out;
     Arrays arrays(out);
-    const auto cube = result.arrays.find("transient");
-    if (cube != result.arrays.end()) {
-        const std::vector<std::size_t>& shape = cube->second.shape;
-        measure_cube(sensor, result.time, cube->second.data.data(), int(shape[0]), int(shape[1]), threads, arrays);
-        return std::move(out.arrays);
-    }
-    const auto capture = result.arrays.find("capture");
-    if (capture == result.arrays.end()) throw Error("the result has neither a transient cube nor a capture to measure");
-    const CaptureCube c = capture_cube(capture->second);
-    measure_cube(sensor, result.time, c.cube.data(), c.height, c.width, threads, arrays);
+    measure_cube(sensor, result.time, cube, c.height, c.width, threads, arrays);
     return std::move(out.arrays);
 }
 
