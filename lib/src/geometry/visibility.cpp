@@ -2,6 +2,7 @@
 
 #include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
+#include "tprf/scene/scene.h"
 
 #include <Eigen/Geometry>
 #include <embree3/rtcore.h>
@@ -74,17 +75,66 @@ std::vector<std::int64_t> find_twins(const PatchSet& patches) {
 struct Visibility::Impl {
     EmbreeErrors errors;
     RTCDevice device = nullptr;
-    RTCScene scene = nullptr;
+    RTCScene opaque = nullptr;                 // every patch but glass
+    RTCScene glass = nullptr;                  // glass patches, one of each pair of twins
+    std::vector<std::uint32_t> opaque_patch;   // primitive -> patch
+    std::vector<std::uint32_t> glass_patch;
+    std::vector<float> glass_transmittance;    // per glass primitive
     const PatchSet* patches = nullptr;
     std::vector<std::int64_t> twin;
 
     ~Impl() {
-        if (scene) rtcReleaseScene(scene);
+        if (opaque) rtcReleaseScene(opaque);
+        if (glass) rtcReleaseScene(glass);
         if (device) rtcReleaseDevice(device);
     }
+
+    RTCScene make_scene(const std::vector<std::uint32_t>& ids);
 };
 
-Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>()) {
+// A scene of the patches `ids` (primitive k is patch ids[k]).
+RTCScene Visibility::Impl::make_scene(const std::vector<std::uint32_t>& ids) {
+    RTCScene scene = rtcNewScene(device);
+    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+    // Watertight: a ray through the shared edge of two triangles (a quad's diagonal, a patch border)
+    // must hit one of them, or pixels and visibility rays leak through the surface.
+    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+    if (!ids.empty()) {
+        const PatchSet& p = *patches;
+        // Quads throughout: a triangle is a quad whose last corner repeats the third (Embree's convention).
+        RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
+        auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                               RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                               p.vertices.size()));
+        auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+                                                                  RTC_FORMAT_UINT4, 4 * sizeof(unsigned), ids.size()));
+        if (!vb || !ib) {  // out of memory: Embree has said why
+            rtcReleaseGeometry(geometry);
+            rtcReleaseScene(scene);
+            errors.raise("Embree: cannot allocate the geometry");
+        }
+        for (std::size_t k = 0; k < p.vertices.size(); ++k)
+            for (int c = 0; c < 3; ++c) vb[3 * k + c] = static_cast<float>(p.vertices[k][c]);
+        for (std::size_t k = 0; k < ids.size(); ++k) {
+            const std::size_t i = ids[k];
+            const std::size_t corners = p.corners(i);
+            TPRF_CHECK(corners == 3 || corners == 4);
+            const unsigned f = p.first[i];
+            ib[4 * k + 0] = f;
+            ib[4 * k + 1] = f + 1;
+            ib[4 * k + 2] = f + 2;
+            ib[4 * k + 3] = corners == 4 ? f + 3 : f + 2;
+        }
+        rtcCommitGeometry(geometry);
+        rtcAttachGeometry(scene, geometry);
+        rtcReleaseGeometry(geometry);
+    }
+    rtcCommitScene(scene);
+    return scene;
+}
+
+Visibility::Visibility(const PatchSet& patches, std::vector<SpecularPlane> planes, int max_specular)
+    : m_impl(std::make_unique<Impl>()), m_planes(std::move(planes)), m_max_specular(max_specular) {
     Impl& im = *m_impl;
     im.patches = &patches;
     im.device = rtcNewDevice(nullptr);
@@ -94,11 +144,6 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
         throw InternalError("Embree: cannot create a device");
     }
     rtcSetDeviceErrorFunction(im.device, embree_error, &im.errors);
-    im.scene = rtcNewScene(im.device);
-    rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_HIGH);
-    // Watertight: a ray through the shared edge of two triangles (a quad's diagonal, a patch border)
-    // must hit one of them, or pixels and visibility rays leak through the surface.
-    rtcSetSceneFlags(im.scene, RTC_SCENE_FLAG_ROBUST);
 
     Eigen::AlignedBox<double, 3> box;
     for (const Vec3& v : patches.vertices) box.extend(v);
@@ -107,89 +152,188 @@ Visibility::Visibility(const PatchSet& patches) : m_impl(std::make_unique<Impl>(
     // any patch size that matters.
     m_epsilon = 1e-5 * std::max(diagonal, 1e-3);
 
-    const std::size_t n = patches.size();
-    if (n > 0) {
-        // Quads throughout: a triangle is a quad whose last corner repeats the third (Embree's convention).
-        RTCGeometry geometry = rtcNewGeometry(im.device, RTC_GEOMETRY_TYPE_QUAD);
-        auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                               RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                               patches.vertices.size()));
-        auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
-                                                                  RTC_FORMAT_UINT4, 4 * sizeof(unsigned), n));
-        if (!vb || !ib) {  // out of memory: Embree has said why
-            rtcReleaseGeometry(geometry);
-            im.errors.raise("Embree: cannot allocate the geometry");
-        }
-        for (std::size_t k = 0; k < patches.vertices.size(); ++k)
-            for (int c = 0; c < 3; ++c) vb[3 * k + c] = static_cast<float>(patches.vertices[k][c]);
-        for (std::size_t i = 0; i < n; ++i) {
-            const std::size_t corners = patches.corners(i);
-            TPRF_CHECK(corners == 3 || corners == 4);
-            const unsigned f = patches.first[i];
-            ib[4 * i + 0] = f;
-            ib[4 * i + 1] = f + 1;
-            ib[4 * i + 2] = f + 2;
-            ib[4 * i + 3] = corners == 4 ? f + 3 : f + 2;
-        }
-        rtcCommitGeometry(geometry);
-        rtcAttachGeometry(im.scene, geometry);
-        rtcReleaseGeometry(geometry);
-    }
-    rtcCommitScene(im.scene);
-    if (!im.errors.first.empty()) im.errors.raise("");
     im.twin = find_twins(patches);
+    for (const SpecularPlane& s : m_planes) {
+        if (s.object >= m_object_plane.size()) m_object_plane.resize(s.object + 1, -1);
+        m_object_plane[s.object] = int(&s - m_planes.data());
+    }
+    for (std::uint32_t i = 0; i < patches.size(); ++i) {
+        const int plane = plane_of(i);
+        if (plane < 0 || !(m_planes[std::size_t(plane)].transmittance > 0.0)) {
+            im.opaque_patch.push_back(i);
+        } else if (im.twin[i] < 0 || std::int64_t(i) < im.twin[i]) {
+            im.glass_patch.push_back(i);
+            im.glass_transmittance.push_back(float(m_planes[std::size_t(plane)].transmittance));
+        }
+    }
+    m_glass = !im.glass_patch.empty();
+    im.opaque = im.make_scene(im.opaque_patch);
+    if (m_glass) im.glass = im.make_scene(im.glass_patch);
+    if (!im.errors.first.empty()) im.errors.raise("");
+    m_chains = mirror_chains(m_planes, max_specular);
+}
+
+int Visibility::plane_of(std::uint32_t patch) const {
+    const std::uint32_t object = m_impl->patches->object[patch];
+    return object < m_object_plane.size() ? m_object_plane[object] : -1;
 }
 
 Visibility::~Visibility() = default;
+
+namespace {
+
+RTCRay make_ray(const Vec3& origin, const Vec3& dir, double tnear, double tfar) {
+    RTCRay ray{};
+    ray.org_x = static_cast<float>(origin.x());
+    ray.org_y = static_cast<float>(origin.y());
+    ray.org_z = static_cast<float>(origin.z());
+    ray.dir_x = static_cast<float>(dir.x());
+    ray.dir_y = static_cast<float>(dir.y());
+    ray.dir_z = static_cast<float>(dir.z());
+    ray.tnear = static_cast<float>(tnear);
+    ray.tfar = static_cast<float>(std::min(tfar, 1e30));
+    ray.mask = 0xFFFFFFFFu;
+    return ray;
+}
+
+// The closest primitive of `scene` along the ray, or -1; its distance in `t`.
+std::int64_t closest(RTCScene scene, const Vec3& origin, const Vec3& dir, double tnear, double tfar, double& t) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCRayHit rh{};
+    rh.ray = make_ray(origin, dir, tnear, tfar);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, &context, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return -1;
+    t = rh.ray.tfar;
+    return rh.hit.primID;
+}
+
+}  // namespace
 
 bool Visibility::occluded(const Vec3& a, const Vec3& b) const {
     const Vec3 d = b - a;
     const double length = d.norm();
     if (length <= 2 * m_epsilon) return false;
-    const Vec3 dir = d / length;
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    RTCRay ray{};
-    ray.org_x = static_cast<float>(a.x());
-    ray.org_y = static_cast<float>(a.y());
-    ray.org_z = static_cast<float>(a.z());
-    ray.dir_x = static_cast<float>(dir.x());
-    ray.dir_y = static_cast<float>(dir.y());
-    ray.dir_z = static_cast<float>(dir.z());
-    ray.tnear = static_cast<float>(m_epsilon);
-    ray.tfar = static_cast<float>(length - m_epsilon);
-    ray.mask = 0xFFFFFFFFu;
-    rtcOccluded1(m_impl->scene, &context, &ray);
+    RTCRay ray = make_ray(a, d / length, m_epsilon, length - m_epsilon);
+    rtcOccluded1(m_impl->opaque, &context, &ray);
     return ray.tfar == -std::numeric_limits<float>::infinity();
 }
 
+double Visibility::transmittance(const Vec3& a, const Vec3& b) const {
+    if (occluded(a, b)) return 0.0;
+    if (!m_glass) return 1.0;
+    const Vec3 d = b - a;
+    const double length = d.norm();
+    if (length <= 2 * m_epsilon) return 1.0;
+    const Vec3 dir = d / length;
+    double passed = 1.0, from = m_epsilon, t = 0.0;
+    // Each glass sheet crossed in turn (a guard against a ray stuck in a stack of coincident sheets).
+    for (int k = 0; k < 256; ++k) {
+        const std::int64_t prim = closest(m_impl->glass, a, dir, from, length - m_epsilon, t);
+        if (prim < 0) break;
+        passed *= m_impl->glass_transmittance[std::size_t(prim)];
+        from = t + m_epsilon;
+    }
+    return passed;
+}
+
 RayHit Visibility::intersect(const Vec3& origin, const Vec3& direction, double max_distance) const {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRayHit rh{};
-    rh.ray.org_x = static_cast<float>(origin.x());
-    rh.ray.org_y = static_cast<float>(origin.y());
-    rh.ray.org_z = static_cast<float>(origin.z());
-    rh.ray.dir_x = static_cast<float>(direction.x());
-    rh.ray.dir_y = static_cast<float>(direction.y());
-    rh.ray.dir_z = static_cast<float>(direction.z());
-    rh.ray.tnear = static_cast<float>(m_epsilon);
-    rh.ray.tfar = static_cast<float>(std::min(max_distance, 1e30));
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(m_impl->scene, &context, &rh);
+    const Impl& im = *m_impl;
+    double t = 0.0, t_glass = 0.0;
+    std::int64_t prim = closest(im.opaque, origin, direction, m_epsilon, max_distance, t);
+    std::uint32_t patch = prim >= 0 ? im.opaque_patch[std::size_t(prim)] : 0;
+    if (m_glass) {
+        const std::int64_t g = closest(im.glass, origin, direction, m_epsilon, max_distance, t_glass);
+        if (g >= 0 && (prim < 0 || t_glass < t)) {
+            prim = g;
+            t = t_glass;
+            patch = im.glass_patch[std::size_t(g)];
+        }
+    }
     RayHit out;
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return out;
+    if (prim < 0) return out;
     out.hit = true;
-    out.distance = rh.ray.tfar;
+    out.distance = t;
     out.point = origin + out.distance * direction;
-    std::uint32_t patch = rh.hit.primID;
-    const PatchSet& p = *m_impl->patches;
-    if (p.normal[patch].dot(direction) > 0 && m_impl->twin[patch] >= 0)
-        patch = static_cast<std::uint32_t>(m_impl->twin[patch]);
+    const PatchSet& p = *im.patches;
+    if (p.normal[patch].dot(direction) > 0 && im.twin[patch] >= 0) patch = static_cast<std::uint32_t>(im.twin[patch]);
     out.patch = patch;
     out.front = p.normal[patch].dot(direction) < 0;
     return out;
+}
+
+double Visibility::unfolded(const MirrorChain& chain, const Vec3& x, const Vec3& image, bool* through) const {
+    if (through) *through = false;
+    const Vec3 d = image - x;
+    Unfolding u;  // R1 ... R(j-1): the unfolded frame of plane j
+    double t_prev = 0.0;
+    Vec3 real_prev = x;
+    for (int j = 0; j < chain.length; ++j) {
+        const SpecularPlane& s = m_planes[chain.plane[std::size_t(j)]];
+        const Vec3 n = u.linear * s.normal;
+        const double denom = n.dot(d);
+        if (!(std::abs(denom) > 0.0)) return 0.0;
+        const double t = n.dot(u(s.point) - x) / denom;
+        if (!(t > t_prev && t < 1.0)) return 0.0;
+        // The real direction of travel meets the reflecting side: towards -side * normal.
+        if (!(chain.side[std::size_t(j)] * s.normal.dot(u.linear.transpose() * d) < 0.0)) return 0.0;
+        const Vec3 p = u.inverse(x + t * d);
+        if (!s.contains(p)) return 0.0;
+        real_prev = p;
+        t_prev = t;
+        u = u.after(Unfolding::reflection(s.point, s.normal));
+    }
+    if (through) *through = true;
+    // The legs, now that the path exists: x -> p1 -> ... -> pk -> y, each straight in the real scene.
+    double weight = chain.reflectance;
+    u = Unfolding{};
+    real_prev = x;
+    t_prev = 0.0;
+    for (int j = 0; j < chain.length && weight > 0.0; ++j) {
+        const SpecularPlane& s = m_planes[chain.plane[std::size_t(j)]];
+        const Vec3 n = u.linear * s.normal;
+        const double t = n.dot(u(s.point) - x) / n.dot(d);
+        const Vec3 p = u.inverse(x + t * d);
+        weight *= transmittance(real_prev, p);
+        real_prev = p;
+        u = u.after(Unfolding::reflection(s.point, s.normal));
+    }
+    if (weight > 0.0) weight *= transmittance(real_prev, chain.unfold.inverse(image));
+    return weight;
+}
+
+void Visibility::trace(const Vec3& origin, const Vec3& direction, std::vector<TracedHit>& out) const {
+    struct Ray {
+        Vec3 origin, direction;
+        double path, weight;
+        int reflections, crossings;
+    };
+    std::vector<Ray> stack{{origin, direction, 0.0, 1.0, 0, 0}};
+    while (!stack.empty()) {
+        const Ray r = stack.back();
+        stack.pop_back();
+        const RayHit h = intersect(r.origin, r.direction, std::numeric_limits<double>::infinity());
+        if (!h.hit) continue;
+        out.push_back({h, r.path + h.distance, r.weight});
+        const int plane = plane_of(h.patch);
+        if (plane < 0) continue;
+        const SpecularPlane& s = m_planes[std::size_t(plane)];
+        const int side = s.normal.dot(r.direction) < 0.0 ? 1 : -1;
+        const double path = r.path + h.distance;
+        if (s.transmittance > 0.0 && r.crossings < 64)
+            stack.push_back({h.point, r.direction, path, r.weight * s.transmittance, r.reflections, r.crossings + 1});
+        if (s.reflects_from(side) && r.reflections < m_max_specular) {
+            const Vec3 reflected = r.direction - 2.0 * s.normal.dot(r.direction) * s.normal;
+            stack.push_back({h.point, reflected, path, r.weight * s.reflectance, r.reflections + 1, r.crossings});
+        }
+    }
+}
+
+std::unique_ptr<Visibility> scene_visibility(const Scene& scene, const PatchSet& patches) {
+    return std::make_unique<Visibility>(patches, specular_planes(scene, patches), scene.solver.max_specular);
 }
 
 }  // namespace tprf

@@ -39,16 +39,30 @@ Vec3 camera_ray(const Camera& camera, double column, double row) {
 SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int threads) {
     const int spp = std::max(1, camera.spp);
     std::vector<std::vector<SensingPoint>> by_row(std::size_t(camera.height));
+    const bool specular = !vis.planes().empty();
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
+        std::vector<TracedHit> hits;
         for (int c = 0; c < camera.width; ++c)
             for (int s = 0; s < spp; ++s) {
                 double sx, sy;
                 subpixel(s, spp, sx, sy);
                 const Vec3 dir = camera_ray(camera, c + sx, double(r) + sy);
-                const RayHit h = vis.intersect(camera.position, dir, std::numeric_limits<double>::infinity());
-                if (!h.hit || !h.front) continue;
-                by_row[r].push_back({std::uint32_t(int(r) * camera.width + c), h.patch, h.point,
-                                     camera.unwarp ? 0.0f : float(h.distance)});
+                const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
+                if (!specular) {
+                    const RayHit h = vis.intersect(camera.position, dir, std::numeric_limits<double>::infinity());
+                    if (!h.hit || !h.front) continue;
+                    by_row[r].push_back({pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
+                    continue;
+                }
+                // Into mirrors and through glass: every diffuse front side the ray reaches, with its
+                // whole path and the specular weight of the way.
+                hits.clear();
+                vis.trace(camera.position, dir, hits);
+                for (const TracedHit& t : hits) {
+                    if (!t.hit.front) continue;
+                    by_row[r].push_back({pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path),
+                                         float(t.weight)});
+                }
             }
     });
     SensingPoints points;

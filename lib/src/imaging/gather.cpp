@@ -168,9 +168,10 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
         for (std::size_t h = run_start[k]; h < run_start[k + 1]; ++h) {
             const SensingPoint& sp = pts[h];
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
+            const double share = weight * double(sp.throughput);
             for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
-                run_taps[k].push_back({q, float(w * weight / M_PI), sp.leg, earliest});
-            direct_arrivals(sp, weight, patches, sources, vis, options, direct);
+                run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest});
+            direct_arrivals(sp, share, patches, sources, vis, options, direct);
         }
         std::sort(run_taps[k].begin(), run_taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
             return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;

@@ -54,7 +54,8 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     s.seconds_patches = seconds_since(t0);
 
     t0 = std::chrono::steady_clock::now();
-    const Visibility visibility(patches);
+    const std::unique_ptr<Visibility> owned = scene_visibility(scene, patches);
+    const Visibility& visibility = *owned;
     LinkOptions link_options;
     link_options.threads = options.threads;
     link_options.progress = options.progress;

@@ -78,7 +78,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
     report.seconds.patches = seconds_since(start);
 
     start = Clock::now();
-    t.visibility = std::make_unique<Visibility>(t.patches);
+    t.visibility = scene_visibility(scene, t.patches);
     if (links) {
         LinkOptions link_options;
         link_options.threads = options.threads;

@@ -149,16 +149,44 @@ fs::path parse_mesh_file(const Node& n) {
     return p;
 }
 
+// The `material` block. Its `albedo` (the diffuse part) may be given there or on the object, not both;
+// a specular object without one has no diffuse part.
+void parse_material(const Node& n, bool object_albedo, Object& o) {
+    const Node type = n.child("type");
+    const std::string name = type.string();
+    Material& m = o.material;
+    if (name == "diffuse") {
+        n.check_keys({"type", "albedo"});
+    } else if (name == "mirror") {
+        n.check_keys({"type", "reflectance", "albedo"});
+        m.type = MaterialType::Mirror;
+        m.reflectance = n.child("reflectance").rgb();
+    } else if (name == "glass") {
+        n.check_keys({"type", "reflectance", "transmittance", "albedo"});
+        m.type = MaterialType::Glass;
+        m.reflectance = n.child("reflectance").rgb();
+        m.transmittance = n.child("transmittance").rgb();
+    } else {
+        type.fail("unknown material type " + in_quotes(name) + R"( (expected "diffuse", "mirror" or "glass"))");
+    }
+    if (const auto albedo = n.find("albedo")) {
+        if (object_albedo) albedo->fail("the object gives an albedo too; give it in one place");
+        o.albedo = albedo->rgb();
+    } else if (m.specular() && !object_albedo) {
+        o.albedo = Rgb::Zero();
+    }
+}
+
 Object parse_object(const Node& n) {
     const Node type = n.child("type");
     const std::string name = type.string();
     Object o;
     o.json_path = n.path;
     if (name == "rectangle") {
-        n.check_keys({"type", "origin", "u", "v", "albedo", "emission", "two_sided"});
+        n.check_keys({"type", "origin", "u", "v", "albedo", "emission", "two_sided", "material"});
         o.shape = parse_rectangle(n);
     } else if (name == "mesh") {
-        n.check_keys({"type", "file", "transform", "albedo", "emission", "two_sided"});
+        n.check_keys({"type", "file", "transform", "albedo", "emission", "two_sided", "material"});
         MeshShape m;
         m.file = parse_mesh_file(n.child("file"));
         if (const auto transform = n.find("transform")) m.transform = parse_transform(*transform);
@@ -166,14 +194,16 @@ Object parse_object(const Node& n) {
     } else {
         type.fail("unknown object type " + in_quotes(name) + " (expected \"rectangle\" or \"mesh\")");
     }
-    if (const auto albedo = n.find("albedo")) o.albedo = albedo->rgb();
+    const auto albedo = n.find("albedo");
+    if (albedo) o.albedo = albedo->rgb();
+    if (const auto material = n.find("material")) parse_material(*material, albedo.has_value(), o);
     if (const auto emission = n.find("emission")) o.emission = emission->rgb();
     if (const auto two_sided = n.find("two_sided")) o.two_sided = two_sided->boolean();
     return o;
 }
 
 SolverSettings parse_solver(const Node& n) {
-    n.check_keys({"max_bounces", "delay", "bounces"});
+    n.check_keys({"max_bounces", "delay", "bounces", "max_specular"});
     SolverSettings s;
     if (const auto max_bounces = n.find("max_bounces")) {
         s.max_bounces = max_bounces->integer();
@@ -185,6 +215,7 @@ SolverSettings parse_solver(const Node& n) {
         s.delay = parse_choice<DelayMode>(*delay, "delay mode",
                                           {{"nearest", DelayMode::Nearest}, {"linear", DelayMode::Linear}});
     if (const auto bounces = n.find("bounces")) s.bounces = bounces->boolean();
+    if (const auto max_specular = n.find("max_specular")) s.max_specular = max_specular->integer();
     return s;
 }
 

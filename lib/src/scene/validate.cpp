@@ -144,6 +144,27 @@ void check_transform(const Eigen::Matrix4d& m, const At& at) {
     if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) at.fail("is singular");
 }
 
+// A specular part: finite, in [0, 1], grey (tinted specular transfer is not built yet).
+void check_specular_part(const Rgb& value, const At& at) {
+    finite3(value, at);
+    if ((value < 0.0).any() || (value > 1.0).any()) at.fail("must be in [0, 1]");
+    if (value.maxCoeff() != value.minCoeff())
+        at.fail("must be grey (one number, or three equal ones): tinted mirrors and glass are not supported yet");
+}
+
+void check_material(const Object& o, const At& at) {
+    const Material& m = o.material;
+    if (!m.specular()) return;
+    const At material = at.key("material");
+    check_specular_part(m.reflectance, material.key("reflectance"));
+    if (m.type == MaterialType::Glass) check_specular_part(m.transmittance, material.key("transmittance"));
+    else if (!(m.transmittance == 0.0).all()) material.key("transmittance").fail("only glass transmits");
+    const Rgb sum = m.reflectance + m.transmittance + o.albedo;
+    if ((sum > 1.0 + 1e-12).any())
+        material.fail("reflectance + transmittance + albedo is " + std::to_string(sum.maxCoeff()) +
+                      "; it must be at most 1 (energy is not created)");
+}
+
 void check_object(const Object& o, const At& at) {
     if (const auto* r = std::get_if<RectangleShape>(&o.shape)) {
         check_rectangle(*r, at);
@@ -156,6 +177,7 @@ void check_object(const Object& o, const At& at) {
     finite3(o.albedo, albedo);
     if ((o.albedo < 0.0).any() || (o.albedo > 1.0).any()) albedo.fail("must be in [0, 1]");
     non_negative(o.emission, at.key("emission"));
+    check_material(o, at);
 }
 
 // A table pulse as the parser leaves it after reading its CSV (which names lines; a hand-built table
@@ -374,6 +396,8 @@ void check_settings(const Scene& scene, const At& root) {
     finite(scene.links.time_bins, time_bins);
     if (scene.links.time_bins < 0.0) time_bins.fail("must be >= 0 (0 turns the timing criterion off)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
+    if (scene.solver.max_specular < 0 || scene.solver.max_specular > 16)
+        root.key("solver").key("max_specular").fail("must be in [0, 16]");
 }
 
 }  // namespace

@@ -264,10 +264,13 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
         if (p.k[q] <= 0.0) continue;
         ++cast;
         ++counts.pair_stats.rays;
-        if (m_vis.occluded(p.x[q].x + lift * p.x[q].n, p.y[q].x + lift * p.y[q].n)) {
+        // Glass between the nodes passes its transmittance; a partial pass is no shadow edge.
+        const double passed = m_vis.transmittance(p.x[q].x + lift * p.x[q].n, p.y[q].x + lift * p.y[q].n);
+        if (!(passed > 0.0)) {
             ++blocked;
             p.k[q] = 0.0;
         } else {
+            p.k[q] *= passed;
             visible_sum += p.k[q];
         }
     }

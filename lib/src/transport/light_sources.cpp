@@ -77,6 +77,74 @@ LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visib
     return spot;
 }
 
+std::vector<LaserSpot> trace_laser(const Vec3& origin, const Vec3& direction, const Rgb& power,
+                                   const PatchSet& patches, const Visibility& visibility) {
+    if (visibility.planes().empty()) {
+        LaserSpot spot = find_laser_spot(origin, direction, visibility);
+        spot.power = power;
+        return {spot};
+    }
+    std::vector<TracedHit> hits;
+    visibility.trace(origin, direction, hits);
+    std::vector<LaserSpot> spots;
+    for (const TracedHit& h : hits) {
+        // A back side absorbs; a mirror's or glass' front without a diffuse part sends nothing itself.
+        if (!h.hit.front || !(patches.albedo[h.hit.patch] > 0.0).any()) continue;
+        LaserSpot spot;
+        spot.hit = true;
+        spot.patch = h.hit.patch;
+        spot.point = h.hit.point;
+        spot.path = h.path;
+        spot.power = power * h.weight;
+        spots.push_back(spot);
+    }
+    if (spots.empty()) spots.push_back(LaserSpot{});
+    return spots;
+}
+
+namespace {
+
+// Whether some of `points` lies on the reflecting side of the chain's last plane (nearest the source).
+bool before_last_plane(const MirrorChain& chain, const std::vector<SpecularPlane>& planes, const Vec3* points,
+                       std::size_t count) {
+    const std::size_t k = std::size_t(chain.length - 1);
+    const SpecularPlane& s = planes[chain.plane[k]];
+    for (std::size_t c = 0; c < count; ++c)
+        if (chain.side[k] * s.normal.dot(points[c] - s.point) > 0.0) return true;
+    return false;
+}
+
+}  // namespace
+
+void add_images(LightSources& sources, const Visibility& visibility) {
+    const std::vector<MirrorChain>& chains = visibility.chains();
+    const std::vector<SpecularPlane>& planes = visibility.planes();
+    const std::size_t points = sources.points.size(), areas = sources.areas.size();
+    for (std::size_t c = 0; c < chains.size(); ++c) {
+        const MirrorChain& chain = chains[c];
+        for (std::size_t k = 0; k < points; ++k) {
+            const PointSource& s = sources.points[k];
+            if (s.chain >= 0 || !before_last_plane(chain, planes, &s.origin, 1)) continue;
+            PointSource image = s;
+            image.position = chain.image(s.position);
+            image.origin = chain.image(s.origin);
+            image.lobe = chain.unfold.linear * s.lobe;
+            image.patch = kNoPatch;  // a spot may light its own patch through a mirror
+            image.chain = std::int32_t(c);
+            sources.points.push_back(image);
+        }
+        for (std::size_t k = 0; k < areas; ++k) {
+            const AreaSource& a = sources.areas[k];
+            if (a.chain >= 0 || !before_last_plane(chain, planes, a.polygon(), a.count)) continue;
+            std::array<Vec3, 4> corners{};
+            for (int q = 0; q < a.count; ++q) corners[std::size_t(q)] = chain.image(a.corners[std::size_t(a.count - 1 - q)]);
+            AreaSource image = make_area_source(corners.data(), a.count, a.radiance, a.object);
+            image.chain = std::int32_t(c);
+            sources.areas.push_back(image);
+        }
+    }
+}
+
 LightSources light_sources(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
     LightSources sources;
     for (const Light& light : scene.lights)
@@ -88,12 +156,14 @@ LightSources light_sources(const Scene& scene, const PatchSet& patches, const Vi
         }
     for (const Light& light : scene.lights)
         if (const auto* laser = std::get_if<Laser>(&light)) {
-            sources.spots.push_back(find_laser_spot(laser->origin, laser->direction, visibility));
-            sources.spots.back().power = laser->power;
+            const std::vector<LaserSpot> spots = trace_laser(laser->origin, laser->direction, laser->power, patches,
+                                                             visibility);
+            sources.spots.insert(sources.spots.end(), spots.begin(), spots.end());
         }
     for (const LaserSpot& spot : sources.spots)
         if (spot.hit) sources.points.push_back(spot_source(spot, patches, visibility));
     sources.areas = area_sources(&scene, patches);
+    add_images(sources, visibility);
     return sources;
 }
 
@@ -132,9 +202,13 @@ bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visib
     if (cos_x <= 0.0) return false;
     const Rgb intensity = source.intensity_towards(Vec3(-d / r));
     if (!(intensity > 0.0).any()) return false;
-    if (visibility.occluded(x + visibility.epsilon() * n, source.position)) return false;
+    const Vec3 lifted = x + visibility.epsilon() * n;
+    const double passed = source.chain < 0
+                              ? visibility.transmittance(lifted, source.position)
+                              : visibility.unfolded(visibility.chains()[std::size_t(source.chain)], lifted, source.position);
+    if (!(passed > 0.0)) return false;
     out.path = source.path + r;
-    out.intensity = intensity;
+    out.intensity = intensity * passed;
     out.cos_over_r2 = cos_x / (r * r);
     return true;
 }
@@ -161,6 +235,15 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int
     return s;
 }
 
+namespace {
+
+// The share of light that passes from the point y of area source a (or of its image) to x.
+double pass_between(const Visibility& vis, const AreaSource& a, const Vec3& x, const Vec3& y) {
+    return a.chain < 0 ? vis.transmittance(x, y) : vis.unfolded(vis.chains()[std::size_t(a.chain)], x, y);
+}
+
+}  // namespace
+
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis, const AreaSampling& s,
                    std::vector<AreaPair>& out) {
     const double lift = vis.epsilon();
@@ -172,21 +255,22 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
         path = std::sqrt(r2);
         return std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2);
     };
+    // The share of light that passes between x and the cell's centre (0: blocked).
     const auto open_to = [&](int u, int v, int m) {
-        return !vis.occluded(x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
+        return pass_between(vis, a, x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
     };
     // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
     // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
-    thread_local std::vector<char> coarse_open;
-    coarse_open.assign(std::size_t(coarse * coarse), char(2));  // 2: not tested
+    thread_local std::vector<double> coarse_open;
+    coarse_open.assign(std::size_t(coarse * coarse), -1.0);  // -1: not tested
     bool any_open = false, any_blocked = false;
     for (int c = 0; c < coarse * coarse; ++c) {
         double path;
         const int u = c % coarse, v = c / coarse;
         if (!(kernel(u, v, coarse, path) > 0.0)) continue;
-        const bool o = open_to(u, v, coarse);
-        coarse_open[std::size_t(c)] = char(o);
-        (o ? any_open : any_blocked) = true;
+        const double o = open_to(u, v, coarse);
+        coarse_open[std::size_t(c)] = o;
+        (o > 0.0 ? any_open : any_blocked) = true;
     }
     const bool penumbra = any_open && any_blocked;
     const int m = penumbra ? std::max(s.timing, s.penumbra) : s.timing;
@@ -197,24 +281,25 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
         const double w = kernel(u, v, m, path) / (double(m) * m);
         if (!(w > 0.0)) continue;
         total += w;
-        bool open;
+        double open;
         if (penumbra) {
             open = open_to(u, v, m);
         } else {
             const int cu = u * coarse / m, cv = v * coarse / m;
-            char& o = coarse_open[std::size_t(cv * coarse + cu)];
-            if (o == 2) o = char(open_to(cu, cv, coarse));  // its centre faces away, this pair does not
-            open = o != 0;
+            double& o = coarse_open[std::size_t(cv * coarse + cu)];
+            if (o < 0.0) o = open_to(cu, cv, coarse);  // its centre faces away, this pair does not
+            open = o;
         }
-        if (open) out.push_back({path, w});
+        if (open > 0.0) out.push_back({path, w * open});
     }
     return total;
 }
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,
                             std::vector<AreaPair>& out) {
-    if (vis.occluded(x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal)) return 0.0;
-    out.push_back({(x - a.centroid).norm(), 1.0});
+    const double passed = pass_between(vis, a, x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal);
+    if (!(passed > 0.0)) return 0.0;
+    out.push_back({(x - a.centroid).norm(), passed});
     return 1.0;
 }
 

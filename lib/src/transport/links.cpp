@@ -76,18 +76,19 @@ double visible_fraction(const PatchSet& patches, const Visibility& vis, std::siz
     const int total = std::clamp(options.visibility_rays, 1, 16);
     const int first = std::clamp(options.first_rays, 1, total);
     const double lift = vis.epsilon();
-    int visible = 0, cast = 0;
+    double visible = 0.0;  // rays that pass, each weighed by the glass it crosses
+    int cast = 0;
     for (int k = 0; k < total; ++k) {
-        if (k == first && (visible == 0 || visible == cast)) break;
+        if (k == first && (visible == 0.0 || visible == double(cast))) break;
         const Vec3 a = stratified_point(patches, i, kStrataA[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k)),
                                         hash01(i, j, 4 * std::uint64_t(k) + 1), lift);
         const Vec3 b = stratified_point(patches, j, kStrataB[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k) + 2),
                                         hash01(i, j, 4 * std::uint64_t(k) + 3), lift);
         ++cast;
-        if (!vis.occluded(a, b)) ++visible;
+        visible += vis.transmittance(a, b);
     }
     rays += std::uint64_t(cast);
-    return double(visible) / double(cast);
+    return visible / double(cast);
 }
 
 }  // namespace

@@ -2,13 +2,16 @@
 /// Ray visibility over the patch geometry (Embree 3).
 
 #include "tprf/core/types.h"
+#include "tprf/geometry/mirror_images.h"
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 namespace tprf {
 
 struct PatchSet;
+struct Scene;
 
 /// The closest surface a ray hits.
 struct RayHit {
@@ -19,21 +22,54 @@ struct RayHit {
     Vec3 point = Vec3::Zero();  ///< metres
 };
 
-/// A bounding-volume hierarchy over every patch polygon. Thread-safe for queries once built.
+/// A surface that a ray traced through mirrors and glass reaches (Visibility::trace).
+struct TracedHit {
+    RayHit hit;                 ///< the surface; hit.distance is the last straight piece only
+    double path = 0.0;          ///< metres from the ray's origin, every specular leg included
+    double weight = 1.0;        ///< product of the reflectances and transmittances on the way
+};
+
+/// A bounding-volume hierarchy over every patch polygon, and the specular planes of the scene (mirrors
+/// and glass, geometry/mirror_images.h). Thread-safe for queries once built.
 class Visibility {
 public:
-    /// Builds the hierarchy. Every patch is opaque from both sides, whatever its own sidedness.
-    explicit Visibility(const PatchSet& patches);
+    /// Builds the hierarchy. Every patch is opaque from both sides, whatever its own sidedness, except
+    /// the patches of glass planes, which pass their transmittance. Chains of up to `max_specular`
+    /// reflections between the planes are enumerated (mirror_chains).
+    explicit Visibility(const PatchSet& patches, std::vector<SpecularPlane> planes = {}, int max_specular = 0);
     ~Visibility();
     Visibility(const Visibility&) = delete;
     Visibility& operator=(const Visibility&) = delete;
 
-    /// True when something lies strictly between a and b (the end points' own surfaces excluded
-    /// by a relative epsilon).
+    /// True when something opaque lies strictly between a and b (the end points' own surfaces excluded
+    /// by a relative epsilon). Glass does not occlude: see transmittance().
     bool occluded(const Vec3& a, const Vec3& b) const;
 
-    /// The first surface along origin + s * direction (unit), s in (0, max_distance).
+    /// The share of light that passes straight from a to b: 0 when occluded, else the product of the
+    /// transmittances of the glass crossed (1 without glass).
+    double transmittance(const Vec3& a, const Vec3& b) const;
+
+    /// Light from the point y whose image through `chain` is `image`, seen from x: the chain's
+    /// reflectance times the transmittance of every real leg, when the straight segment from x to
+    /// `image` crosses each unfolded plane of the chain in turn, from its reflecting side and within
+    /// its polygons; else 0 (and `through`, when given, is set false: the path does not exist, as
+    /// opposed to being shadowed).
+    double unfolded(const MirrorChain& chain, const Vec3& x, const Vec3& image, bool* through = nullptr) const;
+
+    /// The surfaces along origin + s * direction (unit): the first one, and where it is a mirror or
+    /// glass, what its reflection (and glass' transmission) reaches in turn, up to max_specular
+    /// reflections. Appends to `out`, which holds the first surface first.
+    void trace(const Vec3& origin, const Vec3& direction, std::vector<TracedHit>& out) const;
+
+    /// The first surface along origin + s * direction (unit), s in (0, max_distance), glass included.
     RayHit intersect(const Vec3& origin, const Vec3& direction, double max_distance) const;
+
+    /// The specular planes and their chains.
+    const std::vector<SpecularPlane>& planes() const { return m_planes; }
+    const std::vector<MirrorChain>& chains() const { return m_chains; }
+    /// The specular plane of patch i, or -1.
+    int plane_of(std::uint32_t patch) const;
+    bool has_glass() const { return m_glass; }
 
     /// Offset used to lift ray end points off their surfaces, metres (scales with the scene size).
     double epsilon() const { return m_epsilon; }
@@ -42,6 +78,15 @@ private:
     struct Impl;
     std::unique_ptr<Impl> m_impl;
     double m_epsilon = 0.0;
+    std::vector<SpecularPlane> m_planes;
+    std::vector<MirrorChain> m_chains;
+    std::vector<int> m_object_plane;   // per object index: its plane, or -1
+    int m_max_specular = 0;
+    bool m_glass = false;
 };
+
+/// The visibility of a scene's patches with its mirrors and glass (specular_planes, and chains of up
+/// to solver.max_specular reflections).
+std::unique_ptr<Visibility> scene_visibility(const Scene& scene, const PatchSet& patches);
 
 }  // namespace tprf

@@ -17,6 +17,9 @@ struct SensingPoint {
     std::uint32_t patch = 0;    ///< the patch it lies on (its front side faces the sensor)
     Vec3 point = Vec3::Zero();  ///< metres
     float leg = 0.0f;           ///< metres of optical path from the point to the sensor (0: unwarped)
+    /// The share of the point's light that reaches the sensor: the product of the reflectances and
+    /// transmittances of the mirrors and glass on its way (1 on a straight line of sight).
+    float throughput = 1.0f;
 };
 
 /// A set of sensing points, in output order (non-decreasing `output`).

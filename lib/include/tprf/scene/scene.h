@@ -58,10 +58,32 @@ struct MeshShape {
     Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();
 };
 
+/// What an object's surface does with light (SPEC.md v2, "Materials"; docs/materials.md).
+enum class MaterialType {
+    Diffuse,  ///< Lambertian only (`albedo`)
+    Mirror,   ///< perfect specular reflection of `reflectance` on the front side, plus `albedo` diffuse
+    Glass,    ///< a thin sheet: `reflectance` mirrored on both sides, `transmittance` straight through
+};
+
+/// An object's material: its specular parts; the diffuse part is Object::albedo.
+struct Material {
+    MaterialType type = MaterialType::Diffuse;
+    /// Specular reflectance per channel, in [0, 1]; grey (all channels equal) until tinted specular
+    /// links exist (validate() says so). Zero for a diffuse object.
+    Rgb reflectance = Rgb::Zero();
+    /// Glass: straight-through transmittance per channel, in [0, 1], grey; else zero.
+    Rgb transmittance = Rgb::Zero();
+    /// Whether the object is a specular plane (a mirror or glass).
+    bool specular() const { return type != MaterialType::Diffuse; }
+};
+
 /// One entry of `objects`.
 struct Object {
     std::variant<RectangleShape, MeshShape> shape;
-    Rgb albedo = Rgb::Constant(0.5);   ///< Lambertian reflectance per channel, in [0, 1]
+    /// Lambertian reflectance per channel, in [0, 1]; with a specular material, its diffuse part
+    /// (reflectance + transmittance + albedo <= 1 per channel).
+    Rgb albedo = Rgb::Constant(0.5);
+    Material material;
     Rgb emission = Rgb::Zero();        ///< radiance L_e, W/(m^2 sr), from the front side, >= 0
     bool two_sided = false;
     std::string json_path;             ///< e.g. "objects[2]", for error messages; "" means objects[its index]
@@ -75,6 +97,9 @@ struct SolverSettings {
     int max_bounces = -1;               ///< >= 0, or -1: every bounce that arrives inside the window
     DelayMode delay = DelayMode::Linear;
     bool bounces = false;               ///< also write the per-bounce terms
+    /// Most specular reflections (mirror or glass) on one leg between two diffuse points, on a camera
+    /// or laser ray, or from a light (`solver.max_specular`, beyond SPEC: docs/materials.md); >= 0.
+    int max_specular = 4;
 };
 
 /// How light is exchanged between patches (SPEC.md v2, "Links and scale").

@@ -36,6 +36,9 @@ struct PointSource {
     Vec3 lobe = Vec3::Zero();       ///< zero: isotropic; else the unit normal of a Lambertian lobe
     std::uint32_t patch = kNoPatch; ///< the patch it lies on, which it does not light
     std::uint8_t order = 1;         ///< bounce order of the light it delivers (1: point light, 2: laser spot)
+    /// -1: a real source. Else the mirror image of one through Visibility::chains()[chain]: position,
+    /// origin and lobe are the images, and its light reaches x only along that chain (Visibility::unfolded).
+    std::int32_t chain = -1;
 
     /// Radiant intensity towards the unit direction `dir`, W/sr.
     Rgb intensity_towards(const Vec3& dir) const;
@@ -59,6 +62,7 @@ struct AreaSource {
     Vec3 centroid = Vec3::Zero();    ///< metres
     Rgb radiance = Rgb::Zero();      ///< L_e, W/(m^2 sr)
     std::uint32_t object = 0;        ///< index into Scene::objects
+    std::int32_t chain = -1;         ///< -1: real; else a mirror image through Visibility::chains()[chain]
 
     const Vec3* polygon() const { return corners.data(); }
     /// The point at (u, v) in the unit square, uniform in area (polygon_point).
@@ -67,10 +71,17 @@ struct AreaSource {
 
 /// Every source of a scene.
 struct LightSources {
-    std::vector<PointSource> points;     ///< point lights (scene order), then the lasers' spots
-    std::vector<LaserSpot> spots;        ///< where each laser landed, in scene order (hit or not)
-    std::vector<AreaSource> areas;       ///< the emissive patches as whole polygons (area_sources)
+    /// Point lights (scene order), then the lasers' spots, then their mirror images (add_images)
+    std::vector<PointSource> points;
+    /// Where each laser landed: in scene order, one per laser when no mirror or glass is hit (hit or
+    /// not), else one per surface its beam reaches through them
+    std::vector<LaserSpot> spots;
+    std::vector<AreaSource> areas;       ///< the emissive patches as whole polygons (area_sources), then images
 };
+
+/// Appends to `sources` the mirror image of every real point and area source through every chain of
+/// `visibility` whose last plane has the source on its reflecting side.
+void add_images(LightSources& sources, const Visibility& visibility);
 
 /// The emissive patches of `patches` as area sources: the patches of an emissive rectangle of `scene`
 /// (per side) become that rectangle; every other emissive patch is a source of its own. Without a
@@ -79,6 +90,12 @@ std::vector<AreaSource> area_sources(const Scene* scene, const PatchSet& patches
 
 /// Where a laser's ray first meets the scene (a back side absorbs: hit stays false).
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visibility& visibility);
+
+/// Every diffuse front side a laser's beam reaches, through mirrors and glass (Visibility::trace), with
+/// `power` times the specular weight of the way; one spot (hit or not) when the scene has no mirror
+/// or glass in the beam's way, as find_laser_spot finds it.
+std::vector<LaserSpot> trace_laser(const Vec3& origin, const Vec3& direction, const Rgb& power,
+                                   const PatchSet& patches, const Visibility& visibility);
 
 /// The spot as a Lambertian point source: radiant intensity albedo P cos(theta) / pi about its patch's
 /// normal, its light leaving at spot.path (a laser's spot, or a capture's laser point on the wall).

@@ -84,6 +84,16 @@ struct HierarchyStats {
 LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,
                               const HierarchyOptions& hierarchy, HierarchyStats* stats = nullptr);
 
+/// Adds the links through mirrors and glass reflections: for every chain of Visibility::chains(), the
+/// transfer between every pair of patches on its two ends, from the receiver to the source's mirror
+/// image seen through the chain's polygons (the exact point-to-polygon form factor of the clipped
+/// image, integrated over the receiver), times the chain's reflectance and the transmittance and
+/// visibility of its legs, at the unfolded distance. Patch-to-patch links, merged into the rows in the
+/// order the solver expects (`bin_width_m`: the bins of a hierarchical set's delay octaves). Returns
+/// the links added. Cost: pairs of patches in front of the planes, as the flat method.
+std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visibility& visibility,
+                               const LinkOptions& options, double bin_width_m);
+
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
 /// `bin_width_m` (and then its counts in `stats`, when given).
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
