@@ -385,3 +385,53 @@ TEST(Render, BadSceneWritesNothing) {
 
 }  // namespace
 }  // namespace tprf
+
+// A window that starts late still shows the light that left the patches before it began: a patch's
+// profile at path p reaches a pixel at p + leg. The glow of an emitter (path 0, never propagated
+// through the links), the laser spot and the later bounces all show in a window from one bin on
+// exactly as in the same bins of a window from 0; a window from 1.8 m (after the glow and the spot
+// left their patches) holds the same energy in every pixel.
+nlohmann::json window_scene(double start, int bins) {
+    return {{"time", {{"bins", bins}, {"bin_width", 0.02}, {"start", start}}},
+            {"camera", {{"position", {0.5, 0.5, 2.0}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 1, 0}}, {"fov", 40},
+                        {"width", 12}, {"height", 12}}},
+            {"lights", {{{"type", "laser"}, {"origin", {0.2, 0.2, 1.0}}, {"target", {0.3, 0.6, 0}}, {"power", 1.0}}}},
+            {"objects",
+             {{{"type", "rectangle"}, {"origin", {0, 0, 0}}, {"u", {1, 0, 0}}, {"v", {0, 1, 0}}, {"albedo", 0.7}},
+              {{"type", "rectangle"}, {"origin", {0.1, 0.1, 0.01}}, {"u", {0.1, 0, 0}}, {"v", {0, 0.1, 0}},
+               {"albedo", 0.5}, {"emission", 2.0}},
+              {{"type", "rectangle"}, {"origin", {0, 1, 0}}, {"u", {1, 0, 0}}, {"v", {0, 0, 0.6}}, {"albedo", 0.7}}}},
+            {"patches", {{"max_edge", 0.1}}}};
+}
+
+TEST(RenderWindow, ALateWindowShowsWhatTheSameBinsOfAnEarlyOneShow) {
+    const std::size_t pixels = 144, T = 260;
+    const auto cube = [](double start, std::size_t bins) {
+        return tprf::render_scene(tprf::parse_scene(window_scene(start, int(bins)).dump(), "window.json"), {})
+            .arrays.at("transient").data;
+    };
+    const std::vector<float> early = cube(0.0, T);
+    float peak = 0.0f;
+    for (float v : early) peak = std::max(peak, v);
+    // From one bin on: the same numbers, bin for bin.
+    const std::vector<float> one = cube(0.02, T - 1);
+    double diff = 0.0;
+    for (std::size_t px = 0; px < pixels; ++px)
+        for (std::size_t t = 0; t + 1 < T; ++t)
+            for (std::size_t c = 0; c < 3; ++c)
+                diff = std::max(diff, double(std::abs(early[(px * T + t + 1) * 3 + c] - one[(px * (T - 1) + t) * 3 + c])));
+    EXPECT_LT(diff, 1e-5 * peak) << "largest difference " << diff << " of a peak " << peak;
+    // From 1.8 m: each pixel's energy in the window.
+    const std::size_t offset = 90;
+    const std::vector<float> late = cube(0.02 * offset, T - offset);
+    double worst = 0.0, total = 0.0;
+    for (std::size_t px = 0; px < pixels; ++px) {
+        double a = 0.0, b = 0.0;
+        for (std::size_t t = offset; t < T; ++t) a += early[(px * T + t) * 3];
+        for (std::size_t t = 0; t < T - offset; ++t) b += late[(px * (T - offset) + t) * 3];
+        worst = std::max(worst, std::abs(a - b));
+        total += b;
+    }
+    EXPECT_GT(total, 0.0);
+    EXPECT_LT(worst, 1e-5 * peak) << "largest per-pixel energy difference " << worst;
+}

@@ -24,6 +24,8 @@
 #include "tprf/transport/solver.h"
 #include "tprf/transport/steady.h"
 
+#include <algorithm>
+#include <cmath>
 #include <exception>
 #include <memory>
 #include <new>
@@ -137,6 +139,17 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
     }
 }
 
+// Bins before the window whose patch light the camera still sees inside it: a patch profile at path
+// p reaches a pixel at p + leg, so with a window from `start` the patches are solved (not written)
+// from start - the longest leg (not before path 0), one bin more for the linear split's second tap.
+int lead_bins(const TimeAxis& time, const Gather& gather) {
+    float longest = 0.0f;
+    for (const PixelTap& tap : gather.taps) longest = std::max(longest, tap.leg);
+    const double start = time.start_m(), bin = time.bin_width_m();
+    if (!(start > 0.0) || !(longest > 0.0f)) return 0;
+    return int(std::ceil(std::min(double(longest), start) / bin)) + 1;
+}
+
 // Solves and films every block; then the exact direct light. Records the solve and gather times.
 SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Cubes& c,
                             RenderReport& report) {
@@ -147,17 +160,26 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
     const std::size_t N = t.patches.size(), T = std::size_t(scene.time.bins);
+    // The solve starts `lead` bins before the window (the films read those bins at negative indices).
+    const int lead = lead_bins(scene.time, t.gather);
+    TimeAxis solve_axis = scene.time;
+    solve_axis.start -= lead * scene.time.bin_width;
+    solve_axis.bins += lead;
     auto start = Clock::now();
     double sink_seconds = 0.0;
-    const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, scene.time, solver_options,
-                                             [&](const SolveBlock& b) {
+    const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, solve_axis, solver_options,
+                                             [&](const SolveBlock& solved) {
         const auto s0 = Clock::now();
+        SolveBlock b = solved;
+        b.first_bin -= lead;  // on the scene's axis
         c.film->add_block(b);
         for (auto& f : c.term_films) f->add_block(b);
+        const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written
         if (c.patch_cube)
             for (std::size_t i = 0; i < N; ++i)
-                std::copy_n(b.radiosity + i * std::size_t(b.bins) * 3, std::size_t(b.bins) * 3,
-                            c.patch_cube + (i * T + std::size_t(b.first_bin)) * 3);
+                std::copy_n(b.radiosity + (i * std::size_t(b.bins) + std::size_t(skip)) * 3,
+                            std::size_t(b.bins - skip) * 3,
+                            c.patch_cube + (i * T + std::size_t(b.first_bin + skip)) * 3);
         sink_seconds += seconds_since(s0);
     });
     report.link_bin_updates = stats.link_bin_updates;
