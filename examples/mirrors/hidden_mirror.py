@@ -14,24 +14,16 @@ OUTDIR holds `tprf render hidden_mirror.json -o OUTDIR`. Prints the recovered an
 scene's mirror) and writes OUTDIR/hidden_mirror.png. Exit 1 unless the normal is within 1 degree and
 the plane within 1 cm.
 """
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from tprf_cube import (camera_rays, in_rect, laser_ray, load_render, load_scene, onset_paths, ray_plane, rect_plane,
+from tprf_cube import (camera_rays, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane,
                        unit)
 
-ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-ap.add_argument("outdir")
-ap.add_argument("--scene", default=str(Path(__file__).with_name("hidden_mirror.json")))
-args = ap.parse_args()
-
-scene = load_scene(args.scene)
-cube, start, bin_m = load_render(args.outdir)
+args, scene, cube, start, bin_m, C = open_experiment(__doc__, __file__)
 cam = scene["camera"]
-C = np.asarray(cam["position"], float)
 L, d = laser_ray(scene)
 wall = scene["objects"][0]  # the diffuse wall: a plane the user knows
 w0, wn = rect_plane(wall)

@@ -13,23 +13,15 @@ OUTDIR holds `tprf render mirror_depth.json -o OUTDIR`. Prints the recovered and
 ray against the scene's mirror plane) and writes OUTDIR/mirror_depth.png. Exit 1 when X is off by more
 than one bin width.
 """
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from tprf_cube import camera_rays, in_rect, laser_ray, load_render, load_scene, onset_paths, ray_plane, rect_plane
+from tprf_cube import camera_rays, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane
 
-ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-ap.add_argument("outdir")
-ap.add_argument("--scene", default=str(Path(__file__).with_name("mirror_depth.json")))
-args = ap.parse_args()
-
-scene = load_scene(args.scene)
-cube, start, bin_m = load_render(args.outdir)
+args, scene, cube, start, bin_m, C = open_experiment(__doc__, __file__)
 cam = scene["camera"]
-C = np.asarray(cam["position"], float)
 P, d = laser_ray(scene)
 wall = scene["objects"][0]  # the diffuse wall: a plane the user knows (e.g. measured by stereo)
 mirror = next(o for o in scene["objects"] if o.get("material", {}).get("type") == "mirror")

@@ -3,6 +3,7 @@
 Only the cube and what a user knows of the set-up (camera pose, laser ray, the diffuse wall's plane) are
 used; the mirror's geometry is read from the scene only to score the result.
 """
+import argparse
 import json
 from pathlib import Path
 
@@ -28,6 +29,18 @@ def load_render(outdir):
     t = json.loads((outdir / "render.json").read_text())["time"]
     scale = 1.0 if t.get("unit", "m") == "m" else C_LIGHT * 1e-12  # "ps": picoseconds of light travel
     return cube, float(t.get("start", 0.0)) * scale, float(t["bin_width"]) * scale
+
+
+def open_experiment(doc, script):
+    """The command line both scripts take (the render's folder, --scene), the scene, the cube and its
+    time axis, and the camera's position."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("outdir")
+    ap.add_argument("--scene", default=str(Path(script).with_suffix(".json")))
+    args = ap.parse_args()
+    scene = load_scene(args.scene)
+    cube, start, bin_m = load_render(args.outdir)
+    return args, scene, cube, start, bin_m, np.asarray(scene["camera"]["position"], float)
 
 
 def camera_rays(cam):
