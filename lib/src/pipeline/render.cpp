@@ -160,18 +160,14 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
     const std::size_t N = t.patches.size(), T = std::size_t(scene.time.bins);
-    // The solve starts `lead` bins before the window (the films read those bins at negative indices).
+    // The patches' light from `lead` bins before the window on (the films read those bins too).
     const int lead = lead_bins(scene.time, t.gather);
-    TimeAxis solve_axis = scene.time;
-    solve_axis.start -= lead * scene.time.bin_width;
-    solve_axis.bins += lead;
+    solver_options.first_bin = -lead;
     auto start = Clock::now();
     double sink_seconds = 0.0;
-    const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, solve_axis, solver_options,
-                                             [&](const SolveBlock& solved) {
+    const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, scene.time, solver_options,
+                                             [&](const SolveBlock& b) {
         const auto s0 = Clock::now();
-        SolveBlock b = solved;
-        b.first_bin -= lead;  // on the scene's axis
         c.film->add_block(b);
         for (auto& f : c.term_films) f->add_block(b);
         const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written

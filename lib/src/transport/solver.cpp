@@ -348,6 +348,7 @@ struct SolvePlan {
     std::size_t ring_floats = 0;    // per layer
     int ring = 0;                   // longest ring
     std::int64_t T = 0, b_begin = 0, blocks = 0;
+    std::int64_t first_emitted = 0;  // first bin handed to the sink (SolverOptions::first_bin)
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
@@ -622,7 +623,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
 // Light sent before the window opens still travels: the march starts at the batch's earliest pulse,
 // aligned to the longest window, so that every window starts at the first block.
 void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
-    std::int64_t first_pulse_bin = 0;
+    std::int64_t first_pulse_bin = std::min<std::int64_t>(0, plan.first_emitted);
     for (const Illumination* illumination : batch)
         for (const Pulse& p : illumination->pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
     const std::int64_t align = plan.acc_bins;
@@ -1148,7 +1149,8 @@ void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
 }
 
 void March::emit_block(std::int64_t b0, const BlockSink& sink) {
-    const std::int64_t lo = std::max<std::int64_t>(b0, 0), hi = std::min<std::int64_t>(b0 + m_plan.bt, m_plan.T);
+    const std::int64_t lo = std::max<std::int64_t>(b0, m_plan.first_emitted);
+    const std::int64_t hi = std::min<std::int64_t>(b0 + m_plan.bt, m_plan.T);
     if (lo >= hi) return;
     const int count = int(hi - lo);
     parallel_for(m_plan.n, {m_plan.threads, 1, false}, [&](std::size_t i) {
@@ -1202,6 +1204,8 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
         TPRF_CHECK_EQ(illumination->row.size(), patches.size() + 1);
     }
     SolvePlan plan = make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, batch) ? 1 : 3);
+    TPRF_CHECK_LE(options.first_bin, 0);
+    plan.first_emitted = options.first_bin;
     plan_blocks(plan, batch);
     March march(batch, plan);
     SolveStats stats;

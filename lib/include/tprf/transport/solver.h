@@ -40,11 +40,14 @@ struct SolverOptions {
     int block_bins = 32;                  ///< time-block length, bins
     int threads = 0;                      ///< 0: all cores
     ProgressFn progress;                  ///< phase "solve"
+    /// The first bin handed to the sink, <= 0: bins before the window (negative SolveBlock::first_bin),
+    /// for a camera whose leg brings the light that left the patches then into the window.
+    int first_bin = 0;
 };
 
 /// A block of final bins, handed to the caller as soon as it is complete.
 struct SolveBlock {
-    int first_bin = 0;              ///< index of the block's first bin on the scene's time axis
+    int first_bin = 0;              ///< index of the block's first bin on the scene's time axis (< 0: before it)
     int bins = 0;                   ///< bins in this block
     std::size_t patches = 0;        ///< N
     int illuminations = 1;          ///< K: the illuminations of the batch, in the order they were given
