@@ -201,7 +201,8 @@ TEST(Capture, ThirdBounceOfASmallPatchMatchesTheClosedForm) {
 }
 
 // A hidden corner (the tilted plane and a wall standing on it), every bounce marched.
-std::string corner_scene(const std::string& extra_capture = "") {
+std::string corner_scene(const std::string& extra_capture = "",
+                         const std::string& time = R"({"bins": 150, "bin_width": 0.02})") {
     const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
         "sensor": {"position": [0, -1.5, 0.3]},
         "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 3, "nv": 3})" +
@@ -210,8 +211,7 @@ std::string corner_scene(const std::string& extra_capture = "") {
         R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
     const char* side =
         R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
-    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, R"({"bins": 150, "bin_width": 0.02})",
-                      0.1);
+    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, time, 0.1);
 }
 
 // Helmholtz reciprocity: with the laser and the sensor at one position and one grid, H[l, s] = H[s, l] at
@@ -261,6 +261,27 @@ TEST(Capture, BatchedMarchesMatchSingleOnes) {
         only3 += r3.H[k];
     }
     EXPECT_GT(all, only3 * 1.001);
+}
+
+// A window that starts late keeps the marched light that left the patches before it began and reaches
+// the sensor points inside it: bin for bin what the same bins of a window from 0 hold.
+TEST(Capture, ALateWindowHoldsWhatTheSameBinsOfAnEarlyOneHold) {
+    const std::size_t T = 150, offset = 40;  // 0.8 m: after most third bounces have left their patches
+    const CaptureResult early = Built(corner_scene()).capture();
+    const CaptureResult late =
+        Built(corner_scene("", R"({"bins": 110, "bin_width": 0.02, "start": 0.8})")).capture();
+    const std::size_t pairs = early.H.size() / T;
+    ASSERT_EQ(late.H.size(), pairs * (T - offset));
+    double largest = 0.0, worst = 0.0, total = 0.0;
+    for (std::size_t q = 0; q < pairs; ++q)
+        for (std::size_t t = 0; t + offset < T; ++t) {
+            const double a = early.H[q * T + t + offset], b = late.H[q * (T - offset) + t];
+            largest = std::max(largest, a);
+            worst = std::max(worst, std::abs(a - b));
+            total += b;
+        }
+    EXPECT_GT(total, 0.0);
+    EXPECT_LE(worst, 1e-6 * largest) << "largest difference " << worst << " of " << largest;
 }
 
 // Bad capture blocks: one line naming the file and the JSON path, exit status 2, nothing written.

@@ -313,6 +313,14 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std
     solver.delay = p.scene.solver.delay;
     solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;  // patch orders: one less than the sensor's
     solver.threads = options.threads;
+    // Patch light from before the window still reaches the sensor points inside it, a tap's leg later.
+    double longest = 0.0;
+    for (const auto& by_pair : taps)
+        for (const auto& list : by_pair)
+            for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
+    for (const auto& list : sensor_taps_all)
+        for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
+    solver.first_bin = -bins_before_window(p.scene.time, longest);
     const CaptureFilm film(p, result.H);
     double film_seconds = 0.0;
     const auto start = Clock::now();

@@ -139,15 +139,11 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
     }
 }
 
-// Bins before the window whose patch light the camera still sees inside it: a patch profile at path
-// p reaches a pixel at p + leg, so with a window from `start` the patches are solved (not written)
-// from start - the longest leg (not before path 0), one bin more for the linear split's second tap.
+// Bins before the window whose patch light the camera still sees inside it (bins_before_window).
 int lead_bins(const TimeAxis& time, const Gather& gather) {
     float longest = 0.0f;
     for (const PixelTap& tap : gather.taps) longest = std::max(longest, tap.leg);
-    const double start = time.start_m(), bin = time.bin_width_m();
-    if (!(start > 0.0) || !(longest > 0.0f)) return 0;
-    return int(std::ceil(std::min(double(longest), start) / bin)) + 1;
+    return bins_before_window(time, double(longest));
 }
 
 // Solves and films every block; then the exact direct light. Records the solve and gather times.

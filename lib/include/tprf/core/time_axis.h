@@ -21,4 +21,10 @@ struct TimeAxis {
     double to_metres(double value_in_unit) const;
 };
 
+/// Bins before the window whose light a sensor still sees inside it, when what leaves a surface at
+/// path p reaches the sensor at p + leg and the longest such leg is `longest_leg_m`: from start less
+/// that leg (not before path 0), one bin more for a linear split's second tap. 0 when the window
+/// starts at 0 or there is no leg.
+int bins_before_window(const TimeAxis& time, double longest_leg_m);
+
 }  // namespace tprf
