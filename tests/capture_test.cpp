@@ -284,6 +284,45 @@ TEST(Capture, ALateWindowHoldsWhatTheSameBinsOfAnEarlyOneHold) {
     EXPECT_LE(worst, 1e-6 * largest) << "largest difference " << worst << " of " << largest;
 }
 
+// A mirror perpendicular to the relay wall (the wall's image is coplanar with it, so the wall never sees
+// itself in it) and a plane in front of it: the first three bounces are those of the unfolded scene,
+// where the mirror is replaced by the plane's mirror image, to float precision.
+TEST(Capture, ThroughAMirrorTheFirstBouncesAreThoseOfTheUnfoldedScene) {
+    const std::string capture = R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]}, "grid": {"origin": [-0.6, -0.6, 0], "u": [1.2, 0, 0],
+        "v": [0, 1.2, 0], "nu": 6, "nv": 6}, "max_bounces": 3})";
+    const std::string plane =
+        R"({"type": "rectangle", "origin": [0.5, -0.3, 0.5], "u": [0, 0.6, 0], "v": [0.2, 0, 0.4], "albedo": 0.6})";
+    const std::string mirror = R"({"type": "rectangle", "origin": [1, -1.5, 0.2], "u": [0, 0, 1.8], "v": [0, 3, 0],
+        "material": {"type": "mirror", "reflectance": 1}})";
+    const std::string image =  // the plane reflected across x = 1 (u and v swapped keep its front)
+        R"({"type": "rectangle", "origin": [1.5, -0.3, 0.5], "u": [-0.2, 0, 0.4], "v": [0, 0.6, 0], "albedo": 0.6})";
+    const std::string time = R"({"bins": 500, "bin_width": 0.01})";
+    const auto capture_of = [&](const std::string& objects) {
+        const Scene scene = parse_scene(scene_text(objects, capture, time, 0.1), "mirror_capture.json");
+        const PatchSet patches = build_patches(scene);
+        const std::unique_ptr<Visibility> visibility = scene_visibility(scene, patches);
+        return compute_capture(scene, patches, *visibility, nullptr, {}).H;
+    };
+    const std::vector<float> with_mirror = capture_of(std::string(kWall) + "," + plane + "," + mirror);
+    const std::vector<float> unfolded = capture_of(std::string(kWall) + "," + plane + "," + image);
+    const std::vector<float> plane_only = capture_of(std::string(kWall) + "," + plane);
+    ASSERT_EQ(with_mirror.size(), unfolded.size());
+    ASSERT_EQ(plane_only.size(), unfolded.size());
+    double largest = 0.0, worst = 0.0, total = 0.0, straight = 0.0;
+    for (std::size_t k = 0; k < unfolded.size(); ++k) {
+        largest = std::max(largest, double(unfolded[k]));
+        worst = std::max(worst, std::abs(double(with_mirror[k]) - double(unfolded[k])));
+        if (k % 500 == 0) continue;  // the spot itself (bin 0 of every point's row)
+        total += with_mirror[k];
+        straight += plane_only[k];
+    }
+    MEASURED("capture through a mirror vs unfolded: %.3g of the largest; after the spot, %.4g with the mirror, %.4g without\n",
+             worst / largest, total, straight);
+    EXPECT_LE(worst, 1e-4 * largest);
+    EXPECT_GT(total, 2.0 * straight);  // the mirror's light is there, not only the plane's own
+}
+
 // Bad capture blocks: one line naming the file and the JSON path, exit status 2, nothing written.
 class CaptureCli : public ::testing::Test {
 protected:

@@ -140,6 +140,47 @@ ViewCells view_cells(const PatchSet& patches) {
     return c;
 }
 
+namespace {
+
+// The view of patch j from `probe` (the wall point, or its image through a chain) by its samples:
+// arrive() gives the kernel and the exact path with its shadow ray (or the unfolded path's weight);
+// small far patches take one ray from the centroid for all samples (straight views only).
+bool view_patch(const PointSource& probe, std::size_t j, const Vec3& wall_normal, const PatchSet& patches,
+                const Visibility& visibility, const ViewCells& cells, PatchView& v) {
+    const Vec3& n = patches.normal[j];
+    const double distance = (patches.centroid[j] - probe.origin).norm();
+    const bool one_ray = probe.chain < 0 && circumradius(patches, j) < kOneRayAngle * distance;
+    v.patch = std::uint32_t(j);
+    v.chain = probe.chain;
+    v.from = probe.origin;
+    bool seen = false;
+    for (int s = 0; s < kViewSamples; ++s) {
+        const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
+        const Vec3& y = cells.point[at];
+        double g = 0.0, path = 0.0;
+        if (one_ray) {
+            const Vec3 d = probe.position - y;
+            path = d.norm();
+            g = std::max(0.0, n.dot(d)) * std::max(0.0, -wall_normal.dot(d)) / (path * path * path * path);
+        } else if (PointArrival a; arrive(probe, y, n, visibility, a)) {
+            path = a.path;
+            g = a.intensity[0] * a.cos_over_r2;
+        }
+        if (!(g > 0.0)) continue;
+        v.path[std::size_t(s)] = float(path);
+        v.g[std::size_t(s)] = float(g);
+        const Vec3 dir = (y - probe.position) / path;
+        v.du[std::size_t(s)] = float(dir.dot(cells.hu[at]));
+        v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
+        seen = true;
+    }
+    if (seen && one_ray && visibility.occluded(patches.centroid[j] + visibility.epsilon() * n, probe.position))
+        seen = false;
+    return seen;
+}
+
+}  // namespace
+
 std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility,
                                     const ViewCells& cells) {
     // A probe whose intensity toward a direction is the cosine at the wall: arrive() then gives
@@ -150,39 +191,30 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
     probe.intensity = Rgb::Constant(M_PI);
     probe.lobe = w.normal;
     probe.patch = w.patch;
-    std::vector<PatchView> out;
-    for (std::size_t j = 0; j < patches.size(); ++j) {
-        if (j == w.patch) continue;
-        const Vec3& n = patches.normal[j];
-        const double distance = (patches.centroid[j] - w.point).norm();
-        const bool one_ray = circumradius(patches, j) < kOneRayAngle * distance;
-        PatchView v;
-        v.patch = std::uint32_t(j);
-        bool seen = false;
-        for (int s = 0; s < kViewSamples; ++s) {
-            const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
-            const Vec3& y = cells.point[at];
-            double g = 0.0, path = 0.0;
-            if (one_ray) {
-                const Vec3 d = probe.position - y;
-                path = d.norm();
-                g = std::max(0.0, n.dot(d)) * std::max(0.0, -w.normal.dot(d)) / (path * path * path * path);
-            } else if (PointArrival a; arrive(probe, y, n, visibility, a)) {
-                path = a.path;
-                g = a.intensity[0] * a.cos_over_r2;
-            }
-            if (!(g > 0.0)) continue;
-            v.path[std::size_t(s)] = float(path);
-            v.g[std::size_t(s)] = float(g);
-            const Vec3 dir = (y - probe.position) / path;
-            v.du[std::size_t(s)] = float(dir.dot(cells.hu[at]));
-            v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
-            seen = true;
-        }
-        if (seen && one_ray && visibility.occluded(patches.centroid[j] + visibility.epsilon() * n, probe.position))
-            seen = false;
-        if (seen) out.push_back(v);
+    // Its images through every chain that the wall point stands before the last plane of (the chain
+    // runs from the patch towards the wall point).
+    std::vector<PointSource> probes{probe};
+    const std::vector<MirrorChain>& chains = visibility.chains();
+    for (std::size_t c = 0; c < chains.size(); ++c) {
+        const MirrorChain& chain = chains[c];
+        const std::size_t last = std::size_t(chain.length - 1);
+        const SpecularPlane& plane = visibility.planes()[chain.plane[last]];
+        if (!(chain.side[last] * plane.normal.dot(w.point - plane.point) > 0.0)) continue;
+        PointSource image = probe;
+        image.position = chain.image(probe.position);
+        image.origin = chain.image(probe.origin);
+        image.lobe = chain.unfold.linear * probe.lobe;
+        image.patch = kNoPatch;  // the wall point's own patch may see it through a mirror
+        image.chain = std::int32_t(c);
+        probes.push_back(image);
     }
+    std::vector<PatchView> out;
+    for (std::size_t j = 0; j < patches.size(); ++j)
+        for (const PointSource& p : probes) {
+            if (j == p.patch) continue;
+            PatchView v;
+            if (view_patch(p, j, w.normal, patches, visibility, cells, v)) out.push_back(v);
+        }
     return out;
 }
 

@@ -94,12 +94,17 @@ void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::siz
         deposit(H, p, pair, p.laser_leg(l) + p.sensor_leg(s), mean3(spot) / (M_PI * cell));
     }
     if (!p.keeps(2)) return;
-    const PointSource source =
-        spot_source(wall_spot(laser, p.capture.laser_power, p.laser_leg(l)), p.patches, p.visibility);
-    PointArrival a;
-    if (!arrive(source, sensor.point, sensor.normal, p.visibility, a)) return;
-    const Rgb radiance = p.patches.albedo[sensor.patch] * a.intensity * a.cos_over_r2 / M_PI;
-    deposit(H, p, pair, a.path + p.sensor_leg(s), mean3(radiance));
+    // The spot straight, and its images through mirrors and glass.
+    LightSources spots;
+    spots.points.push_back(
+        spot_source(wall_spot(laser, p.capture.laser_power, p.laser_leg(l)), p.patches, p.visibility));
+    add_images(spots, p.visibility);
+    for (const PointSource& source : spots.points) {
+        PointArrival a;
+        if (!arrive(source, sensor.point, sensor.normal, p.visibility, a)) continue;
+        const Rgb radiance = p.patches.albedo[sensor.patch] * a.intensity * a.cos_over_r2 / M_PI;
+        deposit(H, p, pair, a.path + p.sensor_leg(s), mean3(radiance));
+    }
 }
 
 // The shortest path from l to s by way of the plane of patch j, both in front of it: the path to the
@@ -124,6 +129,12 @@ void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::s
     const Rgb ends = p.patches.albedo[p.points.laser[l].patch] * p.capture.laser_power *
                      p.patches.albedo[p.points.sensor[s].patch] / (M_PI * M_PI * M_PI * kViewSamples);
     const double legs = p.laser_leg(l) + p.sensor_leg(s);
+    // Each patch's views from either end (straight, and through each chain of mirrors) pair up.
+    const auto run_end = [](auto it, auto end) {
+        const std::uint32_t j = it->patch;
+        while (it != end && it->patch == j) ++it;
+        return it;
+    };
     auto a = from_laser.begin(), b = from_sensor.begin();
     while (a != from_laser.end() && b != from_sensor.end()) {
         if (a->patch < b->patch) {
@@ -136,17 +147,22 @@ void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::s
         }
         const std::uint32_t j = a->patch;
         const double scale = mean3(ends * p.patches.albedo[j]) * p.patches.area[j];
-        const double first = legs + shortest_by_plane(p.patches, j, p.points.laser[l].point, p.points.sensor[s].point);
-        for (std::size_t k = 0; k < std::size_t(kViewSamples); ++k) {
-            const double g = double(a->g[k]) * double(b->g[k]);
-            if (!(g > 0.0)) continue;
-            const double path = legs + double(a->path[k]) + double(b->path[k]);
-            const double spread = std::abs(double(a->du[k]) + double(b->du[k])) +
-                                  std::abs(double(a->dv[k]) + double(b->dv[k]));
-            deposit_box(H, p, pair, std::min(path, std::max(first, path - spread)), path + spread, scale * g);
-        }
-        ++a;
-        ++b;
+        const auto a_end = run_end(a, from_laser.end()), b_end = run_end(b, from_sensor.end());
+        for (auto va = a; va != a_end; ++va)
+            for (auto vb = b; vb != b_end; ++vb) {
+                // The points as patch j sees them (their images through the views' chains).
+                const double first = legs + shortest_by_plane(p.patches, j, va->from, vb->from);
+                for (std::size_t k = 0; k < std::size_t(kViewSamples); ++k) {
+                    const double g = double(va->g[k]) * double(vb->g[k]);
+                    if (!(g > 0.0)) continue;
+                    const double path = legs + double(va->path[k]) + double(vb->path[k]);
+                    const double spread = std::abs(double(va->du[k]) + double(vb->du[k])) +
+                                          std::abs(double(va->dv[k]) + double(vb->dv[k]));
+                    deposit_box(H, p, pair, std::min(path, std::max(first, path - spread)), path + spread, scale * g);
+                }
+            }
+        a = a_end;
+        b = b_end;
     }
 }
 

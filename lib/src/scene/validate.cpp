@@ -417,18 +417,7 @@ void validate(const Scene& scene) {
     for (std::size_t i = 0; i < scene.lights.size(); ++i) check_light(scene.lights[i], lights.index(i));
     check_objects(scene, root);
     check_settings(scene, root);
-    if (scene.capture) {
-        const At capture{scene.file, scene.capture->json_path};
-        check_capture(*scene.capture, capture);
-        // A capture's first three bounces are exact sums over straight legs (docs/capture.md); through
-        // mirrors and glass they are not built yet, and a capture missing them would be wrong silently.
-        for (std::size_t i = 0; i < scene.objects.size(); ++i)
-            if (scene.objects[i].material.specular())
-                capture.fail("a capture of a scene with mirrors or glass is not supported yet (" +
-                             (scene.objects[i].json_path.empty() ? "objects[" + std::to_string(i) + "]"
-                                                                 : scene.objects[i].json_path) +
-                             " is one); render it with a camera");
-    }
+    if (scene.capture) check_capture(*scene.capture, At{scene.file, scene.capture->json_path});
     if (!scene.sensor) return;
     const SensorSettings& s = *scene.sensor;
     const At sensor{s.file.empty() ? scene.file : s.file, s.json_path.empty() ? "sensor" : s.json_path};

@@ -55,8 +55,12 @@ inline constexpr int kViewSamples = kViewSide * kViewSide;
 /// the cell's half-axes h_u, h_v, the path's gradient (y - x) / |y - x| dotted with them. A cell's paths
 /// from x then lie within path +- (|du| + |dv|) to first order, which times the cell's light as a box in
 /// path length instead of one point (docs/capture.md, "Onsets").
+/// Through mirrors and glass (Visibility::chains()), x's image through a chain sees the patch as well:
+/// one more view of the same patch, its paths unfolded and its kernel times the chain's weight.
 struct PatchView {
     std::uint32_t patch = 0;
+    std::int32_t chain = -1;                 ///< -1: the straight view; else the chain it is seen through
+    Vec3 from = Vec3::Zero();                ///< x, or its image through the chain, metres
     std::array<float, kViewSamples> path{};  ///< metres
     std::array<float, kViewSamples> g{};     ///< m^-2
     std::array<float, kViewSamples> du{};    ///< metres: (y - x) / |y - x| . h_u
@@ -80,7 +84,8 @@ struct ViewCells {
 /// The samples and cells of every patch (for view_patches).
 ViewCells view_cells(const PatchSet& patches);
 
-/// Every patch that wall point w sees (some sample with g > 0), in increasing patch order.
+/// Every patch that wall point w sees (some sample with g > 0), straight or through a chain of mirrors
+/// and glass, in increasing patch order (then chain order, the straight view first).
 std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility,
                                     const ViewCells& cells);
 
