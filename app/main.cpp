@@ -180,6 +180,9 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
                     "judged)\n",
                     s.links, double(s.link_bytes) / 1e6, s.clusters, static_cast<unsigned long long>(s.patch_links),
                     static_cast<unsigned long long>(s.cluster_links), static_cast<unsigned long long>(s.candidates));
+    if (s.mirror_links > 0)
+        std::printf("mirrors  %llu of the links go through mirrors and glass\n",
+                    static_cast<unsigned long long>(s.mirror_links));
     std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
     std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
     return 0;

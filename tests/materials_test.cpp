@@ -8,6 +8,7 @@
 #include "tprf/core/error.h"
 #include "tprf/geometry/mirror_images.h"
 #include "tprf/geometry/patches.h"
+#include "tprf/pipeline/info.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 
@@ -155,7 +156,9 @@ TEST(Materials, EchoTrainOfGlassInFrontOfADiffuserMatchesTheMirrorImageViewFacto
         const auto first = std::find_if(p.begin(), p.end(), [&](double v) { return v > 0.0; });
         EXPECT_EQ(int(first - p.begin()), expected) << "echo " << k;
         const int peak = int(std::max_element(p.begin(), p.end()) - p.begin());
-        if (k <= 2) EXPECT_LE(std::abs(peak - expected), 1) << "echo " << k << " peaks at bin " << peak;
+        if (k <= 2) {
+            EXPECT_LE(std::abs(peak - expected), 1) << "echo " << k << " peaks at bin " << peak;
+        }
     }
     // B glows uniformly, so the first echo holds albedo R F of it exactly; later ones, lit unevenly,
     // a little more (their light gathers towards B's centre).
@@ -164,6 +167,20 @@ TEST(Materials, EchoTrainOfGlassInFrontOfADiffuserMatchesTheMirrorImageViewFacto
              expected_ratio);
     EXPECT_NEAR(ratio, expected_ratio, 0.02 * expected_ratio);
     EXPECT_NEAR(energy[2] / energy[1], expected_ratio, 0.02 * expected_ratio);
+}
+
+// `tprf info` counts the links through the glass before building them (within a factor 2), and the
+// built summary names them.
+TEST(Materials, InfoCountsTheLinksThroughMirrors) {
+    const tprf::Scene scene = tprf::parse_scene(echo_scene(0.0625).dump(), "echo.json");
+    const tprf::ResourceEstimate e = tprf::estimate_resources(scene, {}, false);
+    const tprf::SceneSummary s = tprf::describe_scene(scene, {});
+    MEASURED("echo scene: %zu links estimated, %zu built, %llu through the glass\n", e.links, s.links,
+             static_cast<unsigned long long>(s.mirror_links));
+    EXPECT_EQ(s.mirror_links, s.links);  // the diffuser and the glass' back never face each other directly
+    EXPECT_GT(s.mirror_links, 0u);
+    EXPECT_LT(double(e.links), 2.0 * double(s.links));
+    EXPECT_GT(double(e.links), 0.5 * double(s.links));
 }
 
 // A closed unit box, inward walls of albedo a, one wall a perfect mirror, a glowing patch on the floor:

@@ -86,6 +86,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
         link_options.threads = options.threads;
         link_options.progress = options.progress;
         t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
+        add_mirror_links(t.links, t.patches, *t.visibility, link_options, scene.time.bin_width_m());
         report.links = t.links.links.size();
     }
     report.seconds.links = seconds_since(start);

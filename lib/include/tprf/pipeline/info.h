@@ -38,6 +38,7 @@ struct SceneSummary {
     std::size_t links = 0;
     std::size_t link_bytes = 0;
     std::uint64_t pairs_tested = 0; ///< unordered pairs facing each other (flat)
+    std::uint64_t mirror_links = 0; ///< of `links`, those through mirrors and glass (both directions)
     std::size_t clusters = 0;       ///< clusters of the tree (hierarchical)
     std::uint64_t cluster_links = 0;///< links with a cluster at either end, pieces counted once (hierarchical)
     std::uint64_t patch_links = 0;  ///< patch-to-patch links (hierarchical)

@@ -95,7 +95,8 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
                                const LinkOptions& options, double bin_width_m);
 
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
-/// `bin_width_m` (and then its counts in `stats`, when given).
+/// `bin_width_m` (and then its counts in `stats`, when given). Links through mirrors are the caller's
+/// next step (add_mirror_links), so that it can report them.
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
                       double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr);
 
