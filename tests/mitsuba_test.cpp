@@ -243,6 +243,35 @@ TEST(Mitsuba, RefAndTwosided) {
     EXPECT_FALSE(s.objects[1].two_sided);
 }
 
+// A conductor is a mirror (Mitsuba's perfect "none", times its specular_reflectance), twosided it
+// reflects on both sides (glass that passes nothing); a thin dielectric of index 1.5 is glass with the
+// normal-incidence R = 2r / (1 + r), T = (1 - r) / (1 + r), r = 0.04. A solid dielectric is refused.
+TEST(Mitsuba, ConductorsAndThinDielectricsAreMirrorsAndGlass) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="rectangle"><bsdf type="conductor"><float name="specular_reflectance" value="0.9"/></bsdf></shape>
+      <shape type="rectangle"><bsdf type="twosided"><bsdf type="conductor"/></bsdf></shape>
+      <shape type="rectangle"><bsdf type="thindielectric"><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/></bsdf></shape>)"),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 3u);
+    EXPECT_EQ(s.objects[0].material.type, tprf::MaterialType::Mirror);
+    EXPECT_EQ(s.objects[0].material.reflectance.matrix(), Vec3::Constant(0.9));
+    EXPECT_EQ(s.objects[0].albedo.matrix(), Vec3::Zero());
+    EXPECT_EQ(s.objects[1].material.type, tprf::MaterialType::Glass);
+    EXPECT_EQ(s.objects[1].material.reflectance.matrix(), Vec3::Constant(1.0));
+    EXPECT_EQ(s.objects[1].material.transmittance.matrix(), Vec3::Zero());
+    EXPECT_EQ(s.objects[2].material.type, tprf::MaterialType::Glass);
+    EXPECT_NEAR(s.objects[2].material.reflectance[0], 2 * 0.04 / 1.04, 1e-12);
+    EXPECT_NEAR(s.objects[2].material.transmittance[0], 0.96 / 1.04, 1e-12);
+    EXPECT_NE(error_of(scene_xml(R"(<shape type="rectangle"><bsdf type="dielectric"/></shape>)"), dir)
+                  .find("scene.xml:12: <bsdf type=\"dielectric\">: a solid dielectric refracts"),
+              std::string::npos);
+    EXPECT_NE(error_of(scene_xml(R"(<shape type="rectangle"><bsdf type="conductor"><string name="material" value="Au"/></bsdf></shape>)"),
+                       dir)
+                  .find("conductor material \"Au\""),
+              std::string::npos);
+}
+
 TEST(Mitsuba, AreaAndPointEmitters) {
     TempDir dir;
     const tprf::Scene s = parse(scene_xml(R"(
@@ -479,11 +508,11 @@ TEST(MitsubaCli, DefinesReachTheScene) {
 
 TEST(MitsubaCli, BadElementExitsTwoWithFileLineAndWritesNothing) {
     TempDir dir;
-    std::ofstream(dir.path / "bad.xml") << scene_xml(R"(<shape type="rectangle"><bsdf type="conductor"/></shape>)");
+    std::ofstream(dir.path / "bad.xml") << scene_xml(R"(<shape type="rectangle"><bsdf type="roughplastic"/></shape>)");
     const tprf::test::Outcome r =
         tprf::test::run_tprf("render " + (dir.path / "bad.xml").string() + " -o " + (dir.path / "out").string());
     EXPECT_EQ(r.status, 2);
-    EXPECT_NE(r.err.find("bad.xml:12: <bsdf type=\"conductor\">: unsupported BSDF type"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("bad.xml:12: <bsdf type=\"roughplastic\">: unsupported BSDF type"), std::string::npos) << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     EXPECT_FALSE(fs::exists(dir.path / "out"));
 }

@@ -28,6 +28,7 @@ using mitsuba::describe;
 struct Surface {
     Rgb albedo = Rgb::Constant(0.5);  // Mitsuba's default diffuse reflectance
     bool two_sided = false;
+    Material material;                // a conductor or a thin dielectric: mirror or glass
 };
 
 // What is read while walking the document: elements with an id (for <ref>), and whether the one-of
@@ -51,6 +52,7 @@ void check_color(const Props& p, std::string_view name, const Rgb& c, bool at_mo
 }
 
 Surface diffuse_bsdf(const Context& ctx, const pugi::xml_node& node);
+Surface specular_bsdf(const Context& ctx, const pugi::xml_node& node, std::string_view type);
 
 // <bsdf type="diffuse"> or <bsdf type="twosided"> around one, or a <ref> to either.
 Surface parse_bsdf(const Context& ctx, pugi::xml_node node, bool inside_twosided) {
@@ -65,16 +67,64 @@ Surface parse_bsdf(const Context& ctx, pugi::xml_node node, bool inside_twosided
     }
     const std::string type = node.attribute("type").value();
     if (type == "diffuse") return diffuse_bsdf(ctx, node);
+    if (type == "conductor" || type == "thindielectric") return specular_bsdf(ctx, node, type);
+    if (type == "dielectric")
+        ctx.src.fail(node, "a solid dielectric refracts, which tprf does not; a thin sheet of glass is "
+                           "<bsdf type=\"thindielectric\"> (docs/materials.md)");
     if (type != "twosided")
         ctx.src.fail(node, "unsupported BSDF type " + std::string("\"") + type +
-                               "\" (tprf reads \"diffuse\" and \"twosided\" around it)");
+                               "\" (tprf reads \"diffuse\", \"conductor\", \"thindielectric\" and \"twosided\" "
+                               "around a diffuse or conductor one)");
     if (inside_twosided) ctx.src.fail(node, "a twosided BSDF inside a twosided BSDF");
     Props p(ctx.src, node);
     const std::vector<pugi::xml_node> inner = p.objects({"bsdf", "ref"});
     p.finish();
     if (inner.size() != 1) p.fail("needs exactly one nested diffuse <bsdf> (tprf has no separate back side)");
     Surface s = parse_bsdf(ctx, inner.front(), true);
+    if (s.material.type == MaterialType::Glass) ctx.src.fail(node, "a thin dielectric is two-sided already");
+    if (s.material.type == MaterialType::Mirror) {
+        // A mirror on both sides is glass that lets nothing through.
+        s.material.type = MaterialType::Glass;
+        return s;
+    }
     s.two_sided = true;
+    return s;
+}
+
+// <bsdf type="conductor"> as a mirror (material "none": Mitsuba's perfect mirror, times its
+// specular_reflectance), <bsdf type="thindielectric"> as glass with the normal-incidence reflectance
+// and transmittance of a thin sheet of relative index n: r = ((n - 1) / (n + 1))^2, R = 2r / (1 + r),
+// T = (1 - r) / (1 + r). tprf's specular parts do not vary with the angle (docs/mitsuba.md).
+Surface specular_bsdf(const Context& ctx, const pugi::xml_node& node, std::string_view type) {
+    Props p(ctx.src, node);
+    Surface s;
+    s.albedo = Rgb::Zero();
+    Rgb scale = Rgb::Ones();
+    if (const auto r = p.color("specular_reflectance")) {
+        scale = *r;
+        check_color(p, "specular_reflectance", scale, true);
+    }
+    if (type == "conductor") {
+        const auto material = p.string("material");
+        if (material && *material != "none")
+            p.fail("conductor material \"" + *material + "\": tprf's mirrors reflect alike at every angle; give "
+                   "material \"none\" and a specular_reflectance");
+        s.material.type = MaterialType::Mirror;
+        s.material.reflectance = scale;
+    } else {
+        const double int_ior = p.number("int_ior").value_or(1.5046), ext_ior = p.number("ext_ior").value_or(1.000277);
+        if (!(int_ior > 0.0) || !(ext_ior > 0.0)) p.fail("int_ior and ext_ior must be > 0 (numbers)");
+        Rgb transmit = Rgb::Ones();
+        if (const auto t = p.color("specular_transmittance")) {
+            transmit = *t;
+            check_color(p, "specular_transmittance", transmit, true);
+        }
+        const double n = int_ior / ext_ior, r = ((n - 1.0) / (n + 1.0)) * ((n - 1.0) / (n + 1.0));
+        s.material.type = MaterialType::Glass;
+        s.material.reflectance = scale * (2.0 * r / (1.0 + r));
+        s.material.transmittance = transmit * ((1.0 - r) / (1.0 + r));
+    }
+    p.finish();
     return s;
 }
 
@@ -162,6 +212,7 @@ void parse_shape(const Context& ctx, const pugi::xml_node& node, std::vector<Obj
                            "two-sided tprf surface would emit from both sides (use a one-sided diffuse BSDF)");
     o.albedo = surface.albedo;
     o.two_sided = surface.two_sided;
+    o.material = surface.material;
     if (type == "obj" || type == "ply") {
         MeshShape mesh;
         mesh.file = mesh_file(ctx.src, p);
