@@ -8,13 +8,61 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 namespace tprf {
 
 TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time,
                              DelayMode delay, float* cube, int order, bool last_is_tail, int threads)
     : m_gather(gather), m_illumination(illumination), m_time(time), m_delay(delay), m_cube(cube), m_order(order),
-      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)) {}
+      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)) {
+    merge_taps();
+}
+
+void TransientFilm::merge_taps() {
+    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const std::size_t pixels = m_gather.row.empty() ? 0 : m_gather.row.size() - 1;
+    std::vector<std::vector<Tap>> per_pixel(pixels);
+    parallel_for(pixels, {m_threads, 256, true}, [&](std::size_t px) {
+        std::vector<Tap>& out = per_pixel[px];
+        for (std::uint64_t k = m_gather.row[px]; k < m_gather.row[px + 1]; ++k) {
+            const PixelTap& tap = m_gather.taps[k];
+            const double lag = double(tap.leg) * inv_bin;
+            Tap t{tap.patch, 0, std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin)), tap.weight, 0.0f};
+            if (m_delay == DelayMode::Nearest) {
+                t.lag = std::int32_t(std::floor(lag + 0.5));
+            } else {
+                t.lag = std::int32_t(std::floor(lag));
+                const double f = lag - double(t.lag);
+                t.w0 = float(tap.weight * (1.0 - f));
+                t.w1 = float(tap.weight * f);
+            }
+            out.push_back(t);
+        }
+        // In a fixed order (the gather's, then the key's), so that the sums do not depend on threads.
+        std::stable_sort(out.begin(), out.end(), [](const Tap& a, const Tap& b) {
+            return std::tie(a.patch, a.lag, a.first) < std::tie(b.patch, b.lag, b.first);
+        });
+        std::size_t kept = 0;
+        for (std::size_t k = 0; k < out.size(); ++k) {
+            Tap& last = out[kept > 0 ? kept - 1 : 0];
+            if (kept > 0 && last.patch == out[k].patch && last.lag == out[k].lag && last.first == out[k].first) {
+                last.w0 += out[k].w0;
+                last.w1 += out[k].w1;
+            } else {
+                out[kept++] = out[k];
+            }
+        }
+        out.resize(kept);
+    });
+    m_row.assign(pixels + 1, 0);
+    for (std::size_t px = 0; px < pixels; ++px) m_row[px + 1] = m_row[px] + per_pixel[px].size();
+    m_taps.reserve(m_row[pixels]);
+    for (auto& v : per_pixel) {
+        m_taps.insert(m_taps.end(), v.begin(), v.end());
+        std::vector<Tap>().swap(v);
+    }
+}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -60,24 +108,13 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
 // One pixel's taps over the block: each reads its patch's profile and shifts it by the last leg,
 // split between two bins.
 void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
     const std::int64_t T = m_time.bins;
     float* out = m_cube + px * std::size_t(T) * 3;
-    for (std::uint64_t k = m_gather.row[px]; k < m_gather.row[px + 1]; ++k) {
-        const PixelTap& tap = m_gather.taps[k];
-        const double lag = double(tap.leg) * inv_bin;
-        std::int64_t whole;
-        float w0 = tap.weight, w1 = 0.0f;
-        if (m_delay == DelayMode::Nearest) {
-            whole = std::int64_t(std::floor(lag + 0.5));
-        } else {
-            whole = std::int64_t(std::floor(lag));
-            const double f = lag - double(whole);
-            w0 = float(tap.weight * (1.0 - f));
-            w1 = float(tap.weight * f);
-        }
+    for (std::uint64_t k = m_row[px]; k < m_row[px + 1]; ++k) {
+        const Tap& tap = m_taps[k];
+        const std::int64_t whole = tap.lag, first = tap.first;
+        const float w0 = tap.w0, w1 = tap.w1;
         // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
-        const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
         const std::int64_t base = first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
         const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
         // Bins t whose w0 target base + t lies before `first` (and their w1 targets up to it).

@@ -6,6 +6,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/scene/scene.h"
 
+#include <cstdint>
 #include <vector>
 
 namespace tprf {
@@ -31,7 +32,17 @@ public:
     void add_block(const SolveBlock& block);
 
 private:
+    /// A pixel's taps on one patch that land alike, summed: out[t + lag] += w0 B[t], out[t + lag + 1]
+    /// += w1 B[t], light before bin `first` moved to it (the earliest bound of its samples).
+    struct Tap {
+        std::uint32_t patch;
+        std::int32_t lag;    ///< whole bins of the leg
+        std::int64_t first;  ///< the earliest bin any of its light may reach
+        float w0, w1;
+    };
+
     bool takes_order(int order) const;
+    void merge_taps();
     void copy_indirect(const SolveBlock& block);
     void add_taps(std::size_t pixel, int first_bin, std::size_t bins);
 
@@ -44,6 +55,11 @@ private:
     bool m_last_is_tail;
     int m_threads;
     std::vector<float> m_indirect;  ///< N x bins x 3 scratch, one block
+    /// The gather's taps split between bins as the delay mode says and merged per pixel wherever they
+    /// share a patch, a lag and a first bin (a pixel's samples mostly do): each profile is read a
+    /// few times per pixel, not once per sample and neighbour.
+    std::vector<std::uint64_t> m_row;
+    std::vector<Tap> m_taps;
 };
 
 /// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same
