@@ -6,6 +6,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/geometry/form_factors.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -426,4 +427,56 @@ TEST(RenderWindow, ALateWindowShowsWhatTheSameBinsOfAnEarlyOneShow) {
         EXPECT_GT(total, 0.0);
         EXPECT_LT(diff, 1e-5 * peak) << "from bin " << offset << ": largest difference " << diff << " of a peak " << peak;
     }
+}
+
+// A floor lit by a square emitter above it: at every pixel (spp 1, the pixel centre) the radiance is
+// albedo L_e F(x) to 0.2% (F the exact point-to-polygon form factor), and the first light
+// of the first bounce arrives exactly in the bin of the camera leg plus the distance from the floor
+// point to the emitter's polygon (its nearest point): each cell of the emitter is timed as the box of
+// its paths, never before that distance.
+TEST(AreaLight, AFloorUnderASquareEmitterHasItsExactRadianceAndFirstArrivalAtEveryPixel) {
+    const double bin = 0.01;
+    const nlohmann::json s = {
+        {"time", {{"bins", 400}, {"bin_width", bin}}},
+        {"camera", {{"position", {0.3, -0.8, 1.6}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 0, 1}}, {"fov", 50},
+                    {"width", 24}, {"height", 24}}},
+        {"objects",
+         {{{"type", "rectangle"}, {"origin", {-0.5, -0.5, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}}, {"albedo", 0.7}},
+          {{"type", "rectangle"}, {"origin", {0.3, 0.3, 0.6}}, {"u", {0, 0.4, 0}}, {"v", {0.4, 0, 0}},
+           {"albedo", 0.0}, {"emission", 1.0}}}},
+        {"patches", {{"max_edge", 0.1}}},
+        {"solver", {{"bounces", true}, {"max_bounces", 1}}}};
+    const tprf::Scene scene = tprf::parse_scene(s.dump(), "area.json");
+    const tprf::RenderResult r = tprf::render_scene(scene, {});
+    const tprf::FloatArray& order1 = r.arrays.at("transient_bounce_1");
+    const tprf::Camera& cam = *scene.camera;
+    int checked = 0;
+    for (int row = 0; row < 24; ++row)
+        for (int col = 0; col < 24; ++col) {
+            const tprf::Vec3 d = tprf::camera_ray(cam, col + 0.5, row + 0.5);
+            if (!(d.z() < 0.0)) continue;
+            const double t = -cam.position.z() / d.z();
+            const tprf::Vec3 x = cam.position + t * d;
+            if (x.x() < -0.5 || x.x() > 1.5 || x.y() < -0.5 || x.y() > 1.5) continue;
+            const tprf::Vec3 on_lamp = cam.position + ((cam.position.z() - 0.6) / -d.z()) * d;
+            if (on_lamp.x() > 0.29 && on_lamp.x() < 0.71 && on_lamp.y() > 0.29 && on_lamp.y() < 0.71) continue;  // its back
+            // Seen from x, the lamp's nearest point: straight up when x lies under it, else on an edge.
+            const double cx = std::clamp(x.x(), 0.3, 0.7), cy = std::clamp(x.y(), 0.3, 0.7);
+            const double path = t + std::sqrt((x.x() - cx) * (x.x() - cx) + (x.y() - cy) * (x.y() - cy) + 0.36);
+            const double at = path / bin;
+            if (at >= 399.0) continue;                                                  // after the window
+            if (at - std::floor(at) < 1e-3 || std::ceil(at) - at < 1e-3) continue;  // on a bin edge
+            const float* p = order1.data.data() + (std::size_t(row) * 24 + std::size_t(col)) * 400 * 3;
+            int first = -1;
+            for (int b = 0; b < 400 && first < 0; ++b)
+                if (p[3 * b] > 0.0f) first = b;
+            EXPECT_EQ(first, int(std::floor(at))) << "pixel " << row << "," << col << " path " << path;
+            // Its radiance: albedo L_e F(x), F Lambert's exact point-to-polygon form factor (0.2%).
+            const tprf::Vec3 lamp[4] = {{0.3, 0.3, 0.6}, {0.3, 0.7, 0.6}, {0.7, 0.7, 0.6}, {0.7, 0.3, 0.6}};  // CCW from below
+            const double f = tprf::point_polygon_form_factor(x, tprf::Vec3::UnitZ(), lamp, 4, -tprf::Vec3::UnitZ());
+            const float steady = r.arrays.at("steady").data[(std::size_t(row) * 24 + std::size_t(col)) * 3];
+            EXPECT_NEAR(steady, 0.7 * f, 0.002 * 0.7 * f) << "pixel " << row << "," << col;
+            ++checked;
+        }
+    EXPECT_GE(checked, 400);
 }

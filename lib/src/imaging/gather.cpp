@@ -63,8 +63,10 @@ void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patche
     const double bin_m = options.time ? options.time->bin_width_m() : 0.0;
     thread_local std::vector<AreaPair> pairs;
     pairs.clear();
-    double total = arrive_area(a, sp.point, n, vis, area_sampling(a, sp.point, bin_m, options.emitter_rays,
-                                                                  options.penumbra_rays), pairs);
+    const double origin = options.time ? options.time->start_m() - sp.leg : 0.0;  // bin edges, as merged below
+    double total = arrive_area(a, sp.point, n, vis,
+                               area_sampling(a, sp.point, bin_m, origin, options.emitter_rays, options.penumbra_rays),
+                               pairs);
     if (!(total > 0.0) && (total = arrive_area_centroid(a, sp.point, n, vis, pairs)) == 0.0) return;
     const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
     if (options.time) pairs = merge_pairs_by_bin(pairs, bin_m, options.time->start_m() - sp.leg);

@@ -84,8 +84,9 @@ void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t
     if (!(energy > 0.0).any()) return;
     const Vec3& ni = patches.normal[i];
     const double bin_m = options.merge_bins ? options.merge_bins->bin_width_m() : 0.0;
+    const double origin = options.merge_bins ? options.merge_bins->start_m() : 0.0;  // as merged below
     const AreaSampling sampling =
-        area_sampling(a, patches.centroid[i], bin_m, options.emitter_rays, options.penumbra_rays);
+        area_sampling(a, patches.centroid[i], bin_m, origin, options.emitter_rays, options.penumbra_rays);
     const int g = grid_side(options.area_samples);
     pairs.clear();
     double total = 0.0;  // the weight of every pair, blocked or not

@@ -221,14 +221,17 @@ double earliest_path(const LightSources& sources, const Vec3& x) {
     return std::isfinite(best) ? best : 0.0;
 }
 
-AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int shadow_rays, int penumbra_rays) {
+AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, double origin, int shadow_rays,
+                           int penumbra_rays) {
     const auto side = [](int cells) { return std::max(1, int(std::lround(std::sqrt(double(std::max(cells, 1)))))); };
     AreaSampling s;
     if (bin_m > 0.0) {
         double far = 0.0;
         for (int k = 0; k < a.count; ++k) far = std::max(far, (a.corners[std::size_t(k)] - x).norm());
         const double spread = far - distance_to_polygon(x, a.polygon(), a.count, a.normal);
-        s.timing = int(std::clamp(std::ceil(2.0 * spread / bin_m), 2.0, 32.0));
+        s.timing = int(std::clamp(std::ceil(0.5 * spread / bin_m), 2.0, 32.0));
+        s.bin_m = bin_m;
+        s.origin = origin;
     }
     s.shadow = side(shadow_rays);
     s.penumbra = std::max(side(penumbra_rays), s.shadow);
@@ -240,6 +243,34 @@ namespace {
 // The share of light that passes from the point y of area source a (or of its image) to x.
 double pass_between(const Visibility& vis, const AreaSource& a, const Vec3& x, const Vec3& y) {
     return a.chain < 0 ? vis.transmittance(x, y) : vis.unfolded(vis.chains()[std::size_t(a.chain)], x, y);
+}
+
+}  // namespace
+
+namespace {
+
+// The light `weight` of cell (u, v) of an m x m grid over source a, whose centre is `path` from x,
+// spread evenly over the cell's paths to first order (path +- the change of |y - x| along the cell's
+// half-axes, never before `nearest`) and cut at the bin edges: one pair per bin it touches.
+void cell_box(const AreaSource& a, const Vec3& x, int u, int v, int m, double path, double nearest,
+              const AreaSampling& s, double weight, std::vector<AreaPair>& out) {
+    const double cu = (u + 0.5) / m, cv = (v + 0.5) / m, h = 0.5 / m;
+    const Vec3 dir = (a.point(cu, cv) - x) / path;
+    const double spread = 0.5 * (std::abs(dir.dot(a.point(cu + h, cv) - a.point(cu - h, cv))) +
+                                 std::abs(dir.dot(a.point(cu, cv + h) - a.point(cu, cv - h))));
+    const double lo = std::max(path - spread, std::min(nearest, path)), hi = path + spread;
+    const double first = std::floor((lo - s.origin) / s.bin_m), last = std::floor((hi - s.origin) / s.bin_m);
+    if (!(hi > lo) || first == last) {
+        out.push_back({std::max(lo, std::min(path, hi)), weight});
+        return;
+    }
+    const double per_metre = weight / (hi - lo);
+    for (double b = first; b <= last; ++b) {
+        const double start = s.origin + b * s.bin_m, from = std::max(lo, start);
+        const double overlap = std::min(hi, start + s.bin_m) - from;
+        // The middle of the overlap: well inside the bin, whatever the rounding of its edges.
+        if (overlap > 0.0) out.push_back({from + 0.5 * overlap, per_metre * overlap});
+    }
 }
 
 }  // namespace
@@ -274,6 +305,7 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     }
     const bool penumbra = any_open && any_blocked;
     const int m = penumbra ? std::max(s.timing, s.penumbra) : s.timing;
+    const double nearest = s.bin_m > 0.0 ? distance_to_polygon(x, a.polygon(), a.count, a.normal) : 0.0;
     double total = 0.0;
     for (int c = 0; c < m * m; ++c) {
         const int u = c % m, v = c / m;
@@ -290,7 +322,12 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
             if (o < 0.0) o = open_to(cu, cv, coarse);  // its centre faces away, this pair does not
             open = o;
         }
-        if (open > 0.0) out.push_back({path, w * open});
+        if (!(open > 0.0)) continue;
+        if (s.bin_m > 0.0) {
+            cell_box(a, x, u, v, m, path, nearest, s, w * open, out);
+        } else {
+            out.push_back({path, w * open});
+        }
     }
     return total;
 }

@@ -133,14 +133,21 @@ inline constexpr int kAreaPenumbraRays = 256;
 
 /// How an area source is sampled from one surface point: a grid of cells over the source.
 struct AreaSampling {
-    int timing = 4;     ///< cells per side whose centres time the light
+    int timing = 4;     ///< cells per side that time the light
     int shadow = 4;     ///< cells per side that shadow rays test first
     int penumbra = 16;  ///< cells per side, a ray each, where those disagree (or `timing`, if finer)
+    /// When > 0, each cell's light is spread evenly over its paths, its centre's path +- the path's
+    /// first-order change across the cell (never before x's distance to the source), and cut at the
+    /// bin edges origin + k bin_m: one pair per bin it touches. When 0, one pair at the centre's path.
+    double bin_m = 0.0;
+    double origin = 0.0;
 };
 
-/// The sampling of source a seen from x: timing cells whose paths span about half of `bin_m` (2 to 32
-/// per side; 4 when bin_m is 0), and shadow grids of about `shadow_rays` and `penumbra_rays` cells.
-AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, int shadow_rays, int penumbra_rays);
+/// The sampling of source a seen from x: timing cells whose paths span about two bins of `bin_m`
+/// (2 to 32 per side; 4 when bin_m is 0), their light cut at the bin edges `origin` + k bin_m, and
+/// shadow grids of about `shadow_rays` and `penumbra_rays` cells.
+AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, double origin, int shadow_rays,
+                           int penumbra_rays);
 
 /// The light of area source a at the point x with unit normal n: appends to `out` the pairs between x
 /// and the cells' centres that shadow rays find unblocked (to the shadow grid's cells; where those
