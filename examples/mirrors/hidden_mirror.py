@@ -15,11 +15,10 @@ scene's mirror) and writes OUTDIR/hidden_mirror.png. Exit 1 unless the normal is
 the plane within 1 cm.
 """
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from tprf_cube import (camera_rays, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane,
+from tprf_cube import (camera_rays, finish, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane,
                        unit)
 
 args, scene, cube, start, bin_m, C = open_experiment(__doc__, __file__)
@@ -122,8 +121,4 @@ a2.set_xlabel("x (m)")
 a2.set_ylabel("y (m)")
 a2.legend(fontsize=7, loc="best")
 a2.set_title(f"top view: normal off {angle:.2f} deg, plane off {off * 1000:.1f} mm")
-fig.tight_layout()
-png = Path(args.outdir) / "hidden_mirror.png"
-fig.savefig(png, dpi=110)
-print(f"wrote {png}")
-sys.exit(0 if ok else 1)
+finish(fig, args.outdir, "hidden_mirror", ok)

@@ -14,11 +14,10 @@ ray against the scene's mirror plane) and writes OUTDIR/mirror_depth.png. Exit 1
 than one bin width.
 """
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from tprf_cube import camera_rays, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane
+from tprf_cube import camera_rays, finish, open_experiment, in_rect, laser_ray, onset_paths, ray_plane, rect_plane
 
 args, scene, cube, start, bin_m, C = open_experiment(__doc__, __file__)
 cam = scene["camera"]
@@ -97,8 +96,4 @@ for p, style, name in marks:
 a2.set_aspect("equal")
 a2.legend(fontsize=8, loc="best")
 a2.set_title(f"flatland: X off by {err * 1000:.2f} mm ({err / bin_m:.2f} bins)")
-fig.tight_layout()
-png = Path(args.outdir) / "mirror_depth.png"
-fig.savefig(png, dpi=110)
-print(f"wrote {png}")
-sys.exit(0 if err <= bin_m else 1)
+finish(fig, args.outdir, "mirror_depth", err <= bin_m)

@@ -95,3 +95,13 @@ def onset_paths(profiles, start, bin_m, frac=0.02):
     rows = np.arange(len(p))
     a, b = p[rows, k0], p[rows, np.minimum(k0 + 1, p.shape[1] - 1)]
     return start + (k0 + b / (a + b) + 0.5) * bin_m
+
+
+def finish(fig, outdir, name, ok):
+    """Writes the figure as OUTDIR/NAME.png and exits 0 when the answer met its bar, else 1."""
+    import sys
+    fig.tight_layout()
+    png = Path(outdir) / f"{name}.png"
+    fig.savefig(png, dpi=110)
+    print(f"wrote {png}")
+    sys.exit(0 if ok else 1)
