@@ -178,6 +178,22 @@ def test_info_gives_the_estimate_and_the_counts():
     assert "links" not in tprf.info(tprf.load_scene(CORNER), links=False)
 
 
+def test_a_mirror_from_a_dict_scene_adds_links_and_light():
+    # The corner with a mirror at x = 0 facing +x: light reaches the floor and the wall through it too.
+    mirrored = copy.deepcopy(CORNER)
+    mirrored["objects"].append({"type": "rectangle", "origin": [0, 0, 0], "u": [0, 1, 0], "v": [0, 0, 1],
+                                "material": {"type": "mirror", "reflectance": 0.9}})
+    info = tprf.info(tprf.load_scene(mirrored))
+    assert info["mirror_links"] > 0 and info["mirror_links"] < info["links"]
+    assert tprf.info(tprf.load_scene(CORNER))["mirror_links"] == 0
+    plain = tprf.render(tprf.load_scene(CORNER)).steady.sum()
+    assert tprf.render(tprf.load_scene(mirrored)).steady.sum() > plain
+    bad = copy.deepcopy(mirrored)
+    bad["objects"][-1]["material"]["reflectance"] = 1.5
+    with pytest.raises(ValueError, match=r"objects\[2\]\.material\.reflectance: must be in \[0, 1\]"):
+        tprf.load_scene(bad)
+
+
 # A render long enough to interrupt: 1 cm patches, flat links.
 SLOW = copy.deepcopy(CORNER)
 SLOW["patches"]["max_edge"] = 0.012
