@@ -343,3 +343,49 @@ TEST(Materials, CameraThroughGlassSeesTransmittanceTimesTheScene) {
 }
 
 }  // namespace
+
+namespace {
+
+// Two mirrors at right angles (a corner reflector) standing on a floor: the floor is lit by the light,
+// by its image in each mirror and by its image through both (a chain of two reflections). Unfolded:
+// the floor under the four lights. The floor's images are coplanar with it, so it never lights itself.
+TEST(Materials, ACornerReflectorLightsTheFloorAsItsFourImagesDo) {
+    json mirror_a = rect({0, 0, 0}, {0, 2, 0}, {0, 0, 2}, 0.0);  // x = 0, facing +x
+    json mirror_b = rect({0, 0, 0}, {0, 0, 2}, {2, 0, 0}, 0.0);  // y = 0, facing +y
+    for (json* m : {&mirror_a, &mirror_b}) {
+        m->erase("albedo");
+        (*m)["material"] = {{"type", "mirror"}, {"reflectance", 1.0}};
+    }
+    const json floor = rect({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0.6);
+    const json base = {{"time", {{"bins", 300}, {"bin_width", 0.01}}},
+                       {"camera", {{"position", {0.5, 0.5, 2.0}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 1, 0}},
+                                   {"fov", 16}, {"width", 16}, {"height", 16}}},
+                       {"patches", {{"max_edge", 0.1}}}};
+    json with_mirrors = base, unfolded = base;
+    with_mirrors["objects"] = {floor, mirror_a, mirror_b};
+    with_mirrors["lights"] = {point_light({0.3, 0.2, 0.5})};
+    unfolded["objects"] = {floor};
+    unfolded["lights"] = {point_light({0.3, 0.2, 0.5}), point_light({-0.3, 0.2, 0.5}), point_light({0.3, -0.2, 0.5}),
+                          point_light({-0.3, -0.2, 0.5})};
+    const tprf::RenderResult a = render(with_mirrors), b = render(unfolded);
+    const double transient = relative_difference(array(a, "transient"), array(b, "transient"));
+    const double steady = relative_difference(array(a, "steady"), array(b, "steady"));
+    MEASURED("corner reflector vs four lights: transient %.3g, steady %.3g of the peak\n", transient, steady);
+    EXPECT_LT(transient, 1e-4);
+    EXPECT_LT(steady, 1e-4);
+    // With one reflection at most (solver.max_specular 1), the image through both mirrors is gone: the
+    // floor under three lights. The chain of two carried about a tenth of the light.
+    json one = with_mirrors, three = unfolded;
+    one["solver"] = {{"max_specular", 1}};
+    three["lights"].erase(3);
+    const tprf::RenderResult c = render(one), d = render(three);
+    EXPECT_LT(relative_difference(array(c, "transient"), array(d, "transient")), 1e-4);
+    const tprf::FloatArray& sa = array(a, "steady");
+    const tprf::FloatArray& sc = array(c, "steady");
+    const double share = 1.0 - std::accumulate(sc.data.begin(), sc.data.end(), 0.0) /
+                                   std::accumulate(sa.data.begin(), sa.data.end(), 0.0);
+    MEASURED("the chain of two reflections carries %.3f of the light\n", share);
+    EXPECT_GT(share, 0.05);
+}
+
+}  // namespace

@@ -152,15 +152,23 @@ std::vector<double> circumradii(const PatchSet& patches) {
 
 namespace {
 
+// A patch with no diffuse part and no emission (a pure mirror or glass) neither gathers nor sends
+// diffuse light: its links would carry nothing.
+bool inert(const PatchSet& patches, std::size_t i) {
+    return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
+}
+
 // The links of patch i to every later patch j > i that faces it and is not fully occluded (patch_pair).
 void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
               const std::vector<double>& radius, const std::vector<std::uint32_t>& near_i, std::size_t i,
               std::vector<PairLink>& row, LinkStats& counts) {
     const std::size_t n = patches.size();
+    if (inert(patches, i)) return;
     std::size_t near_cursor = 0;
     for (std::size_t j = i + 1; j < n; ++j) {
         const bool is_near = near_cursor < near_i.size() && near_i[near_cursor] == j;
         if (is_near) ++near_cursor;
+        if (inert(patches, j)) continue;
         PairFormFactors f;
         if (patch_pair(patches, vis, options, radius, i, j, is_near, f, counts))
             row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f.ij)});
