@@ -323,6 +323,37 @@ TEST(Capture, ThroughAMirrorTheFirstBouncesAreThoseOfTheUnfoldedScene) {
     EXPECT_GT(total, 2.0 * straight);  // the mirror's light is there, not only the plane's own
 }
 
+// A sheet of glass that reflects nothing between the relay wall and the hidden plane: the third bounce
+// crosses it twice, so everything after the spot is Tr^2 of the capture without it (every view, the
+// small far patches' one-ray views included).
+TEST(Capture, GlassBetweenTheWallAndTheHiddenPlanePassesTransmittanceSquared) {
+    const std::string capture = R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]}, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0],
+        "v": [0, 1, 0], "nu": 4, "nv": 4}, "max_bounces": 3})";
+    // From y = -0.8 on: every wall-to-plane path crosses it (at y >= -0.75), no device leg does (y <= -0.875);
+    // inside the scene's bounds, so that the ray offsets (a share of the scene's size) stay the same.
+    const std::string glass = R"({"type": "rectangle", "origin": [-1, -0.8, 0.2], "u": [2, 0, 0], "v": [0, 1.8, 0],
+        "material": {"type": "glass", "reflectance": 0, "transmittance": 0.5}})";
+    const std::string time = R"({"bins": 400, "bin_width": 0.01})";
+    const auto capture_of = [&](const std::string& objects) {
+        const Scene scene = parse_scene(scene_text(objects, capture, time, 0.1), "glass_capture.json");
+        const PatchSet patches = build_patches(scene);
+        const std::unique_ptr<Visibility> visibility = scene_visibility(scene, patches);
+        return compute_capture(scene, patches, *visibility, nullptr, {}).H;
+    };
+    const std::vector<float> clear = capture_of(std::string(kWall) + "," + kTiltedPlane);
+    const std::vector<float> behind = capture_of(std::string(kWall) + "," + kTiltedPlane + "," + glass);
+    ASSERT_EQ(clear.size(), behind.size());
+    double largest = 0.0, worst = 0.0;
+    for (std::size_t k = 0; k < clear.size(); ++k) {
+        if (k % 400 == 0) continue;  // the spot itself
+        largest = std::max(largest, double(clear[k]));
+        worst = std::max(worst, std::abs(double(behind[k]) - 0.25 * double(clear[k])));
+    }
+    ASSERT_GT(largest, 0.0);
+    EXPECT_LE(worst, 1e-5 * largest) << "largest difference " << worst << " of " << largest;
+}
+
 // Bad capture blocks: one line naming the file and the JSON path, exit status 2, nothing written.
 class CaptureCli : public ::testing::Test {
 protected:

@@ -42,6 +42,13 @@ json rect(std::array<double, 3> o, std::array<double, 3> u, std::array<double, 3
     return {{"type", "rectangle"}, {"origin", o}, {"u", u}, {"v", v}, {"albedo", albedo}};
 }
 
+// A rectangle of a specular material, without a diffuse part.
+json specular(std::array<double, 3> o, std::array<double, 3> u, std::array<double, 3> v, const json& material) {
+    return {{"type", "rectangle"}, {"origin", o}, {"u", u}, {"v", v}, {"material", material}};
+}
+
+const json kPerfectMirror = {{"type", "mirror"}, {"reflectance", 1.0}};
+
 std::string error_of(const json& scene) {
     try {
         tprf::parse_scene(scene.dump(), "bad.json");
@@ -117,9 +124,8 @@ TEST(Materials, ClipToWindowKeepsWhatTheApexSeesThroughIt) {
 // at distance h. B glows uniformly at t = 0 (order 0); each echo is B lit by its own image at 2h.
 json echo_scene(double bin) {
     const double h = 0.25, side = 0.5;
-    json glass = rect({0, 0, h}, {side, 0, 0}, {0, side, 0}, 0.0);
-    glass.erase("albedo");
-    glass["material"] = {{"type", "glass"}, {"reflectance", 0.5}, {"transmittance", 0.4}};
+    const json glass = specular({0, 0, h}, {side, 0, 0}, {0, side, 0},
+                                {{"type", "glass"}, {"reflectance", 0.5}, {"transmittance", 0.4}});
     json b = rect({0, 0, 0}, {side, 0, 0}, {0, side, 0}, 0.8);
     b["emission"] = 1.0;
     // The camera sees exactly B (its field of view spans B's side), through the glass.
@@ -193,7 +199,7 @@ TEST(Materials, ClosedBoxWithAMirrorWallConservesEnergy) {
         rect({0, 0, 0}, {0, 0, 1}, {1, 0, 0}, a),   // y = 0, facing +y
         rect({0, 1, 0}, {1, 0, 0}, {0, 0, 1}, a),   // y = 1, facing -y
         rect({1, 0, 0}, {0, 0, 1}, {0, 1, 0}, a),   // x = 1, facing -x
-        rect({0, 0, 0}, {0, 1, 0}, {0, 0, 1}, 0.0), // x = 0, facing +x: the mirror
+        specular({0, 0, 0}, {0, 1, 0}, {0, 0, 1}, kPerfectMirror),  // x = 0, facing +x
         // The floor (facing +z) in five pieces, the middle one glowing: nothing in the box absorbs
         // but the walls' (1 - a).
         rect({0, 0, 0}, {1, 0, 0}, {0, 0.4, 0}, a),
@@ -202,8 +208,6 @@ TEST(Materials, ClosedBoxWithAMirrorWallConservesEnergy) {
         rect({0.6, 0.4, 0}, {0.4, 0, 0}, {0, 0.2, 0}, a),
         rect({0.4, 0.4, 0}, {0.2, 0, 0}, {0, 0.2, 0}, a),
     });
-    walls[4].erase("albedo");
-    walls[4]["material"] = {{"type", "mirror"}, {"reflectance", 1.0}};
     walls[9]["emission"] = 1.0;
     const json scene = {{"time", {{"bins", 8}, {"bin_width", 0.5}}},
                         {"camera", {{"position", {0.5, 0.5, 0.5}}, {"look_at", {0, 0.5, 0.5}}, {"up", {0, 0, 1}},
@@ -251,9 +255,7 @@ TEST(Materials, APixelInAMirrorSeesWhatTheUnfoldedSceneShows) {
     json quad = rect({0.5, 0, -0.5}, {1, 0, 0}, {0, 0, 1}, 0.7);  // y = 0, facing -y
     quad["u"] = {0, 0, 1};
     quad["v"] = {1, 0, 0};  // z x x = +y: facing +y
-    json mirror = rect({0, 0, -2}, {0, 3, 0}, {0, 0, 4}, 0.0);  // x = 0, facing +x
-    mirror.erase("albedo");
-    mirror["material"] = {{"type", "mirror"}, {"reflectance", 1.0}};
+    const json mirror = specular({0, 0, -2}, {0, 3, 0}, {0, 0, 4}, kPerfectMirror);  // x = 0, facing +x
     json image = rect({-1.5, 0, -0.5}, {0, 0, 1}, {1, 0, 0}, 0.7);  // the quad reflected: still facing +y
     const json base = {{"time", {{"bins", 160}, {"bin_width", 0.03}}},
                        {"camera", camera_at({1.2, 1.6, 0.3}, {-0.4, 0, 0}, 24)},
@@ -291,9 +293,7 @@ json box_walls(double x0, double length, double a) {
 
 TEST(Materials, SteadyImageOfAMirrorBoxMatchesTheUnfoldedBox) {
     const double a = 0.5;
-    json mirror = rect({0, 0, 0}, {0, 1, 0}, {0, 0, 1}, 0.0);  // x = 0, +x
-    mirror.erase("albedo");
-    mirror["material"] = {{"type", "mirror"}, {"reflectance", 1.0}};
+    const json mirror = specular({0, 0, 0}, {0, 1, 0}, {0, 0, 1}, kPerfectMirror);  // x = 0, +x
     json with_mirror = {{"time", {{"bins", 40}, {"bin_width", 0.2}}},
                         {"camera", camera_at({0.95, 0.5, 0.5}, {0, 0.5, 0.5}, 32)},
                         {"patches", {{"max_edge", 0.1}}},
@@ -322,9 +322,8 @@ TEST(Materials, SteadyImageOfAMirrorBoxMatchesTheUnfoldedBox) {
 // plate times the glass' transmittance, in every pixel and bin.
 TEST(Materials, CameraThroughGlassSeesTransmittanceTimesTheScene) {
     json plate = rect({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, 0.6);
-    json glass = rect({-2, -2, 1}, {4, 0, 0}, {0, 4, 0}, 0.0);
-    glass.erase("albedo");
-    glass["material"] = {{"type", "glass"}, {"reflectance", 0.0}, {"transmittance", 0.35}};
+    const json glass =
+        specular({-2, -2, 1}, {4, 0, 0}, {0, 4, 0}, {{"type", "glass"}, {"reflectance", 0.0}, {"transmittance", 0.35}});
     json clear = {{"time", {{"bins", 120}, {"bin_width", 0.05}}},
                   {"camera", {{"position", {0.2, 0.1, 2.5}}, {"look_at", {0, 0, 0}}, {"up", {0, 1, 0}}, {"fov", 50},
                               {"width", 16}, {"height", 16}}},
@@ -350,12 +349,8 @@ namespace {
 // by its image in each mirror and by its image through both (a chain of two reflections). Unfolded:
 // the floor under the four lights. The floor's images are coplanar with it, so it never lights itself.
 TEST(Materials, ACornerReflectorLightsTheFloorAsItsFourImagesDo) {
-    json mirror_a = rect({0, 0, 0}, {0, 2, 0}, {0, 0, 2}, 0.0);  // x = 0, facing +x
-    json mirror_b = rect({0, 0, 0}, {0, 0, 2}, {2, 0, 0}, 0.0);  // y = 0, facing +y
-    for (json* m : {&mirror_a, &mirror_b}) {
-        m->erase("albedo");
-        (*m)["material"] = {{"type", "mirror"}, {"reflectance", 1.0}};
-    }
+    const json mirror_a = specular({0, 0, 0}, {0, 2, 0}, {0, 0, 2}, kPerfectMirror);  // x = 0, facing +x
+    const json mirror_b = specular({0, 0, 0}, {0, 0, 2}, {2, 0, 0}, kPerfectMirror);  // y = 0, facing +y
     const json floor = rect({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0.6);
     const json base = {{"time", {{"bins", 300}, {"bin_width", 0.01}}},
                        {"camera", {{"position", {0.5, 0.5, 2.0}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 1, 0}},

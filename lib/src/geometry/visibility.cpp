@@ -270,7 +270,8 @@ double Visibility::unfolded(const MirrorChain& chain, const Vec3& x, const Vec3&
     const Vec3 d = image - x;
     Unfolding u;  // R1 ... R(j-1): the unfolded frame of plane j
     double t_prev = 0.0;
-    Vec3 real_prev = x;
+    std::array<Vec3, kMaxChain + 2> real;  // x, the real crossing points, y
+    real[0] = x;
     for (int j = 0; j < chain.length; ++j) {
         const SpecularPlane& s = m_planes[chain.plane[std::size_t(j)]];
         const Vec3 n = u.linear * s.normal;
@@ -282,26 +283,16 @@ double Visibility::unfolded(const MirrorChain& chain, const Vec3& x, const Vec3&
         if (!(chain.side[std::size_t(j)] * s.normal.dot(u.linear.transpose() * d) < 0.0)) return 0.0;
         const Vec3 p = u.inverse(x + t * d);
         if (!s.contains(p)) return 0.0;
-        real_prev = p;
+        real[std::size_t(j + 1)] = p;
         t_prev = t;
         u = u.after(Unfolding::reflection(s.point, s.normal));
     }
     if (through) *through = true;
     // The legs, now that the path exists: x -> p1 -> ... -> pk -> y, each straight in the real scene.
+    const std::size_t ends = std::size_t(chain.length) + 1;
+    real[ends] = chain.unfold.inverse(image);
     double weight = chain.reflectance;
-    u = Unfolding{};
-    real_prev = x;
-    t_prev = 0.0;
-    for (int j = 0; j < chain.length && weight > 0.0; ++j) {
-        const SpecularPlane& s = m_planes[chain.plane[std::size_t(j)]];
-        const Vec3 n = u.linear * s.normal;
-        const double t = n.dot(u(s.point) - x) / n.dot(d);
-        const Vec3 p = u.inverse(x + t * d);
-        weight *= transmittance(real_prev, p);
-        real_prev = p;
-        u = u.after(Unfolding::reflection(s.point, s.normal));
-    }
-    if (weight > 0.0) weight *= transmittance(real_prev, chain.unfold.inverse(image));
+    for (std::size_t k = 0; k < ends && weight > 0.0; ++k) weight *= transmittance(real[k], real[k + 1]);
     return weight;
 }
 

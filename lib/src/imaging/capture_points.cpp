@@ -174,8 +174,13 @@ bool view_patch(const PointSource& probe, std::size_t j, const Vec3& wall_normal
         v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
         seen = true;
     }
-    if (seen && one_ray && visibility.occluded(patches.centroid[j] + visibility.epsilon() * n, probe.position))
-        seen = false;
+    if (seen && one_ray) {
+        // The one ray from the centroid decides for every sample, glass between passing its share.
+        const double passed = visibility.transmittance(patches.centroid[j] + visibility.epsilon() * n, probe.position);
+        if (!(passed > 0.0)) return false;
+        if (passed < 1.0)
+            for (float& g : v.g) g = float(double(g) * passed);
+    }
     return seen;
 }
 
@@ -191,23 +196,9 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
     probe.intensity = Rgb::Constant(M_PI);
     probe.lobe = w.normal;
     probe.patch = w.patch;
-    // Its images through every chain that the wall point stands before the last plane of (the chain
-    // runs from the patch towards the wall point).
+    // And its images through mirrors and glass (the wall point's own patch may see those).
     std::vector<PointSource> probes{probe};
-    const std::vector<MirrorChain>& chains = visibility.chains();
-    for (std::size_t c = 0; c < chains.size(); ++c) {
-        const MirrorChain& chain = chains[c];
-        const std::size_t last = std::size_t(chain.length - 1);
-        const SpecularPlane& plane = visibility.planes()[chain.plane[last]];
-        if (!(chain.side[last] * plane.normal.dot(w.point - plane.point) > 0.0)) continue;
-        PointSource image = probe;
-        image.position = chain.image(probe.position);
-        image.origin = chain.image(probe.origin);
-        image.lobe = chain.unfold.linear * probe.lobe;
-        image.patch = kNoPatch;  // the wall point's own patch may see it through a mirror
-        image.chain = std::int32_t(c);
-        probes.push_back(image);
-    }
+    point_images(probe, visibility, probes);
     std::vector<PatchView> out;
     for (std::size_t j = 0; j < patches.size(); ++j)
         for (const PointSource& p : probes) {

@@ -12,24 +12,18 @@
 
 namespace tprf {
 
-TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time,
-                             DelayMode delay, float* cube, int order, bool last_is_tail, int threads)
-    : m_gather(gather), m_illumination(illumination), m_time(time), m_delay(delay), m_cube(cube), m_order(order),
-      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)) {
-    merge_taps();
-}
-
-void TransientFilm::merge_taps() {
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
-    const std::size_t pixels = m_gather.row.empty() ? 0 : m_gather.row.size() - 1;
+FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads) {
+    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
+    using Tap = FilmTaps::Tap;
     std::vector<std::vector<Tap>> per_pixel(pixels);
-    parallel_for(pixels, {m_threads, 256, true}, [&](std::size_t px) {
+    parallel_for(pixels, {thread_count(threads), 256, true}, [&](std::size_t px) {
         std::vector<Tap>& out = per_pixel[px];
-        for (std::uint64_t k = m_gather.row[px]; k < m_gather.row[px + 1]; ++k) {
-            const PixelTap& tap = m_gather.taps[k];
+        for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
+            const PixelTap& tap = gather.taps[k];
             const double lag = double(tap.leg) * inv_bin;
             Tap t{tap.patch, 0, std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin)), tap.weight, 0.0f};
-            if (m_delay == DelayMode::Nearest) {
+            if (delay == DelayMode::Nearest) {
                 t.lag = std::int32_t(std::floor(lag + 0.5));
             } else {
                 t.lag = std::int32_t(std::floor(lag));
@@ -44,25 +38,33 @@ void TransientFilm::merge_taps() {
             return std::tie(a.patch, a.lag, a.first) < std::tie(b.patch, b.lag, b.first);
         });
         std::size_t kept = 0;
-        for (std::size_t k = 0; k < out.size(); ++k) {
-            Tap& last = out[kept > 0 ? kept - 1 : 0];
-            if (kept > 0 && last.patch == out[k].patch && last.lag == out[k].lag && last.first == out[k].first) {
-                last.w0 += out[k].w0;
-                last.w1 += out[k].w1;
+        for (const Tap& t : out) {
+            if (kept > 0 && out[kept - 1].patch == t.patch && out[kept - 1].lag == t.lag && out[kept - 1].first == t.first) {
+                out[kept - 1].w0 += t.w0;
+                out[kept - 1].w1 += t.w1;
             } else {
-                out[kept++] = out[k];
+                out[kept++] = t;
             }
         }
         out.resize(kept);
     });
-    m_row.assign(pixels + 1, 0);
-    for (std::size_t px = 0; px < pixels; ++px) m_row[px + 1] = m_row[px] + per_pixel[px].size();
-    m_taps.reserve(m_row[pixels]);
+    FilmTaps merged;
+    merged.row.assign(pixels + 1, 0);
+    for (std::size_t px = 0; px < pixels; ++px) merged.row[px + 1] = merged.row[px] + per_pixel[px].size();
+    merged.taps.reserve(merged.row[pixels]);
     for (auto& v : per_pixel) {
-        m_taps.insert(m_taps.end(), v.begin(), v.end());
+        merged.taps.insert(merged.taps.end(), v.begin(), v.end());
         std::vector<Tap>().swap(v);
     }
+    return merged;
 }
+
+TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time,
+                             DelayMode delay, float* cube, int order, bool last_is_tail, int threads,
+                             std::shared_ptr<const FilmTaps> taps)
+    : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(order),
+      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)),
+      m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))) {}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -110,8 +112,8 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
 void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
     const std::int64_t T = m_time.bins;
     float* out = m_cube + px * std::size_t(T) * 3;
-    for (std::uint64_t k = m_row[px]; k < m_row[px + 1]; ++k) {
-        const Tap& tap = m_taps[k];
+    for (std::uint64_t k = m_taps->row[px]; k < m_taps->row[px + 1]; ++k) {
+        const FilmTaps::Tap& tap = m_taps->taps[k];
         const std::int64_t whole = tap.lag, first = tap.first;
         const float w0 = tap.w0, w1 = tap.w1;
         // Light the patch average puts ahead of the earliest possible arrival goes to that bin.

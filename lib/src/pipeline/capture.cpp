@@ -81,9 +81,18 @@ void deposit_box(std::vector<float>& H, const CapturePlan& p, std::size_t pair, 
     }
 }
 
+// Laser point l's spot as point sources: the spot straight, and its images through mirrors and glass.
+std::vector<PointSource> spot_sources(const CapturePlan& p, std::size_t l) {
+    std::vector<PointSource> out{
+        spot_source(wall_spot(p.points.laser[l], p.capture.laser_power, p.laser_leg(l)), p.patches, p.visibility)};
+    point_images(PointSource(out.front()), p.visibility, out);
+    return out;
+}
+
 // Orders 1 and 2: the spot itself where sensor point s's cell holds it, and the spot's light reaching
-// s straight (a relay surface that is not planar).
-void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair, std::vector<float>& H) {
+// s straight (a relay surface that is not planar) or through mirrors (`spots`: spot_sources(p, l)).
+void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::size_t pair,
+                    const std::vector<PointSource>& spots, std::vector<float>& H) {
     const WallPoint& laser = p.points.laser[l];
     const WallPoint& sensor = p.points.sensor[s];
     const Rgb spot = p.patches.albedo[laser.patch] * p.capture.laser_power;  // W leaving the spot
@@ -94,12 +103,7 @@ void add_spot_light(const CapturePlan& p, std::size_t l, std::size_t s, std::siz
         deposit(H, p, pair, p.laser_leg(l) + p.sensor_leg(s), mean3(spot) / (M_PI * cell));
     }
     if (!p.keeps(2)) return;
-    // The spot straight, and its images through mirrors and glass.
-    LightSources spots;
-    spots.points.push_back(
-        spot_source(wall_spot(laser, p.capture.laser_power, p.laser_leg(l)), p.patches, p.visibility));
-    add_images(spots, p.visibility);
-    for (const PointSource& source : spots.points) {
+    for (const PointSource& source : spots) {
         PointArrival a;
         if (!arrive(source, sensor.point, sensor.normal, p.visibility, a)) continue;
         const Rgb radiance = p.patches.albedo[sensor.patch] * a.intensity * a.cos_over_r2 / M_PI;
@@ -240,9 +244,10 @@ std::vector<std::vector<PatchView>> view_all(const CapturePlan& p, const std::ve
 // The light of laser point l that needs no march (orders 1 to 3) at every sensor point it is paired with.
 void add_exact(const CapturePlan& p, std::size_t l, const std::vector<PatchView>& laser_views,
                const std::vector<std::vector<PatchView>>& sensor_views, std::vector<float>& H) {
+    const std::vector<PointSource> spots = spot_sources(p, l);
     for (std::size_t k = 0; k < p.pair_count(); ++k) {
         const std::size_t s = p.sensor_of(l, k), pair = p.first_pair(l) + k;
-        add_spot_light(p, l, s, pair, H);
+        add_spot_light(p, l, s, pair, spots, H);
         add_third_bounce(p, l, s, pair, laser_views, p.confocal ? laser_views : sensor_views[s], H);
     }
 }

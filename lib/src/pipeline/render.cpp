@@ -136,7 +136,7 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
         float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
         const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
         c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
-                                                               term, k, tail, options.threads));
+                                                               term, k, tail, options.threads, c.film->taps()));
     }
 }
 

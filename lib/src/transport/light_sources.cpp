@@ -116,26 +116,31 @@ bool before_last_plane(const MirrorChain& chain, const std::vector<SpecularPlane
 
 }  // namespace
 
-void add_images(LightSources& sources, const Visibility& visibility) {
+void point_images(const PointSource& s, const Visibility& visibility, std::vector<PointSource>& out) {
     const std::vector<MirrorChain>& chains = visibility.chains();
-    const std::vector<SpecularPlane>& planes = visibility.planes();
-    const std::size_t points = sources.points.size(), areas = sources.areas.size();
     for (std::size_t c = 0; c < chains.size(); ++c) {
         const MirrorChain& chain = chains[c];
-        for (std::size_t k = 0; k < points; ++k) {
-            const PointSource& s = sources.points[k];
-            if (s.chain >= 0 || !before_last_plane(chain, planes, &s.origin, 1)) continue;
-            PointSource image = s;
-            image.position = chain.image(s.position);
-            image.origin = chain.image(s.origin);
-            image.lobe = chain.unfold.linear * s.lobe;
-            image.patch = kNoPatch;  // a spot may light its own patch through a mirror
-            image.chain = std::int32_t(c);
-            sources.points.push_back(image);
-        }
+        if (!before_last_plane(chain, visibility.planes(), &s.origin, 1)) continue;
+        PointSource image = s;
+        image.position = chain.image(s.position);
+        image.origin = chain.image(s.origin);
+        image.lobe = chain.unfold.linear * s.lobe;
+        image.patch = kNoPatch;
+        image.chain = std::int32_t(c);
+        out.push_back(image);
+    }
+}
+
+void add_images(LightSources& sources, const Visibility& visibility) {
+    const std::vector<MirrorChain>& chains = visibility.chains();
+    const std::size_t points = sources.points.size(), areas = sources.areas.size();
+    for (std::size_t k = 0; k < points; ++k)
+        if (sources.points[k].chain < 0) point_images(PointSource(sources.points[k]), visibility, sources.points);
+    for (std::size_t c = 0; c < chains.size(); ++c) {
+        const MirrorChain& chain = chains[c];
         for (std::size_t k = 0; k < areas; ++k) {
             const AreaSource& a = sources.areas[k];
-            if (a.chain >= 0 || !before_last_plane(chain, planes, a.polygon(), a.count)) continue;
+            if (a.chain >= 0 || !before_last_plane(chain, visibility.planes(), a.polygon(), a.count)) continue;
             std::array<Vec3, 4> corners{};
             for (int q = 0; q < a.count; ++q) corners[std::size_t(q)] = chain.image(a.corners[std::size_t(a.count - 1 - q)]);
             AreaSource image = make_area_source(corners.data(), a.count, a.radiance, a.object);
@@ -202,10 +207,7 @@ bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visib
     if (cos_x <= 0.0) return false;
     const Rgb intensity = source.intensity_towards(Vec3(-d / r));
     if (!(intensity > 0.0).any()) return false;
-    const Vec3 lifted = x + visibility.epsilon() * n;
-    const double passed = source.chain < 0
-                              ? visibility.transmittance(lifted, source.position)
-                              : visibility.unfolded(visibility.chains()[std::size_t(source.chain)], lifted, source.position);
+    const double passed = visibility.passes(source.chain, x + visibility.epsilon() * n, source.position);
     if (!(passed > 0.0)) return false;
     out.path = source.path + r;
     out.intensity = intensity * passed;
@@ -237,15 +239,6 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, dou
     s.penumbra = std::max(side(penumbra_rays), s.shadow);
     return s;
 }
-
-namespace {
-
-// The share of light that passes from the point y of area source a (or of its image) to x.
-double pass_between(const Visibility& vis, const AreaSource& a, const Vec3& x, const Vec3& y) {
-    return a.chain < 0 ? vis.transmittance(x, y) : vis.unfolded(vis.chains()[std::size_t(a.chain)], x, y);
-}
-
-}  // namespace
 
 namespace {
 
@@ -288,7 +281,7 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     };
     // The share of light that passes between x and the cell's centre (0: blocked).
     const auto open_to = [&](int u, int v, int m) {
-        return pass_between(vis, a, x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
+        return vis.passes(a.chain, x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
     };
     // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
     // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
@@ -334,7 +327,7 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,
                             std::vector<AreaPair>& out) {
-    const double passed = pass_between(vis, a, x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal);
+    const double passed = vis.passes(a.chain, x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal);
     if (!(passed > 0.0)) return 0.0;
     out.push_back({(x - a.centroid).norm(), passed});
     return 1.0;

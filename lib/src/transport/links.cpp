@@ -152,12 +152,6 @@ std::vector<double> circumradii(const PatchSet& patches) {
 
 namespace {
 
-// A patch with no diffuse part and no emission (a pure mirror or glass) neither gathers nor sends
-// diffuse light: its links would carry nothing.
-bool inert(const PatchSet& patches, std::size_t i) {
-    return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
-}
-
 // The links of patch i to every later patch j > i that faces it and is not fully occluded (patch_pair).
 void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
               const std::vector<double>& radius, const std::vector<std::uint32_t>& near_i, std::size_t i,

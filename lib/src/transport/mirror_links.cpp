@@ -29,11 +29,6 @@ struct Extra {
     float distance;
 };
 
-// A patch with no diffuse part and no emission neither receives nor sends diffuse light.
-bool inert(const PatchSet& patches, std::size_t i) {
-    return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
-}
-
 bool on_side(const SpecularPlane& s, int side, const Vec3* poly, std::size_t count) {
     for (std::size_t k = 0; k < count; ++k)
         if (side * s.normal.dot(poly[k] - s.point) > 0.0) return true;

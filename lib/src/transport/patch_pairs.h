@@ -2,6 +2,7 @@
 // Private to the transport stage: the patch-to-patch form factor that flat links use for every pair
 // and hierarchical links for the pairs they refine down to single patches.
 
+#include "tprf/geometry/patches.h"
 #include "tprf/transport/links.h"
 
 #include <vector>
@@ -26,6 +27,12 @@ double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c);
 /// True when i and j are closer than near_factor (r_i + r_j), the pairs integrated adaptively.
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
                std::size_t j);
+
+/// A patch with no diffuse part and no emission (a pure mirror or glass) neither gathers nor sends
+/// diffuse light: links to or from it would carry nothing.
+inline bool inert(const PatchSet& patches, std::size_t i) {
+    return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
+}
 
 /// Circumradius of every patch.
 std::vector<double> circumradii(const PatchSet& patches);

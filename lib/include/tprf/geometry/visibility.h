@@ -56,6 +56,12 @@ public:
     /// opposed to being shadowed).
     double unfolded(const MirrorChain& chain, const Vec3& x, const Vec3& image, bool* through = nullptr) const;
 
+    /// The share of light that passes from y to x straight (chain -1: transmittance(x, y)) or along
+    /// chains()[chain], y being then the image of the sending point (unfolded).
+    double passes(int chain, const Vec3& x, const Vec3& y) const {
+        return chain < 0 ? transmittance(x, y) : unfolded(m_chains[std::size_t(chain)], x, y);
+    }
+
     /// The surfaces along origin + s * direction (unit): the first one, and where it is a mirror or
     /// glass, what its reflection (and glass' transmission) reaches in turn, up to max_specular
     /// reflections. Appends to `out`, which holds the first surface first.

@@ -83,6 +83,10 @@ struct LightSources {
 /// `visibility` whose last plane has the source on its reflecting side.
 void add_images(LightSources& sources, const Visibility& visibility);
 
+/// Appends to `out` the mirror images of the real point source `s` (add_images' rule): position,
+/// origin and lobe reflected, its own patch no longer excluded (it may see itself in a mirror).
+void point_images(const PointSource& s, const Visibility& visibility, std::vector<PointSource>& out);
+
 /// The emissive patches of `patches` as area sources: the patches of an emissive rectangle of `scene`
 /// (per side) become that rectangle; every other emissive patch is a source of its own. Without a
 /// scene (nullptr), every emissive patch is its own source.
