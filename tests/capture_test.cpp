@@ -284,6 +284,14 @@ TEST(Capture, ALateWindowHoldsWhatTheSameBinsOfAnEarlyOneHold) {
     EXPECT_LE(worst, 1e-6 * largest) << "largest difference " << worst << " of " << largest;
 }
 
+// The capture of a scene that needs no march (max_bounces 3), mirrors and glass included.
+std::vector<float> capture_h(const std::string& text) {
+    const Scene scene = parse_scene(text, "specular_capture.json");
+    const PatchSet patches = build_patches(scene);
+    const std::unique_ptr<Visibility> visibility = scene_visibility(scene, patches);
+    return compute_capture(scene, patches, *visibility, nullptr, {}).H;
+}
+
 // A mirror perpendicular to the relay wall (the wall's image is coplanar with it, so the wall never sees
 // itself in it) and a plane in front of it: the first three bounces are those of the unfolded scene,
 // where the mirror is replaced by the plane's mirror image, to float precision.
@@ -298,12 +306,7 @@ TEST(Capture, ThroughAMirrorTheFirstBouncesAreThoseOfTheUnfoldedScene) {
     const std::string image =  // the plane reflected across x = 1 (u and v swapped keep its front)
         R"({"type": "rectangle", "origin": [1.5, -0.3, 0.5], "u": [-0.2, 0, 0.4], "v": [0, 0.6, 0], "albedo": 0.6})";
     const std::string time = R"({"bins": 500, "bin_width": 0.01})";
-    const auto capture_of = [&](const std::string& objects) {
-        const Scene scene = parse_scene(scene_text(objects, capture, time, 0.1), "mirror_capture.json");
-        const PatchSet patches = build_patches(scene);
-        const std::unique_ptr<Visibility> visibility = scene_visibility(scene, patches);
-        return compute_capture(scene, patches, *visibility, nullptr, {}).H;
-    };
+    const auto capture_of = [&](const std::string& objects) { return capture_h(scene_text(objects, capture, time, 0.1)); };
     const std::vector<float> with_mirror = capture_of(std::string(kWall) + "," + plane + "," + mirror);
     const std::vector<float> unfolded = capture_of(std::string(kWall) + "," + plane + "," + image);
     const std::vector<float> plane_only = capture_of(std::string(kWall) + "," + plane);
@@ -335,12 +338,7 @@ TEST(Capture, GlassBetweenTheWallAndTheHiddenPlanePassesTransmittanceSquared) {
     const std::string glass = R"({"type": "rectangle", "origin": [-1, -0.8, 0.2], "u": [2, 0, 0], "v": [0, 1.8, 0],
         "material": {"type": "glass", "reflectance": 0, "transmittance": 0.5}})";
     const std::string time = R"({"bins": 400, "bin_width": 0.01})";
-    const auto capture_of = [&](const std::string& objects) {
-        const Scene scene = parse_scene(scene_text(objects, capture, time, 0.1), "glass_capture.json");
-        const PatchSet patches = build_patches(scene);
-        const std::unique_ptr<Visibility> visibility = scene_visibility(scene, patches);
-        return compute_capture(scene, patches, *visibility, nullptr, {}).H;
-    };
+    const auto capture_of = [&](const std::string& objects) { return capture_h(scene_text(objects, capture, time, 0.1)); };
     const std::vector<float> clear = capture_of(std::string(kWall) + "," + kTiltedPlane);
     const std::vector<float> behind = capture_of(std::string(kWall) + "," + kTiltedPlane + "," + glass);
     ASSERT_EQ(clear.size(), behind.size());

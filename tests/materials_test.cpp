@@ -248,6 +248,18 @@ double relative_difference(const tprf::FloatArray& a, const tprf::FloatArray& b)
     return diff / top;
 }
 
+// Renders both scenes and expects the same cube and steady image, to 1e-4 of the peak; returns the first.
+tprf::RenderResult expect_same_light(const json& first, const json& second, const char* what) {
+    tprf::RenderResult a = render(first);
+    const tprf::RenderResult b = render(second);
+    const double transient = relative_difference(array(a, "transient"), array(b, "transient"));
+    const double steady = relative_difference(array(a, "steady"), array(b, "steady"));
+    MEASURED("%s: transient %.3g, steady %.3g of the peak\n", what, transient, steady);
+    EXPECT_LT(transient, 1e-4) << what;
+    EXPECT_LT(steady, 1e-4) << what;
+    return a;
+}
+
 // A quad perpendicular to a big mirror (its image is coplanar with it, so it never lights itself through
 // the mirror), a point light in front. Unfolded: the mirror replaced by the mirror image of the quad
 // and of the light. The camera sees the same cube in both, its view of the mirror included.
@@ -265,12 +277,7 @@ TEST(Materials, APixelInAMirrorSeesWhatTheUnfoldedSceneShows) {
     with_mirror["lights"] = {point_light({0.7, 0.5, 0.4})};
     unfolded["objects"] = {quad, image};
     unfolded["lights"] = {point_light({0.7, 0.5, 0.4}), point_light({-0.7, 0.5, 0.4})};
-    const tprf::RenderResult a = render(with_mirror), b = render(unfolded);
-    const double transient = relative_difference(array(a, "transient"), array(b, "transient"));
-    const double steady = relative_difference(array(a, "steady"), array(b, "steady"));
-    MEASURED("mirror pixel vs unfolded: transient %.3g, steady %.3g of the peak\n", transient, steady);
-    EXPECT_LT(transient, 1e-4);
-    EXPECT_LT(steady, 1e-4);
+    const tprf::RenderResult a = expect_same_light(with_mirror, unfolded, "mirror pixel vs unfolded");
     // The mirror half of the image is lit: the test compares light, not two dark images.
     double mirrored = 0.0;
     const tprf::FloatArray& s = array(a, "steady");
@@ -362,19 +369,13 @@ TEST(Materials, ACornerReflectorLightsTheFloorAsItsFourImagesDo) {
     unfolded["objects"] = {floor};
     unfolded["lights"] = {point_light({0.3, 0.2, 0.5}), point_light({-0.3, 0.2, 0.5}), point_light({0.3, -0.2, 0.5}),
                           point_light({-0.3, -0.2, 0.5})};
-    const tprf::RenderResult a = render(with_mirrors), b = render(unfolded);
-    const double transient = relative_difference(array(a, "transient"), array(b, "transient"));
-    const double steady = relative_difference(array(a, "steady"), array(b, "steady"));
-    MEASURED("corner reflector vs four lights: transient %.3g, steady %.3g of the peak\n", transient, steady);
-    EXPECT_LT(transient, 1e-4);
-    EXPECT_LT(steady, 1e-4);
+    const tprf::RenderResult a = expect_same_light(with_mirrors, unfolded, "corner reflector vs four lights");
     // With one reflection at most (solver.max_specular 1), the image through both mirrors is gone: the
     // floor under three lights. The chain of two carried about a tenth of the light.
     json one = with_mirrors, three = unfolded;
     one["solver"] = {{"max_specular", 1}};
     three["lights"].erase(3);
-    const tprf::RenderResult c = render(one), d = render(three);
-    EXPECT_LT(relative_difference(array(c, "transient"), array(d, "transient")), 1e-4);
+    const tprf::RenderResult c = expect_same_light(one, three, "one reflection vs three lights");
     const tprf::FloatArray& sa = array(a, "steady");
     const tprf::FloatArray& sc = array(c, "steady");
     const double share = 1.0 - std::accumulate(sc.data.begin(), sc.data.end(), 0.0) /
