@@ -95,7 +95,8 @@ double visible_fraction(const PatchSet& patches, const Visibility& vis, std::siz
 
 std::size_t Links::bytes() const {
     return row.size() * sizeof(std::uint64_t) + source.size() * sizeof(std::uint32_t) +
-           ff.size() * sizeof(float) + distance.size() * sizeof(float);
+           ff.size() * sizeof(float) + distance.size() * sizeof(float) + tint.size() * sizeof(std::uint16_t) +
+           tints.size() * sizeof(tints[0]);
 }
 
 bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,

@@ -4,6 +4,7 @@
 #include "tprf/geometry/form_factors.h"
 #include "tprf/core/progress.h"
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -22,9 +23,20 @@ struct Links {
                                         ///< visibility included (equal, by reciprocity, to the
                                         ///< share of j's power that i receives, per unit area)
     std::vector<float> distance;        ///< L, centroid-to-centroid distance, metres
+    /// Per-channel factors of links through tinted mirrors and glass: empty (every link grey), or L
+    /// indices into `tints`, 0 for a grey link. Link k carries ff[k] * tints[tint[k]][c] in channel c.
+    std::vector<std::uint16_t> tint;
+    /// The palette of tint: tints[0] = {1, 1, 1}; empty when `tint` is.
+    std::vector<std::array<float, 3>> tints;
 
     /// Number of links L.
     std::size_t size() const { return source.size(); }
+    /// Whether some link carries a non-grey tint.
+    bool tinted() const { return !tint.empty(); }
+    /// Link k's factor in channel c (1 for grey links).
+    float tint_factor(std::uint64_t k, int c) const {
+        return tint.empty() ? 1.0f : tints[tint[k]][std::size_t(c)];
+    }
     /// Number of receivers N.
     std::size_t receivers() const { return row.empty() ? 0 : row.size() - 1; }
     /// Bytes held by the link arrays.
