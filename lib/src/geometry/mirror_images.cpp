@@ -47,6 +47,7 @@ SpecularPlane make_plane(const Scene& scene, const PatchSet& patches, std::uint3
     SpecularPlane s;
     s.object = id;
     s.reflectance = o.material.reflectance.mean();
+    if (s.reflectance > 0.0) s.tint = o.material.reflectance / s.reflectance;
     s.transmittance = o.material.transmittance.mean();
     s.both_sides = o.material.type == MaterialType::Glass;
     if (const auto* r = std::get_if<RectangleShape>(&o.shape)) {
@@ -107,6 +108,7 @@ void extend(const std::vector<SpecularPlane>& planes, int max_length, std::size_
             next.side[std::size_t(next.length)] = std::int8_t(side);
             ++next.length;
             next.reflectance *= s.reflectance;
+            next.tint *= s.tint;
             next.unfold = chain.unfold.after(Unfolding::reflection(s.point, s.normal));
             if (out.size() >= limit)
                 throw Error("solver.max_specular: " + std::to_string(max_length) + " reflections make more than " +
@@ -140,6 +142,7 @@ MirrorChain reversed(const MirrorChain& chain, const std::vector<SpecularPlane>&
         r.side[std::size_t(r.length)] = chain.side[std::size_t(k)];
         ++r.length;
         r.reflectance *= s.reflectance;
+        r.tint *= s.tint;
         r.unfold = r.unfold.after(Unfolding::reflection(s.point, s.normal));
     }
     return r;

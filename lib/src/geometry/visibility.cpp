@@ -300,25 +300,28 @@ void Visibility::trace(const Vec3& origin, const Vec3& direction, std::vector<Tr
     struct Ray {
         Vec3 origin, direction;
         double path, weight;
+        Rgb tint;
         int reflections, crossings;
     };
-    std::vector<Ray> stack{{origin, direction, 0.0, 1.0, 0, 0}};
+    std::vector<Ray> stack{{origin, direction, 0.0, 1.0, Rgb::Ones(), 0, 0}};
     while (!stack.empty()) {
         const Ray r = stack.back();
         stack.pop_back();
         const RayHit h = intersect(r.origin, r.direction, std::numeric_limits<double>::infinity());
         if (!h.hit) continue;
-        out.push_back({h, r.path + h.distance, r.weight});
+        out.push_back({h, r.path + h.distance, r.weight, r.tint});
         const int plane = plane_of(h.patch);
         if (plane < 0) continue;
         const SpecularPlane& s = m_planes[std::size_t(plane)];
         const int side = s.normal.dot(r.direction) < 0.0 ? 1 : -1;
         const double path = r.path + h.distance;
         if (s.transmittance > 0.0 && r.crossings < 64)
-            stack.push_back({h.point, r.direction, path, r.weight * s.transmittance, r.reflections, r.crossings + 1});
+            stack.push_back({h.point, r.direction, path, r.weight * s.transmittance, r.tint, r.reflections,
+                             r.crossings + 1});
         if (s.reflects_from(side) && r.reflections < m_max_specular) {
             const Vec3 reflected = r.direction - 2.0 * s.normal.dot(r.direction) * s.normal;
-            stack.push_back({h.point, reflected, path, r.weight * s.reflectance, r.reflections + 1, r.crossings});
+            stack.push_back({h.point, reflected, path, r.weight * s.reflectance, r.tint * s.tint, r.reflections + 1,
+                             r.crossings});
         }
     }
 }

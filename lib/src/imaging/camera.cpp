@@ -39,6 +39,7 @@ Vec3 camera_ray(const Camera& camera, double column, double row) {
 SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int threads) {
     const int spp = std::max(1, camera.spp);
     std::vector<std::vector<SensingPoint>> by_row(std::size_t(camera.height));
+    std::vector<std::vector<Rgb>> row_tints(std::size_t(camera.height));  // per point, with mirrors
     const bool specular = !vis.planes().empty();
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
         std::vector<TracedHit> hits;
@@ -62,13 +63,18 @@ SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int th
                     if (!t.hit.front) continue;
                     by_row[r].push_back({pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path),
                                          float(t.weight)});
+                    row_tints[r].push_back(t.tint);
                 }
             }
     });
     SensingPoints points;
     points.outputs = std::size_t(camera.width) * std::size_t(camera.height);
     points.weight = 1.0 / spp;
-    for (auto& row : by_row) points.points.insert(points.points.end(), row.begin(), row.end());
+    for (std::size_t r = 0; r < by_row.size(); ++r) {
+        // Tinted mirrors' palette, in row order (the same for any thread count).
+        for (std::size_t k = 0; k < row_tints[r].size(); ++k) by_row[r][k].tint = points.tint_index(row_tints[r][k]);
+        points.points.insert(points.points.end(), by_row[r].begin(), by_row[r].end());
+    }
     return points;
 }
 

@@ -153,6 +153,7 @@ bool view_patch(const PointSource& probe, std::size_t j, const Vec3& wall_normal
     v.patch = std::uint32_t(j);
     v.chain = probe.chain;
     v.from = probe.origin;
+    if (probe.chain >= 0) v.tint = visibility.chains()[std::size_t(probe.chain)].tint;
     bool seen = false;
     for (int s = 0; s < kViewSamples; ++s) {
         const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
@@ -199,6 +200,7 @@ std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches,
     // And its images through mirrors and glass (the wall point's own patch may see those).
     std::vector<PointSource> probes{probe};
     point_images(probe, visibility, probes);
+    for (PointSource& image : probes) image.intensity = probe.intensity;  // the chain's tint: PatchView::tint
     std::vector<PatchView> out;
     for (std::size_t j = 0; j < patches.size(); ++j)
         for (const PointSource& p : probes) {

@@ -22,7 +22,8 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
             const PixelTap& tap = gather.taps[k];
             const double lag = double(tap.leg) * inv_bin;
-            Tap t{tap.patch, 0, std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin)), tap.weight, 0.0f};
+            Tap t{tap.patch, 0, std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin)), tap.weight, 0.0f,
+                  tap.tint};
             if (delay == DelayMode::Nearest) {
                 t.lag = std::int32_t(std::floor(lag + 0.5));
             } else {
@@ -35,11 +36,12 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         }
         // In a fixed order (the gather's, then the key's), so that the sums do not depend on threads.
         std::stable_sort(out.begin(), out.end(), [](const Tap& a, const Tap& b) {
-            return std::tie(a.patch, a.lag, a.first) < std::tie(b.patch, b.lag, b.first);
+            return std::tie(a.patch, a.lag, a.first, a.tint) < std::tie(b.patch, b.lag, b.first, b.tint);
         });
         std::size_t kept = 0;
         for (const Tap& t : out) {
-            if (kept > 0 && out[kept - 1].patch == t.patch && out[kept - 1].lag == t.lag && out[kept - 1].first == t.first) {
+            const Tap* last = kept > 0 ? &out[kept - 1] : nullptr;
+            if (last && last->patch == t.patch && last->lag == t.lag && last->first == t.first && last->tint == t.tint) {
                 out[kept - 1].w0 += t.w0;
                 out[kept - 1].w1 += t.w1;
             } else {
@@ -49,6 +51,7 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         out.resize(kept);
     });
     FilmTaps merged;
+    for (const Rgb& t : gather.tints) merged.tints.push_back({float(t[0]), float(t[1]), float(t[2])});
     merged.row.assign(pixels + 1, 0);
     for (std::size_t px = 0; px < pixels; ++px) merged.row[px + 1] = merged.row[px] + per_pixel[px].size();
     merged.taps.reserve(merged.row[pixels]);
@@ -116,6 +119,7 @@ void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
         const FilmTaps::Tap& tap = m_taps->taps[k];
         const std::int64_t whole = tap.lag, first = tap.first;
         const float w0 = tap.w0, w1 = tap.w1;
+        const float* tint = tap.tint != 0 ? m_taps->tints[tap.tint].data() : nullptr;
         // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
         const std::int64_t base = first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
         const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
@@ -127,7 +131,7 @@ void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
                 const float w = w0 + (base + t + 1 <= first ? w1 : 0.0f);
                 for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
             }
-            for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += carried[c];
+            for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += (tint ? tint[c] : 1.0f) * carried[c];
         }
         // The rest: two contiguous multiply-adds over bins, each clipped to the window [0, T).
         auto add = [&](float w, std::int64_t shift, std::int64_t from) {
@@ -138,6 +142,12 @@ void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
             float* __restrict o = out + std::size_t(base + shift + lo) * 3;
             const float* __restrict in = b + std::size_t(lo) * 3;
             const std::size_t len = std::size_t(hi - lo) * 3;
+            if (tint) {  // through tinted mirrors: a weight per channel
+                const float wc[3] = {w * tint[0], w * tint[1], w * tint[2]};
+                for (std::size_t e = 0; e < len; e += 3)
+                    for (int c = 0; c < 3; ++c) o[e + std::size_t(c)] += wc[c] * in[e + std::size_t(c)];
+                return;
+            }
             for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
         };
         add(w0, 0, early);
@@ -162,7 +172,8 @@ std::vector<float> steady_image(const Gather& gather, const Illumination& illumi
     for (std::size_t px = 0; px < pixels; ++px) {
         Rgb v = Rgb::Zero();
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k)
-            v += double(gather.taps[k].weight) * indirect[gather.taps[k].patch];
+            v += double(gather.taps[k].weight) * indirect[gather.taps[k].patch] *
+                 (gather.taps[k].tint != 0 ? gather.tints[gather.taps[k].tint] : Rgb::Ones());
         for (int c = 0; c < 3; ++c) image[px * 3 + std::size_t(c)] = float(v[c]);
     }
     for (const DirectArrival& a : gather.direct)

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 namespace tprf {
 namespace {
@@ -135,6 +136,16 @@ Gather assemble(std::size_t count, int width, int height, const std::vector<std:
 
 }  // namespace
 
+std::uint16_t SensingPoints::tint_index(const Rgb& tint) {
+    if ((tint == 1.0).all()) return 0;
+    if (tints.empty()) tints.push_back(Rgb::Ones());
+    for (std::size_t k = 1; k < tints.size(); ++k)
+        if ((tints[k] == tint).all()) return std::uint16_t(k);
+    if (tints.size() > 0xffff) throw Error("more than 65535 tints of mirror chains in the camera's view");
+    tints.push_back(tint);
+    return std::uint16_t(tints.size() - 1);
+}
+
 Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
                      const LightSources& sources, const Visibility& vis, const GatherOptions& options) {
     TPRF_CHECK_EQ(points.outputs, std::size_t(width) * std::size_t(height));
@@ -172,16 +183,20 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
             const double share = weight * double(sp.throughput);
             for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
-                run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest});
+                run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
+            const std::size_t first = direct.size();
             direct_arrivals(sp, share, patches, sources, vis, options, direct);
+            if (sp.tint != 0)
+                for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tints[sp.tint];
         }
         std::sort(run_taps[k].begin(), run_taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
-            return a.patch != b.patch ? a.patch < b.patch : a.leg != b.leg ? a.leg < b.leg : a.weight < b.weight;
+            return std::tie(a.patch, a.leg, a.tint, a.weight) < std::tie(b.patch, b.leg, b.tint, b.weight);
         });
         order_arrivals(direct, options.time);
         direct.shrink_to_fit();
     });
     Gather g = assemble(points.outputs, width, height, run_output, run_taps, run_direct);
+    g.tints = points.tints;
     if (options.progress) options.progress("camera", 1.0);
     return g;
 }

@@ -150,10 +150,11 @@ void add_third_bounce(const CapturePlan& p, std::size_t l, std::size_t s, std::s
             continue;
         }
         const std::uint32_t j = a->patch;
-        const double scale = mean3(ends * p.patches.albedo[j]) * p.patches.area[j];
+        const Rgb own = ends * p.patches.albedo[j] * p.patches.area[j];
         const auto a_end = run_end(a, from_laser.end()), b_end = run_end(b, from_sensor.end());
         for (auto va = a; va != a_end; ++va)
             for (auto vb = b; vb != b_end; ++vb) {
+                const double scale = mean3(own * va->tint * vb->tint);
                 // The points as patch j sees them (their images through the views' chains).
                 const double first = legs + shortest_by_plane(p.patches, j, va->from, vb->from);
                 for (std::size_t k = 0; k < std::size_t(kViewSamples); ++k) {
@@ -209,7 +210,7 @@ Illumination spot_illumination(const CapturePlan& p, std::size_t l, const std::v
             if (!(share > 0.0)) continue;
             Pulse pulse;
             pulse.path = p.start + (whole + side + 0.5) * bin_width;  // the middle of its bin
-            pulse.energy = p.patches.albedo[v.patch] * spot * (m.sum * share);
+            pulse.energy = p.patches.albedo[v.patch] * spot * v.tint * (m.sum * share);
             pulse.order = 2;
             pulse.point_source = 0;
             out.pulses.push_back(pulse);
@@ -227,7 +228,7 @@ std::vector<SensorTap> sensor_taps(const CapturePlan& p, std::size_t s, const st
     for (const PatchView& v : views) {
         const MeanView m = mean_view(v);
         if (!(m.sum > 0.0)) continue;
-        taps.push_back({v.patch, albedo * p.patches.area[v.patch] * m.sum, m.path + p.sensor_leg(s)});
+        taps.push_back({v.patch, albedo * v.tint * p.patches.area[v.patch] * m.sum, m.path + p.sensor_leg(s)});
     }
     return taps;
 }

@@ -144,12 +144,10 @@ void check_transform(const Eigen::Matrix4d& m, const At& at) {
     if (!(std::abs(a.determinant()) > 1e-12 * size * size * size)) at.fail("is singular");
 }
 
-// A specular part: finite, in [0, 1], grey (tinted specular transfer is not built yet).
+// A specular part: finite, in [0, 1] per channel.
 void check_specular_part(const Rgb& value, const At& at) {
     finite3(value, at);
     if ((value < 0.0).any() || (value > 1.0).any()) at.fail("must be in [0, 1]");
-    if (value.maxCoeff() != value.minCoeff())
-        at.fail("must be grey (one number, or three equal ones): tinted mirrors and glass are not supported yet");
 }
 
 void check_material(const Object& o, const At& at) {
@@ -157,7 +155,14 @@ void check_material(const Object& o, const At& at) {
     if (!m.specular()) return;
     const At material = at.key("material");
     check_specular_part(m.reflectance, material.key("reflectance"));
-    if (m.type == MaterialType::Glass) check_specular_part(m.transmittance, material.key("transmittance"));
+    if (m.type == MaterialType::Glass) {
+        check_specular_part(m.transmittance, material.key("transmittance"));
+        // Light crossing glass keeps its colour: every link, shadow and camera ray passes one number.
+        if (m.transmittance.maxCoeff() != m.transmittance.minCoeff())
+            material.key("transmittance").fail(
+                "must be grey (one number, or three equal ones): tinted transmittance is not supported (a tinted "
+                "reflectance is)");
+    }
     else if (!(m.transmittance == 0.0).all()) material.key("transmittance").fail("only glass transmits");
     const Rgb sum = m.reflectance + m.transmittance + o.albedo;
     if ((sum > 1.0 + 1e-12).any())

@@ -95,7 +95,7 @@ std::vector<LaserSpot> trace_laser(const Vec3& origin, const Vec3& direction, co
         spot.patch = h.hit.patch;
         spot.point = h.hit.point;
         spot.path = h.path;
-        spot.power = power * h.weight;
+        spot.power = power * h.weight * h.tint;
         spots.push_back(spot);
     }
     if (spots.empty()) spots.push_back(LaserSpot{});
@@ -126,6 +126,7 @@ void point_images(const PointSource& s, const Visibility& visibility, std::vecto
         image.origin = chain.image(s.origin);
         image.lobe = chain.unfold.linear * s.lobe;
         image.patch = kNoPatch;
+        image.intensity *= chain.tint;
         image.chain = std::int32_t(c);
         out.push_back(image);
     }
@@ -143,7 +144,7 @@ void add_images(LightSources& sources, const Visibility& visibility) {
             if (a.chain >= 0 || !before_last_plane(chain, visibility.planes(), a.polygon(), a.count)) continue;
             std::array<Vec3, 4> corners{};
             for (int q = 0; q < a.count; ++q) corners[std::size_t(q)] = chain.image(a.corners[std::size_t(a.count - 1 - q)]);
-            AreaSource image = make_area_source(corners.data(), a.count, a.radiance, a.object);
+            AreaSource image = make_area_source(corners.data(), a.count, a.radiance * chain.tint, a.object);
             image.chain = std::int32_t(c);
             sources.areas.push_back(image);
         }

@@ -27,6 +27,7 @@ struct Extra {
     std::uint32_t source;
     float ff;
     float distance;
+    std::uint16_t tint;  // Links::tint
 };
 
 bool on_side(const SpecularPlane& s, int side, const Vec3* poly, std::size_t count) {
@@ -145,7 +146,8 @@ double chain_form_factor(const ChainPair& c, std::size_t i, std::size_t j, const
 
 // The links along one chain (and, by reciprocity, along its reverse).
 void chain_links(const PatchSet& patches, const Visibility& vis, const MirrorChain& chain, bool palindrome,
-                 const std::vector<double>& radius, const LinkOptions& options, std::vector<std::vector<Extra>>& rows) {
+                 std::uint16_t tint, const std::vector<double>& radius, const LinkOptions& options,
+                 std::vector<std::vector<Extra>>& rows) {
     const std::vector<SpecularPlane>& planes = vis.planes();
     const SpecularPlane& first = planes[chain.plane[0]];
     const SpecularPlane& last = planes[chain.plane[std::size_t(chain.length - 1)]];
@@ -166,8 +168,8 @@ void chain_links(const PatchSet& patches, const Visibility& vis, const MirrorCha
             float distance = 0.0f;
             const double f = chain_form_factor(pair, i, j, options, distance);
             if (!(f > 0.0)) continue;
-            out.push_back({i, j, float(f), distance});
-            if (i != j || !palindrome) out.push_back({j, i, float(f * patches.area[i] / patches.area[j]), distance});
+            out.push_back({i, j, float(f), distance, tint});
+            if (i != j || !palindrome) out.push_back({j, i, float(f * patches.area[i] / patches.area[j]), distance, tint});
         }
     });
 }
@@ -200,12 +202,14 @@ void merge_links(LinkSet& set, std::vector<Extra>& extra, double bin_width_m) {
     out.source.reserve(l.size() + extra.size());
     out.ff.reserve(l.size() + extra.size());
     out.distance.reserve(l.size() + extra.size());
+    const bool tinted = l.tinted() || std::any_of(extra.begin(), extra.end(), [](const Extra& x) { return x.tint != 0; });
+    if (tinted) out.tints = l.tints;
     std::size_t e = 0;
     std::vector<Extra> row;
     for (std::size_t r = 0; r < nodes; ++r) {
         row.clear();
         for (std::uint64_t k = l.row[r]; k < l.row[r + 1]; ++k)
-            row.push_back({std::uint32_t(r), l.source[k], l.ff[k], l.distance[k]});
+            row.push_back({std::uint32_t(r), l.source[k], l.ff[k], l.distance[k], l.tint.empty() ? std::uint16_t(0) : l.tint[k]});
         for (; e < extra.size() && extra[e].receiver == r; ++e) row.push_back(extra[e]);
         const auto key = [&](const Extra& a) {
             return std::tuple(by_octave ? delay_octave(a.distance, inv_bin) : 0, a.source, a.distance);
@@ -215,6 +219,7 @@ void merge_links(LinkSet& set, std::vector<Extra>& extra, double bin_width_m) {
             out.source.push_back(x.source);
             out.ff.push_back(x.ff);
             out.distance.push_back(x.distance);
+            if (tinted) out.tint.push_back(x.tint);
         }
         out.row[r + 1] = out.source.size();
     }
@@ -229,11 +234,19 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
     if (chains.empty()) return 0;
     const std::vector<double> radius = circumradii(patches);
     std::vector<Extra> extra;
+    std::vector<std::array<float, 3>>& tints = set.links.tints;
     for (const MirrorChain& chain : chains) {
         const MirrorChain back = reversed(chain, vis.planes());
         if (!lexicographically_first(chain, back)) continue;  // its reverse carries both directions
+        std::uint16_t tint = 0;  // a tinted chain's links carry its tint (the reverse's is the same product)
+        if (!(chain.tint == 1.0).all()) {
+            if (tints.empty()) tints.push_back({1.0f, 1.0f, 1.0f});
+            if (tints.size() > 0xffff) throw Error("more than 65535 tinted chains of mirrors; lower solver.max_specular");
+            tints.push_back({float(chain.tint[0]), float(chain.tint[1]), float(chain.tint[2])});
+            tint = std::uint16_t(tints.size() - 1);
+        }
         std::vector<std::vector<Extra>> rows(patches.size());
-        chain_links(patches, vis, chain, same(chain, back), radius, options, rows);
+        chain_links(patches, vis, chain, same(chain, back), tint, radius, options, rows);
         for (auto& r : rows) extra.insert(extra.end(), r.begin(), r.end());
     }
     const std::uint64_t added = extra.size();

@@ -28,7 +28,8 @@ struct SpecularPlane {
     std::uint32_t object = 0;        ///< index into Scene::objects
     Vec3 point = Vec3::Zero();       ///< a point of the plane, metres
     Vec3 normal = Vec3::UnitZ();     ///< unit front normal
-    double reflectance = 0.0;        ///< specular reflectance (grey)
+    double reflectance = 0.0;        ///< specular reflectance: the mean over the channels
+    Rgb tint = Rgb::Ones();          ///< each channel's reflectance over `reflectance` (ones when grey)
     double transmittance = 0.0;      ///< glass: straight-through transmittance (grey); 0 for a mirror
     bool both_sides = false;         ///< glass reflects on both sides, a mirror on its front only
     /// Polygon k is corners[first[k] .. first[k + 1]), convex, counter-clockwise about `normal`.
@@ -67,10 +68,14 @@ struct MirrorChain {
     int length = 0;
     std::array<std::uint16_t, kMaxChain> plane{};  ///< indices into the planes
     std::array<std::int8_t, kMaxChain> side{};     ///< +1: reflects on the plane's front, -1: its back
-    double reflectance = 1.0;                      ///< product of the planes' reflectances
+    double reflectance = 1.0;                      ///< product of the planes' (mean) reflectances
+    Rgb tint = Rgb::Ones();                        ///< product of the planes' tints: channel c carries
+                                                   ///< reflectance * tint[c]
     Unfolding unfold;                              ///< R1 R2 ... Rk
 
     Vec3 image(const Vec3& y) const { return unfold(y); }
+    /// Whether the chain reflects the channels alike.
+    bool grey() const { return tint[0] == tint[1] && tint[1] == tint[2]; }
 };
 
 /// The specular planes of a scene, one per mirror or glass object, from its patches. Throws Error (the

@@ -26,7 +26,8 @@ struct RayHit {
 struct TracedHit {
     RayHit hit;                 ///< the surface; hit.distance is the last straight piece only
     double path = 0.0;          ///< metres from the ray's origin, every specular leg included
-    double weight = 1.0;        ///< product of the reflectances and transmittances on the way
+    double weight = 1.0;        ///< product of the (mean) reflectances and transmittances on the way
+    Rgb tint = Rgb::Ones();     ///< product of the reflections' tints (SpecularPlane::tint)
 };
 
 /// A bounding-volume hierarchy over every patch polygon, and the specular planes of the scene (mirrors

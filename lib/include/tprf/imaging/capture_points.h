@@ -61,6 +61,7 @@ struct PatchView {
     std::uint32_t patch = 0;
     std::int32_t chain = -1;                 ///< -1: the straight view; else the chain it is seen through
     Vec3 from = Vec3::Zero();                ///< x, or its image through the chain, metres
+    Rgb tint = Rgb::Ones();                  ///< the chain's tint (MirrorChain::tint): channel c's g is g * tint[c]
     std::array<float, kViewSamples> path{};  ///< metres
     std::array<float, kViewSamples> g{};     ///< m^-2
     std::array<float, kViewSamples> du{};    ///< metres: (y - x) / |y - x| . h_u

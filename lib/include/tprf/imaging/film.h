@@ -6,6 +6,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/scene/scene.h"
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -28,9 +29,11 @@ struct FilmTaps {
         std::int32_t lag;    ///< whole bins of the leg
         std::int64_t first;  ///< the earliest bin any of its light may reach
         float w0, w1;
+        std::uint16_t tint;  ///< index into `tints` (0: grey): channel c's weights are w0, w1 times tints[tint][c]
     };
     std::vector<std::uint64_t> row;  ///< pixels + 1 offsets into `taps`
     std::vector<Tap> taps;
+    std::vector<std::array<float, 3>> tints;  ///< Gather::tints
 };
 
 /// The film taps of `gather` on `time` (in an order that does not depend on `threads`).

@@ -36,6 +36,7 @@ struct PixelTap {
     /// this very point; the film moves such light to this bound instead of showing light before it
     /// could have arrived.
     float earliest = 0.0f;
+    std::uint16_t tint = 0;   ///< index into Gather::tints: the weight per channel is weight * tints[tint]
 };
 
 /// An exact direct-light arrival at one output: radiance times one second, at an exact path.
@@ -53,6 +54,7 @@ struct Gather {
     std::vector<std::uint64_t> row;        ///< outputs + 1 offsets into `taps`
     std::vector<PixelTap> taps;
     std::vector<DirectArrival> direct;     ///< sorted by output
+    std::vector<Rgb> tints;                ///< the taps' per-channel factors (SensingPoints::tints)
 };
 
 /// Options of the gather.

@@ -20,6 +20,8 @@ struct SensingPoint {
     /// The share of the point's light that reaches the sensor: the product of the reflectances and
     /// transmittances of the mirrors and glass on its way (1 on a straight line of sight).
     float throughput = 1.0f;
+    /// Where tinted mirrors colour the way: an index into SensingPoints::tints (0: grey).
+    std::uint16_t tint = 0;
 };
 
 /// A set of sensing points, in output order (non-decreasing `output`).
@@ -27,6 +29,13 @@ struct SensingPoints {
     std::size_t outputs = 0;            ///< number of measurements (pixels)
     double weight = 1.0;                ///< each point's share of its output (a pixel sample: 1 / spp)
     std::vector<SensingPoint> points;
+    /// Per-channel factors of the points' throughput: tints[0] = ones; empty when every point is grey.
+    std::vector<Rgb> tints;
+
+    /// The index of `tint` in `tints`, added when new (0 for grey).
+    std::uint16_t tint_index(const Rgb& tint);
+    /// Point p's per-channel factor.
+    Rgb tint_of(const SensingPoint& p) const { return tints.empty() ? Rgb::Ones() : tints[p.tint]; }
 };
 
 }  // namespace tprf

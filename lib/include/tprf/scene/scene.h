@@ -68,8 +68,8 @@ enum class MaterialType {
 /// An object's material: its specular parts; the diffuse part is Object::albedo.
 struct Material {
     MaterialType type = MaterialType::Diffuse;
-    /// Specular reflectance per channel, in [0, 1]; grey (all channels equal) until tinted specular
-    /// links exist (validate() says so). Zero for a diffuse object.
+    /// Specular reflectance per channel, in [0, 1] (a tinted mirror: a gold one reflects red more than
+    /// blue). Zero for a diffuse object.
     Rgb reflectance = Rgb::Zero();
     /// Glass: straight-through transmittance per channel, in [0, 1], grey; else zero.
     Rgb transmittance = Rgb::Zero();
