@@ -99,6 +99,14 @@ std::size_t Links::bytes() const {
            tints.size() * sizeof(tints[0]);
 }
 
+void check_tints(const Links& links) {
+    if (links.tint.empty()) return;
+    TPRF_CHECK_EQ(links.tint.size(), links.size());
+    TPRF_CHECK_LT(std::size_t(0), links.tints.size());
+    TPRF_CHECK((links.tints[0] == std::array<float, 3>{1.0f, 1.0f, 1.0f}));
+    for (std::uint16_t t : links.tint) TPRF_CHECK_LT(std::size_t(t), links.tints.size());
+}
+
 bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
                 const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
                 LinkStats& counts) {

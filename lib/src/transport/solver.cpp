@@ -10,6 +10,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <atomic>
 #include <chrono>
@@ -53,6 +54,58 @@ struct SameBinLink {
     float w;
 };
 
+// A link through tinted mirrors or glass (Links::tint), between patches: its taps in each colour, ff x
+// tints[t][c] split as link_taps splits a grey link's. The long-pass kernels and the lists above keep
+// to grey links, whose one weight serves every lane; the few tinted ones have lists of their own.
+struct TintedLink {
+    std::uint32_t source;  // long list: the source patch; bin-by-bin list: its position
+    int lag;               // as ShortLink's (lag 0: the w1 taps only, w0 is in the same-bin list)
+    float w0[3];
+    float w1[3];
+};
+
+struct TintedSameLink {
+    std::uint32_t source;  // the source patch's position
+    float w[3];
+};
+
+// Whether link k carries a tint other than {1, 1, 1} (which leaves it a grey link).
+bool tinted_link(const Links& links, std::uint64_t k) {
+    if (links.tint.empty() || links.tint[k] == 0) return false;
+    const std::array<float, 3>& f = links.tints[links.tint[k]];
+    return !(f[0] == 1.0f && f[1] == 1.0f && f[2] == 1.0f);
+}
+
+bool any_tinted(const Links& links) {
+    for (std::uint64_t k = 0; k < links.tint.size(); ++k)
+        if (tinted_link(links, k)) return true;
+    return false;
+}
+
+// Link k's taps in each colour, from `source` (a patch or its position).
+TintedLink tinted_taps(const Links& links, std::uint64_t k, std::uint32_t source, float inv_bin, DelayMode mode) {
+    TintedLink out{source, 0, {}, {}};
+    const std::array<float, 3>& f = links.tints[links.tint[k]];
+    for (int c = 0; c < 3; ++c) {
+        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k] * f[std::size_t(c)]);
+        out.lag = t.lag;
+        out.w0[c] = t.w0;
+        out.w1[c] = t.w1;
+    }
+    return out;
+}
+
+// sum[e] += w[c] h[e] over C lanes, c being lane e's colour: lanes come in threes, one per colour, or
+// are grey (`channels` 1), when every tint is grey too and w[0] serves them all.
+inline void add_tinted(float* __restrict sum, const float* w, const float* __restrict h, int C, int channels) {
+    if (channels == 1) {
+        for (int e = 0; e < C; ++e) sum[e] += w[0] * h[e];
+        return;
+    }
+    for (int e = 0; e + 3 <= C; e += 3)  // C is 3 K
+        for (int c = 0; c < 3; ++c) sum[e + c] += w[c] * h[e + c];
+}
+
 // Which rings exist, what each gathers from and where each pulse order goes (see SolveBlock).
 struct LayerPlan {
     std::vector<int> source;  // per layer: the layer it gathers from, -1 for none
@@ -82,10 +135,12 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
     return plan;
 }
 
-bool scene_is_grey(const PatchSet& patches, std::span<const Illumination* const> batch) {
+bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch) {
     auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
     for (const Rgb& a : patches.albedo)
         if (!grey(a)) return false;
+    for (std::uint16_t t : links.tint)
+        if (!(links.tints[t][0] == links.tints[t][1] && links.tints[t][1] == links.tints[t][2])) return false;
     for (const Illumination* illumination : batch)
         for (const Pulse& p : illumination->pulses)
             if (!grey(p.energy)) return false;
@@ -308,7 +363,7 @@ struct SolvePlan {
     // Per receiver: where its links of each window start, then where its row ends (windows + 1
     // offsets); with one window, the whole row (the kernel skips links shorter than the block).
     std::vector<std::uint64_t> segments;
-    const Links* links = nullptr;   // the set's links, or `sorted` when their rows were not by octave
+    const Links* links = nullptr;   // the set's links, or `sorted` (plan_windows): the grey ones, by window
     Links sorted;
     // Lanes: every value the march keeps per node and bin (rings, accumulators, recent bins, emission,
     // sweep state) is C floats, illumination k's colour c in lane k * channels + c.
@@ -326,6 +381,13 @@ struct SolvePlan {
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<ShortLink> short_links;
     std::vector<SameBinLink> same_links;
+    // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
+    // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
+    // rows too, when no link is tinted.
+    std::vector<std::uint64_t> tinted_long_row, tinted_short_row, tinted_same_row;
+    std::vector<TintedLink> tinted_long, tinted_short;
+    std::vector<TintedSameLink> tinted_same;
+    bool same_bin() const { return !same_links.empty() || !tinted_same.empty(); }
     // The bin-by-bin passes visit patches in the cluster tree's leaf order (near patches together)
     // and keep their state by position in it: short and same-bin links name their source's position.
     std::vector<std::uint32_t> order;     // position -> patch
@@ -377,10 +439,13 @@ struct SolvePlan {
     std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
 };
 
-// The links that have to be applied bin by bin (lag < bt), as lists by receiver patch.
+// The links that have to be applied bin by bin (lag < bt), as lists by receiver patch; the tinted
+// ones (sized only when some link is tinted), long ones included.
 struct BinLinks {
     std::vector<std::vector<ShortLink>> shorts;
     std::vector<std::vector<SameBinLink>> same;
+    std::vector<std::vector<TintedLink>> tinted_long, tinted_shorts;
+    std::vector<std::vector<TintedSameLink>> tinted_same;
 };
 
 // Adds a link of lag < bt between patches (the same-bin system takes a lag-0 link's w0 tap).
@@ -393,6 +458,48 @@ void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, con
     }
 }
 
+// Adds tinted link k from patch s to patch i: as add_bin_link adds a grey one when it is shorter than a
+// block, else to the tinted long list, which reads a block and one bin of the source's ring.
+void add_tinted_link(BinLinks& out, SolvePlan& plan, const Links& links, std::uint64_t k, std::size_t i,
+                     std::uint32_t s) {
+    TPRF_CHECK(i < plan.n && s < plan.n);  // only links between patches are tinted (Links::tint)
+    TintedLink t = tinted_taps(links, k, s, plan.inv_bin_f, plan.delay);
+    if (t.lag >= plan.bt) {
+        plan.send_window[s] = std::max(plan.send_window[s], plan.bt);
+        out.tinted_long[i].push_back(t);
+        return;
+    }
+    if (t.lag == 0) {
+        out.tinted_same[i].push_back({s, {t.w0[0], t.w0[1], t.w0[2]}});
+        std::fill_n(t.w0, 3, 0.0f);
+    }
+    out.tinted_shorts[i].push_back(t);
+}
+
+// The tinted lists as CSR: long ones by receiver patch, the others by position, naming their source's.
+void flatten_tinted(BinLinks& bins, SolvePlan& plan) {
+    plan.tinted_long_row.assign(plan.n + 1, 0);
+    plan.tinted_short_row.assign(plan.n + 1, 0);
+    plan.tinted_same_row.assign(plan.n + 1, 0);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        plan.tinted_long.insert(plan.tinted_long.end(), bins.tinted_long[i].begin(), bins.tinted_long[i].end());
+        plan.tinted_long_row[i + 1] = plan.tinted_long.size();
+    }
+    for (std::size_t q = 0; q < plan.n; ++q) {
+        const std::size_t i = plan.order[q];
+        for (TintedLink l : bins.tinted_shorts[i]) {
+            l.source = plan.position[l.source];
+            plan.tinted_short.push_back(l);
+        }
+        for (TintedSameLink l : bins.tinted_same[i]) {
+            l.source = plan.position[l.source];
+            plan.tinted_same.push_back(l);
+        }
+        plan.tinted_short_row[q + 1] = plan.tinted_short.size();
+        plan.tinted_same_row[q + 1] = plan.tinted_same.size();
+    }
+}
+
 // Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
 // bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin). The bin-by-bin passes
 // touch patches only: a link shorter than a block with a cluster at either end (which the
@@ -400,7 +507,15 @@ void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, con
 // the receiver's each taking the whole link (push), the source's each its share of the area (pull).
 void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     const ClusterTree& tree = *plan.tree;
-    BinLinks bins{std::vector<std::vector<ShortLink>>(plan.n), std::vector<std::vector<SameBinLink>>(plan.n)};
+    BinLinks bins;
+    bins.shorts.resize(plan.n);
+    bins.same.resize(plan.n);
+    const bool tinted = any_tinted(links);
+    if (tinted) {
+        bins.tinted_long.resize(plan.n);
+        bins.tinted_shorts.resize(plan.n);
+        bins.tinted_same.resize(plan.n);
+    }
     plan.send_lag.assign(plan.m, 0);
     plan.send_window.assign(plan.m, 0);
     for (std::size_t i = 0; i < plan.m; ++i) {
@@ -409,6 +524,10 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
             plan.max_lag = std::max(plan.max_lag, t.lag);
             const std::uint32_t s = links.source[k];
             plan.send_lag[s] = std::max(plan.send_lag[s], t.lag);
+            if (tinted && tinted_link(links, k)) {
+                add_tinted_link(bins, plan, links, k, i, s);
+                continue;
+            }
             if (t.lag >= plan.bt) {
                 plan.send_window[s] = std::max(plan.send_window[s], plan.window_bins(plan.window_of(t.lag)));
                 continue;
@@ -445,11 +564,39 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         for (int c = 0; c < plan.C; ++c)
             plan.albedo[q * std::size_t(plan.C) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
     }
+    if (tinted) flatten_tinted(bins, plan);
+}
+
+// plan.sorted: the grey links of every row (tinted ones have lists of their own), each row stably
+// sorted by window when `by_window`, so that sources stay non-decreasing within a window.
+template <class WindowFn>
+void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, WindowFn window) {
+    Links& out = plan.sorted;
+    out.row.assign(links.row.size(), 0);
+    out.source.reserve(links.size());
+    out.ff.reserve(links.size());
+    out.distance.reserve(links.size());
+    std::vector<std::uint64_t> order;
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        order.clear();
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
+            if (!tinted_link(links, k)) order.push_back(k);
+        if (by_window)
+            std::stable_sort(order.begin(), order.end(),
+                             [&](std::uint64_t a, std::uint64_t b) { return window(links, a) < window(links, b); });
+        for (std::uint64_t k : order) {
+            out.source.push_back(links.source[k]);
+            out.ff.push_back(links.ff[k]);
+            out.distance.push_back(links.distance[k]);
+        }
+        out.row[i + 1] = out.source.size();
+    }
 }
 
 // The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
 // hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
-// other rows are sorted here, into a copy, when more than one window is used.
+// other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
+// links only: a set with tinted links is copied without them.
 void plan_windows(const Links& links, SolvePlan& plan) {
     plan.acc_bins = std::max(plan.bt, kLongestWindow);
     plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
@@ -460,40 +607,23 @@ void plan_windows(const Links& links, SolvePlan& plan) {
     auto window = [&](const Links& l, std::uint64_t k) {
         return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
-    if (S == 1) {
-        for (std::size_t i = 0; i < plan.m; ++i) {
-            plan.segments[2 * i] = links.row[i];
-            plan.segments[2 * i + 1] = links.row[i + 1];
-        }
-        return;
-    }
+    const bool tinted = any_tinted(links);
     bool ordered = true;
-    for (std::size_t i = 0; i < plan.m && ordered; ++i)
+    for (std::size_t i = 0; i < plan.m && ordered && S > 1; ++i)
         for (std::uint64_t k = links.row[i] + 1; k < links.row[i + 1] && ordered; ++k)
             ordered = window(links, k - 1) <= window(links, k);
-    if (!ordered) {
-        // A stable sort of each row by window: sources stay non-decreasing within a window.
-        Links& out = plan.sorted;
-        out.row = links.row;
-        out.source.resize(links.size());
-        out.ff.resize(links.size());
-        out.distance.resize(links.size());
-        std::vector<std::uint64_t> order;
-        for (std::size_t i = 0; i < plan.m; ++i) {
-            order.clear();
-            for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) order.push_back(k);
-            std::stable_sort(order.begin(), order.end(),
-                             [&](std::uint64_t a, std::uint64_t b) { return window(links, a) < window(links, b); });
-            for (std::size_t q = 0; q < order.size(); ++q) {
-                const std::uint64_t at = links.row[i] + q;
-                out.source[at] = links.source[order[q]];
-                out.ff[at] = links.ff[order[q]];
-                out.distance[at] = links.distance[order[q]];
-            }
-        }
+    if (tinted || !ordered) {
+        copy_grey_links(links, plan, S > 1, window);
         plan.links = &plan.sorted;
     }
     const Links& l = *plan.links;
+    if (S == 1) {
+        for (std::size_t i = 0; i < plan.m; ++i) {
+            plan.segments[2 * i] = l.row[i];
+            plan.segments[2 * i + 1] = l.row[i + 1];
+        }
+        return;
+    }
     for (std::size_t i = 0; i < plan.m; ++i) {
         std::uint64_t k = l.row[i];
         for (std::size_t s = 0; s < S; ++s) {
@@ -505,10 +635,11 @@ void plan_windows(const Links& links, SolvePlan& plan) {
 }
 
 // An upper bound of the spectral radius of the same-bin operator M (M_ij = albedo_i w_ij, the largest
-// albedo over channels): by Collatz and Wielandt, rho(M) <= max_i (Mv)_i / v_i for any positive v,
-// and power iterations from v = 1 bring that bound down to rho. M is similar to a symmetric matrix
-// (the weights are reciprocal: A_i w_ij = A_j w_ji), so its spectrum lies in [-rho, rho], the
-// interval that the Chebyshev weights assume.
+// albedo and the largest tinted weight over channels, so that it bounds every channel's operator): by
+// Collatz and Wielandt, rho(M) <= max_i (Mv)_i / v_i for any positive v, and power iterations from v = 1
+// bring that bound down to rho. M is similar to a symmetric matrix (the weights are reciprocal:
+// A_i w_ij = A_j w_ji, a tinted link's reverse passing the same mirrors), so its spectrum lies in
+// [-rho, rho], the interval that the Chebyshev weights assume.
 double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
     const std::size_t n = plan.n;
     std::vector<double> v(n, 1.0), y(n);
@@ -520,6 +651,11 @@ double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
             double sum = 0.0;
             for (std::uint64_t k = plan.same_row[q]; k < plan.same_row[q + 1]; ++k)
                 sum += double(plan.same_links[k].w) * v[plan.same_links[k].source];
+            if (!plan.tinted_same.empty())
+                for (std::uint64_t k = plan.tinted_same_row[q]; k < plan.tinted_same_row[q + 1]; ++k) {
+                    const TintedSameLink& l = plan.tinted_same[k];
+                    sum += double(std::max({l.w[0], l.w[1], l.w[2]})) * v[l.source];
+                }
             y[q] = patches.albedo[plan.order[q]].maxCoeff() * sum;
             bound = std::max(bound, y[q] / v[q]);
             top = std::max(top, y[q]);
@@ -553,7 +689,7 @@ void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
 // Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in as many
 // sweeps as there are orders), so they sweep plain Jacobi.
 void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
-    if (plan.L != 1 || plan.layers.source[0] != 0 || plan.same_links.empty()) return;
+    if (plan.L != 1 || plan.layers.source[0] != 0 || !plan.same_bin()) return;
     const double rho = same_bin_radius(patches, plan);
     if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
     double w = 1.0;
@@ -635,14 +771,16 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
 std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
     const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_iterate, m_previous, m_same
-    const std::size_t states = 2 + (p.same_radius > 0.0 ? 1 : 0) + (p.same_links.empty() ? 0 : 1);
+    const std::size_t states = 2 + (p.same_radius > 0.0 ? 1 : 0) + (p.same_bin() ? 1 : 0);
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
                                L * std::size_t(p.recent_bins) * p.n * C + states * state +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
     return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
            p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t) +
            p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() +
-           p.albedo.size() * sizeof(float);
+           p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
+           p.tinted_same.size() * sizeof(TintedSameLink) +
+           (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);
 }
 
 // The march: ring buffers of every layer's recent radiosity, the block's accumulators, and the
@@ -660,7 +798,7 @@ public:
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_previous(plan.same_radius > 0.0 ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0),
-          m_same(plan.same_links.empty() ? 0 : std::size_t(plan.L) * plan.n * std::size_t(plan.C), 0.0f),
+          m_same(plan.same_bin() ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0, 0.0f),
           m_out_total(plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {}
 
@@ -704,13 +842,15 @@ private:
     int exact_layer(int order) const { return order < m_plan.layers.exact ? order : -1; }
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
+    void gather_tinted(std::size_t i, const float* ring, std::int64_t b0, float* acc) const;
     // The bin-by-bin steps for CT lanes (0: m_plan.C lanes, counted at run time): with the lane count
     // known at compile time the sums stay in registers.
     template <int CT>
     void short_pass_lanes(std::int64_t b0);
     template <int CT>
     void short_links_of(std::size_t q, std::int64_t b0, int o);
-    // g += the short links (or the same-bin links) of the patch at position q at `bin`, from layer src.
+    // g += the short links (or the same-bin links), grey and tinted, of the patch at position q at `bin`,
+    // from layer src.
     template <int CT>
     void add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const;
     template <int CT>
@@ -813,6 +953,25 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 }
             }
         }
+        if (!p.tinted_long.empty())
+            for (std::size_t i = i0; i < std::min(i1, p.n); ++i)
+                gather_tinted(i, ring_src, b0, m_acc[std::size_t(l)].data() + p.acc_at(i, b0));
+    }
+}
+
+// Patch i's tinted links of lag >= bt over the block, into its accumulators `acc`: each one multiply-add
+// per tap and colour over the block, reading final history from the ring of its source (`ring`).
+void March::gather_tinted(std::size_t i, const float* ring, std::int64_t b0, float* acc) const {
+    const SolvePlan& p = m_plan;
+    const std::size_t C = std::size_t(p.C), stride = p.acc_stride();
+    for (std::uint64_t k = p.tinted_long_row[i]; k < p.tinted_long_row[i + 1]; ++k) {
+        const TintedLink& t = p.tinted_long[k];
+        const RingSlot& slot = p.slots[t.source];
+        const float* h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
+        for (std::size_t b = 0; b < std::size_t(p.bt); ++b) {  // two accumulations, as in gather_long
+            add_tinted(acc + b * stride, t.w0, h + (b + 1) * C, p.C, p.channels);
+            add_tinted(acc + b * stride, t.w1, h + b * C, p.C, p.channels);
+        }
     }
 }
 
@@ -847,6 +1006,12 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
             for (int c = 0; c < C; ++c) sum[c] += s.w1 * h1[c];
         }
     }
+    if (!p.tinted_short.empty())
+        for (std::uint64_t k = p.tinted_short_row[q]; k < p.tinted_short_row[q + 1]; ++k) {
+            const TintedLink& s = p.tinted_short[k];
+            if (s.lag > 0) add_tinted(sum, s.w0, recent(src, s.source, bin - s.lag), C, p.channels);
+            add_tinted(sum, s.w1, recent(src, s.source, bin - s.lag - 1), C, p.channels);
+        }
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
@@ -860,6 +1025,9 @@ void March::add_same_links(int src, std::size_t q, std::int64_t bin, float* g) c
         const float* h = recent(src, p.same_links[k].source, bin);
         for (int c = 0; c < C; ++c) sum[c] += p.same_links[k].w * h[c];
     }
+    if (!p.tinted_same.empty())
+        for (std::uint64_t k = p.tinted_same_row[q]; k < p.tinted_same_row[q + 1]; ++k)
+            add_tinted(sum, p.tinted_same[k].w, recent(src, p.tinted_same[k].source, bin), C, p.channels);
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
@@ -1052,7 +1220,7 @@ void March::short_pass_lanes(std::int64_t b0) {
         if (m_stop) break;
 #pragma omp for schedule(static)
         for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of<CT>(q, b0, o);
-        for (int iteration = 1; iteration <= kMaxSweeps && !m_plan.same_links.empty(); ++iteration) {
+        for (int iteration = 1; iteration <= kMaxSweeps && m_plan.same_bin(); ++iteration) {
             if (!jacobi_sweep<CT>(b0 + o, iteration)) continue;
 #pragma omp single
             {
@@ -1189,6 +1357,7 @@ std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, con
     TPRF_CHECK_LE(illuminations, kMaxBatch);
     TPRF_CHECK(channels == 1 || channels == 3);
     TPRF_CHECK_EQ(set.patches(), patches.size());
+    check_tints(set.links);
     return working_bytes(make_plan(patches, set, time, options, illuminations, channels));
 }
 
@@ -1203,7 +1372,9 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
         TPRF_CHECK(illumination != nullptr);
         TPRF_CHECK_EQ(illumination->row.size(), patches.size() + 1);
     }
-    SolvePlan plan = make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, batch) ? 1 : 3);
+    check_tints(links);
+    SolvePlan plan =
+        make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, links, batch) ? 1 : 3);
     TPRF_CHECK_LE(options.first_bin, 0);
     plan.first_emitted = options.first_bin;
     plan_blocks(plan, batch);
@@ -1241,7 +1412,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
                              std::uint64_t(plan.blocks) * std::uint64_t(plan.bt);
     stats.max_jacobi_iterations = march.worst_jacobi_iterations();
     stats.jacobi_sweeps = march.jacobi_sweeps();
-    stats.short_links = plan.short_links.size();
+    stats.short_links = plan.short_links.size() + plan.tinted_short.size();
     return stats;
 }
 

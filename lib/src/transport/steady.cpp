@@ -14,15 +14,22 @@
 namespace tprf {
 namespace {
 
-// Row sums of the links of node i applied to the node values v.
-double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i) {
+// Row sums of the links of node i applied to the node values v in channel c: a tinted link's form
+// factor times its tint (Links::tint_factor), in float as the transient solver takes it.
+double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i, int c) {
     double s = 0.0;
-    for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) s += double(links.ff[k]) * v[links.source[k]];
+    if (!links.tinted()) {
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) s += double(links.ff[k]) * v[links.source[k]];
+        return s;
+    }
+    for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
+        s += double(links.ff[k] * links.tint_factor(k, c)) * v[links.source[k]];
     return s;
 }
 
-// y = diag(albedo_c) F x for one channel: with clusters, their values pulled from x, every node's
-// gather pushed down to the patches below it (link_set.h).
+// y = diag(albedo_c) F_c x for one channel (F_c: the form factors, tinted links' times their tint):
+// with clusters, their values pulled from x, every node's gather pushed down to the patches below it
+// (link_set.h).
 Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen::VectorXd& x, int c) {
     check_cancelled();  // once per iteration of the solver, outside its parallel loops
     const Eigen::Index n = Eigen::Index(patches.size());
@@ -30,7 +37,8 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
     Eigen::VectorXd y(n);
     if (t.clusters() == 0) {
 #pragma omp parallel for schedule(dynamic, 64)
-        for (Eigen::Index i = 0; i < n; ++i) y[i] = patches.albedo[std::size_t(i)][c] * row_sum(set.links, x, std::size_t(i));
+        for (Eigen::Index i = 0; i < n; ++i)
+            y[i] = patches.albedo[std::size_t(i)][c] * row_sum(set.links, x, std::size_t(i), c);
         return y;
     }
     const std::size_t m = t.nodes();
@@ -41,7 +49,7 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
         v[cl] = (t.area[a] * v[a] + t.area[b] * v[b]) / t.area[cl];
     }
 #pragma omp parallel for schedule(dynamic, 64)
-    for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = row_sum(set.links, v, i);
+    for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = row_sum(set.links, v, i, c);
     for (std::size_t cl = t.leaves; cl < m; ++cl)  // preorder ids: parents first
         if (t.parent[cl] != kNoNode) g[Eigen::Index(cl)] += g[t.parent[cl]];
     for (Eigen::Index i = 0; i < n; ++i) {
@@ -62,7 +70,7 @@ struct Eigen::internal::traits<tprf::SteadyOperator> : public Eigen::internal::t
 
 namespace tprf {
 
-/// The system matrix I - diag(albedo_c) F of one channel, applied straight from the links (Eigen's
+/// The system matrix I - diag(albedo_c) F_c of one channel, applied straight from the links (Eigen's
 /// matrix-free solver interface): a sparse copy of F would cost 12 more bytes per link, as much again
 /// as the links themselves.
 class SteadyOperator : public Eigen::EigenBase<SteadyOperator> {
@@ -83,7 +91,7 @@ public:
         return Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct>(*this, x.derived());
     }
 
-    /// (I - diag(albedo) F) x.
+    /// (I - diag(albedo_c) F_c) x.
     Eigen::VectorXd apply(const Eigen::VectorXd& x) const { return x - gather(m_patches, m_links, x, m_channel); }
 
 private:
@@ -115,6 +123,7 @@ std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, con
     const std::size_t n = patches.size();
     TPRF_CHECK_EQ(links.patches(), n);
     TPRF_CHECK_EQ(links.links.receivers(), links.nodes());
+    check_tints(links.links);
     int max_order = 0;
     for (const Pulse& p : emission.pulses) max_order = std::max(max_order, int(p.order));
     // Time-integrated emission per order (a pulse's energy is its whole contribution).

@@ -43,6 +43,10 @@ struct Links {
     std::size_t bytes() const;
 };
 
+/// Checks that `links.tint` is empty or holds one index per link into `tints`, whose entry 0 is
+/// {1, 1, 1}; throws InternalError otherwise (the solvers check before they read the tints).
+void check_tints(const Links& links);
+
 /// Options of the link stage.
 struct LinkOptions {
     int visibility_rays = 16;      ///< stratified rays per pair when the first ones disagree

@@ -7,7 +7,9 @@
 /// axis is cut into blocks: a link whose delay is at least the block length reads only history that
 /// is already final, so the block is one contiguous multiply-add over bins per link; shorter links are
 /// applied bin by bin, and zero-delay links (both patches within one bin) by a Jacobi iteration
-/// inside the bin, which neither loses nor invents energy.
+/// inside the bin, which neither loses nor invents energy. Tinted links (Links::tint: through tinted
+/// mirrors, a weight per colour) are few and kept in lists of their own, so that the grey links' one
+/// weight serves every lane; the long ones are applied a block at a time.
 ///
 /// A batch of illuminations of the same patches (one per laser point of a capture, say) is marched
 /// together: every link read then serves all of them. The march holds one value per lane per patch
@@ -68,7 +70,7 @@ using BlockSink = std::function<void(const SolveBlock&)>;
 struct SolveStats {
     int block_bins = 0;                 ///< block length used
     int ring_bins = 0;                  ///< history kept per patch, bins
-    int channels = 0;                   ///< 1 when the scene is grey (albedos and every pulse), else 3
+    int channels = 0;                   ///< 1 when the scene is grey (albedos, pulses, link tints), else 3
     int illuminations = 0;              ///< K, illuminations marched together
     int lanes = 0;                      ///< values marched per patch and bin: channels x illuminations
     std::uint64_t link_bin_updates = 0; ///< links x bins x fed layers
@@ -76,7 +78,7 @@ struct SolveStats {
     std::size_t working_bytes = 0;
     int max_jacobi_iterations = 0;      ///< worst zero-delay iteration count in one bin
     std::uint64_t jacobi_sweeps = 0;    ///< zero-delay sweeps over all bins
-    std::uint64_t short_links = 0;      ///< links shorter than a block (applied bin by bin)
+    std::uint64_t short_links = 0;      ///< links shorter than a block (applied bin by bin), tinted ones included
     double seconds_long = 0.0;          ///< wall time in the blocked long-link pass
     double seconds_short = 0.0;         ///< wall time in the bin-by-bin pass (short and same-bin links)
     double seconds_sink = 0.0;          ///< wall time in output assembly and the sink
@@ -92,7 +94,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, const 
 /// block of every illumination goes to `sink` in one SolveBlock (K = batch.size()), and each
 /// illumination's profiles are those that solving it alone gives (up to float summation order and the
 /// same-bin iteration's stopping point, about 1e-7 of a profile's peak). The scene is marched on K lanes
-/// when every albedo and every pulse of every illumination is grey, else on 3 K.
+/// when every albedo, every pulse of every illumination and every link tint (Links::tint) is grey, else on 3 K.
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, std::span<const Illumination* const> batch,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
 
