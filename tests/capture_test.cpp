@@ -13,7 +13,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -350,6 +352,47 @@ TEST(Capture, GlassBetweenTheWallAndTheHiddenPlanePassesTransmittanceSquared) {
     }
     ASSERT_GT(largest, 0.0);
     EXPECT_LE(worst, 1e-5 * largest) << "largest difference " << worst << " of " << largest;
+}
+
+// A tinted mirror and a tinted hidden plane: a capture is the mean of its three channels, each of which
+// is the capture of the scene in that channel's grey values (reflectance and albedo), so the tinted
+// capture is the mean of the three grey captures. Taking the tint as its mean reflectance would pair
+// the plane's red with the mirror's mean instead of its red: off by about the spread checked below.
+TEST(Capture, ATintedMirrorGivesTheMeanOfItsChannelsGreyCaptures) {
+    const std::string capture = R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]}, "grid": {"origin": [-0.6, -0.6, 0], "u": [1.2, 0, 0],
+        "v": [0, 1.2, 0], "nu": 4, "nv": 4}, "max_bounces": 3})";
+    const std::string time = R"({"bins": 500, "bin_width": 0.01})";
+    const auto value = [](const std::array<double, 3>& v, int c) {
+        char text[96];
+        if (c < 0) std::snprintf(text, sizeof text, "[%.17g, %.17g, %.17g]", v[0], v[1], v[2]);
+        else std::snprintf(text, sizeof text, "%.17g", v[std::size_t(c)]);
+        return std::string(text);
+    };
+    const std::array<double, 3> albedo{0.2, 0.5, 0.8}, reflectance{0.9, 0.55, 0.2};
+    // c < 0: tinted; else channel c's grey values.
+    const auto capture_of = [&](int c) {
+        const std::string plane = R"({"type": "rectangle", "origin": [0.5, -0.3, 0.5], "u": [0, 0.6, 0],
+            "v": [0.2, 0, 0.4], "albedo": )" + value(albedo, c) + "}";
+        const std::string mirror = R"({"type": "rectangle", "origin": [1, -1.5, 0.2], "u": [0, 0, 1.8],
+            "v": [0, 3, 0], "material": {"type": "mirror", "reflectance": )" + value(reflectance, c) + "}}";
+        return capture_h(scene_text(std::string(kWall) + "," + plane + "," + mirror, capture, time, 0.1));
+    };
+    const std::vector<float> tinted = capture_of(-1), r = capture_of(0), g = capture_of(1), b = capture_of(2);
+    ASSERT_EQ(tinted.size(), r.size());
+    double largest = 0.0, worst = 0.0, spread = 0.0;
+    for (std::size_t k = 0; k < tinted.size(); ++k) {
+        if (k % 500 == 0) continue;  // the spot itself
+        const double mean = (double(r[k]) + double(g[k]) + double(b[k])) / 3.0;
+        largest = std::max(largest, mean);
+        worst = std::max(worst, std::abs(double(tinted[k]) - mean));
+        spread = std::max(spread, std::abs(double(r[k]) - double(b[k])));
+    }
+    MEASURED("tinted capture vs the mean of the grey ones: %.3g of the largest (red vs blue: %.3g)\n",
+             worst / largest, spread / largest);
+    ASSERT_GT(largest, 0.0);
+    EXPECT_LE(worst, 1e-5 * largest);
+    EXPECT_GT(spread, 0.1 * largest);
 }
 
 // Bad capture blocks: one line naming the file and the JSON path, exit status 2, nothing written.

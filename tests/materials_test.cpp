@@ -76,7 +76,10 @@ TEST(Materials, BadMaterialsNameTheirJsonPath) {
               std::string::npos);
     EXPECT_NE(with({{"type", "mirror"}, {"reflectance", -0.1}}).find("objects[0].material.reflectance: must be in [0, 1]"),
               std::string::npos);
-    EXPECT_NE(with({{"type", "mirror"}, {"reflectance", {0.9, 0.5, 0.5}}}).find("must be grey"), std::string::npos);
+    EXPECT_EQ(with({{"type", "mirror"}, {"reflectance", {0.9, 0.5, 0.5}}}), "");  // a tinted mirror
+    EXPECT_NE(with({{"type", "glass"}, {"reflectance", 0.1}, {"transmittance", {0.9, 0.5, 0.5}}})
+                  .find("objects[0].material.transmittance: must be grey"),
+              std::string::npos);
     EXPECT_NE(with({{"type", "mirror"}, {"reflectance", 0.9}, {"transmittance", 0.1}}).find("objects[0].material"),
               std::string::npos);
     EXPECT_NE(with({{"type", "chrome"}}).find("objects[0].material.type: unknown material type \"chrome\""),
@@ -382,6 +385,74 @@ TEST(Materials, ACornerReflectorLightsTheFloorAsItsFourImagesDo) {
                                    std::accumulate(sa.data.begin(), sa.data.end(), 0.0);
     MEASURED("the chain of two reflections carries %.3f of the light\n", share);
     EXPECT_GT(share, 0.05);
+}
+
+}  // namespace
+
+namespace {
+
+// Channel c of `tinted` against channel c of greys[c], relative to the largest value of the channel.
+double channel_difference(const tprf::FloatArray& tinted, const std::array<const tprf::FloatArray*, 3>& greys, int c) {
+    double diff = 0.0, top = 0.0;
+    for (std::size_t k = std::size_t(c); k < tinted.data.size(); k += 3) {
+        diff = std::max(diff, double(std::abs(tinted.data[k] - greys[std::size_t(c)]->data[k])));
+        top = std::max(top, double(std::abs(greys[std::size_t(c)]->data[k])));
+    }
+    EXPECT_GT(top, 0.0);
+    return diff / top;
+}
+
+// A render of `scene` whose specular object `object` has `material` with reflectance `tint` is, channel by
+// channel, the render of the same scene with the grey reflectance of that channel: the channels of light
+// never mix (links, lights' images, the camera's rays, the steady solve and the film each carry the tint).
+void expect_channels_of_greys(json scene, std::size_t object, json material, const std::array<double, 3>& tint,
+                              const char* what) {
+    material["reflectance"] = tint;
+    scene["objects"][object]["material"] = material;
+    const tprf::RenderResult tinted = render(scene);
+    std::array<tprf::RenderResult, 3> greys;
+    for (std::size_t c = 0; c < 3; ++c) {
+        material["reflectance"] = tint[c];
+        scene["objects"][object]["material"] = material;
+        greys[c] = render(scene);
+    }
+    for (const char* name : {"transient", "steady"}) {
+        const std::array<const tprf::FloatArray*, 3> g{&array(greys[0], name), &array(greys[1], name), &array(greys[2], name)};
+        double worst = 0.0;
+        for (int c = 0; c < 3; ++c) worst = std::max(worst, channel_difference(array(tinted, name), g, c));
+        MEASURED("%s, %s: channels %.3g of each channel's peak from the grey renders\n", what, name, worst);
+        EXPECT_LT(worst, 1e-5) << what << " " << name;
+    }
+    // The test can fail: the greys differ from each other far more than the tolerance (a tint taken as
+    // its mean reflectance would be off by about that much in the red and blue channels).
+    const double spread = relative_difference(array(greys[0], "steady"), array(greys[2], "steady"));
+    MEASURED("%s: the red and blue greys' steady images differ by %.3g of the peak\n", what, spread);
+    EXPECT_GT(spread, 1e-2) << what;
+}
+
+// The closed box with a gold-like mirror wall: light through one and several reflections, lights' images,
+// and a camera that sees the mirror.
+TEST(Materials, ATintedMirrorRendersEachChannelAsAGreyMirrorOfThatChannelsReflectance) {
+    json box = {{"time", {{"bins", 60}, {"bin_width", 0.1}}},
+                {"camera", camera_at({0.95, 0.5, 0.5}, {0, 0.5, 0.5}, 12)},
+                {"patches", {{"max_edge", 0.2}}},
+                {"lights", {point_light({0.7, 0.4, 0.8})}}};
+    box["objects"] = box_walls(0, 1, 0.5);
+    box["objects"].push_back(specular({0, 0, 0}, {0, 1, 0}, {0, 0, 1}, kPerfectMirror));
+    expect_channels_of_greys(box, 5, {{"type", "mirror"}}, {0.9, 0.55, 0.2}, "tinted mirror box");
+}
+
+// Tinted glass (reflectance only; its transmittance is grey) in front of a lit plate, the light between:
+// the camera sees the plate through it and the light's and the plate's images in it.
+TEST(Materials, TintedGlassReflectsEachChannelAsGreyGlassOfThatChannelsReflectance) {
+    json scene = {{"time", {{"bins", 120}, {"bin_width", 0.05}}},
+                  {"camera", {{"position", {0.2, 0.1, 2.5}}, {"look_at", {0, 0, 0}}, {"up", {0, 1, 0}}, {"fov", 50},
+                              {"width", 12}, {"height", 12}}},
+                  {"patches", {{"max_edge", 0.25}}},
+                  {"lights", {point_light({0.3, -0.2, 0.5})}}};
+    scene["objects"] = {rect({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, 0.6),
+                        specular({-2, -2, 1}, {4, 0, 0}, {0, 4, 0}, kPerfectMirror)};
+    expect_channels_of_greys(scene, 1, {{"type", "glass"}, {"transmittance", 0.4}}, {0.5, 0.3, 0.1}, "tinted glass");
 }
 
 }  // namespace

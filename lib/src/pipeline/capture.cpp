@@ -368,6 +368,7 @@ int choose_batch(const CapturePlan& p, const LinkSet& links, const CaptureOption
     if (options.memory_bytes == 0) return kMaxBatch;
     bool grey = p.capture.laser_power[0] == p.capture.laser_power[1] && p.capture.laser_power[1] == p.capture.laser_power[2];
     for (const Rgb& a : p.patches.albedo) grey = grey && a[0] == a[1] && a[1] == a[2];
+    for (const auto& t : links.links.tints) grey = grey && t[0] == t[1] && t[1] == t[2];  // tinted mirrors
     SolverOptions solver;
     solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;
     const double one = double(solve_working_bytes(p.patches, links, p.scene.time, solver, 1, grey ? 1 : 3));

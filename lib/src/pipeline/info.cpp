@@ -162,10 +162,11 @@ std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ?
 
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
-// The solver marches one channel when every albedo and every source is grey (as the solver decides).
+// The solver marches one channel when every albedo, every source and every mirror's reflectance is grey
+// (as the solver decides: a tinted mirror's links are tinted).
 bool scene_grey(const Scene& scene) {
     for (const Object& o : scene.objects)
-        if (!grey(o.albedo) || !grey(o.emission)) return false;
+        if (!grey(o.albedo) || !grey(o.emission) || !grey(o.material.reflectance)) return false;
     for (const Light& l : scene.lights) {
         if (const auto* p = std::get_if<PointLight>(&l); p && !grey(p->intensity)) return false;
         if (const auto* p = std::get_if<Laser>(&l); p && !grey(p->power)) return false;
