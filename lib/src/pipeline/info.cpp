@@ -103,6 +103,7 @@ constexpr double kRowBytes = 8;                  // a CSR row offset per receive
 constexpr double kLinkBuildBytes = 4;            // the link builder's pair lists, per link (8 bytes a pair)
 constexpr double kHierarchicalLinkBuildBytes = 16;  // the hierarchical builder's records (16 bytes a link;
                                                     // a wavy sheet at 99k patches: 15 measured)
+constexpr double kOracleBytesPerNode = 16 * 24;  // the hierarchical builder's stored points, 16 a node
 constexpr double kTreeBytesPerNode = 100;        // a cluster tree node (bounds, cone, ranges, levels)
 constexpr double kPulseBytes = 64;               // a pulse (40 bytes) and the per-patch lists it was built in
 constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lists, taps before and after assembly
@@ -308,7 +309,7 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
     }
     e.links = to_size(links);
     e.link_bytes = to_size(kLinkBytes * links + kRowBytes * (rows + n) + tree);
-    e.link_build_bytes = to_size(build_bytes * links);
+    e.link_build_bytes = to_size(build_bytes * links + (tree > 0.0 ? kOracleBytesPerNode * rows : 0.0));
     e.seconds.links = kEmbreeSeconds * n + seconds;
 }
 

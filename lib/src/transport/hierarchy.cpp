@@ -74,7 +74,17 @@ public:
     Builder(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, const HierarchyOptions& h,
             const ClusterTree& tree)
         : m_patches(patches), m_vis(vis), m_options(options), m_h(h), m_tree(tree), m_radius(circumradii(patches)),
-          m_samples(std::clamp(h.samples, 4, kMaxSamples)), m_pieces(std::clamp(h.kernel_pieces, 1, kMaxPieces)) {}
+          m_samples(std::clamp(h.samples, 4, kMaxSamples)), m_pieces(std::clamp(h.kernel_pieces, 1, kMaxPieces)) {
+        // Every node's points for the oracle's first look, drawn once: a node is judged against hundreds
+        // of others, and drawing its points anew for each was a quarter of the link stage.
+        m_points.resize(tree.nodes() * std::size_t(m_samples));
+        parallel_for(tree.nodes(), {options.threads, 256, true}, [&](std::size_t m) {
+            for (int k = 0; k < m_samples; ++k) {
+                const SamplePoint p = sample(std::uint32_t(m), k, m_samples, 0x51ED270B27A3F9C1ull);
+                m_points[m * std::size_t(m_samples) + std::size_t(k)] = {p.x.cast<float>(), p.n.cast<float>()};
+            }
+        });
+    }
 
     // Every pair of patches below cluster c (none below a patch).
     void refine_self(std::uint32_t c, std::vector<LinkRecord>& out, Counts& counts) const {
@@ -178,6 +188,9 @@ private:
     // carrying less than the tolerance; false when it must be refined.
     bool judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out, Counts& counts) const;
     void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
+    // As draw, with each node's m_samples points drawn once (m_points), paired anew for each pair.
+    void look(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const;
+    void pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, bool fresh, PairSamples& out) const;
     void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
                      int count, std::vector<LinkRecord>& out) const;
 
@@ -189,10 +202,24 @@ private:
     std::vector<double> m_radius;
     int m_samples;
     int m_pieces;
+    struct StoredPoint {
+        Eigen::Vector3f x, n;
+    };
+    std::vector<StoredPoint> m_points;  // per node, m_samples points (look)
 };
 
-// Point pairs of (r, s) and the kernel at each, unoccluded.
+// Point pairs of (r, s) and the kernel at each, unoccluded: drawn for this pair.
 void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const {
+    pair_up(r, s, salt, count, true, out);
+}
+
+void Builder::look(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const {
+    pair_up(r, s, salt, m_samples, false, out);
+}
+
+// Fresh: points drawn for this pair; else each node's stored points.
+void Builder::pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, bool fresh,
+                      PairSamples& out) const {
     // Stratum q of r meets a random stratum of s (a fresh permutation per pair): a fixed pairing would
     // weigh some pairs of strata in every estimate and none of the others, a bias that does not
     // average out over the links of a scene.
@@ -204,8 +231,15 @@ void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int cou
     out.k_max = 0.0;
     out.k_sum = 0.0;
     for (int q = 0; q < count; ++q) {
-        out.x[q] = sample(r, q, count, salt);
-        out.y[q] = sample(s, partner[q], count, salt ^ 0x5bd1e995u);
+        if (fresh) {
+            out.x[q] = sample(r, q, count, salt);
+            out.y[q] = sample(s, partner[q], count, salt ^ 0x5bd1e995u);
+        } else {
+            const StoredPoint& a = m_points[std::size_t(r) * std::size_t(count) + std::size_t(q)];
+            const StoredPoint& b = m_points[std::size_t(s) * std::size_t(count) + std::size_t(partner[q])];
+            out.x[q] = {a.x.cast<double>(), a.n.cast<double>()};
+            out.y[q] = {b.x.cast<double>(), b.n.cast<double>()};
+        }
         const Vec3 d = out.y[q].x - out.x[q].x;
         const double r2 = d.squaredNorm();
         out.path[q] = std::sqrt(r2);
@@ -225,7 +259,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     const double a_r = m_tree.area[r], a_s = m_tree.area[s], a_big = std::max(a_r, a_s);
     const std::uint64_t salt = std::uint64_t(std::min(r, s)) << 32 | std::max(r, s);
     PairSamples judged;
-    draw(r, s, salt, m_samples, judged);
+    look(r, s, salt, judged);
     if (judged.k_max == 0.0) {
         // No sample faces the other node, yet their cones and bounds allow it. Dropping the pair
         // would lose whatever part does face, always in the same direction (an enclosure would leak):

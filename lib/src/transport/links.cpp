@@ -137,16 +137,6 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
     return true;
 }
 
-double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-    std::uint64_t h = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^ c;
-    h ^= h >> 33;
-    h *= 0xff51afd7ed558ccdull;
-    h ^= h >> 33;
-    h *= 0xc4ceb9fe1a85ec53ull;
-    h ^= h >> 33;
-    return double(h >> 11) * 0x1.0p-53;
-}
-
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
                std::size_t j) {
     const double limit = near_factor * (radius[i] + radius[j]);
