@@ -401,8 +401,14 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     const double rings = L * nodes * (share * e.ring_bins + kBlockBins + 1) * C * 4;
     const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
     const double outputs = (1.0 + terms + 1.0 + cubes) * n * kBlockBins * 3 * 4;  // solver's and films' blocks
-    const double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
-                                            shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
+    double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
+                                      shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
+    // Tinted mirrors: the march keeps its own copy of the grey links (solver.cpp plan_windows).
+    for (const Object& o : scene.objects)
+        if (!grey(o.material.reflectance)) {
+            lists += double(e.links) * kLinkBytes;
+            break;
+        }
     e.solver_bytes = to_size(rings + blocks + outputs + lists);
     // Layers that gather from links (solver.cpp plan_layers): all but the first order's, or the one total.
     const double fed = (layers == 1 && scene.solver.max_bounces < 0) ? 1 : layers - 1;
