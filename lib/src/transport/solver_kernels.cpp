@@ -1,0 +1,166 @@
+// The long-link kernels of the transient march (solver_plan.h): for one receiver and one tile of
+// sources, every link's window of the source's ring multiplied into the block's sums.
+
+#include "solver_plan.h"
+
+#include <algorithm>
+
+namespace tprf::solver_detail {
+namespace {
+
+// Links ahead whose source history the long-link kernel prefetches.
+constexpr std::uint64_t kAhead = 8;
+
+// The long-link kernel for one receiver and one source tile: the block's sums stay in registers
+// (C * BT floats) across all the receiver's links, and go to memory once at the end.
+template <int C, int BT>
+void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end, float inv_bin,
+                 DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, float* acc,
+                 std::size_t stride) {
+    // Locals, not the reference and the vectors: a store through `cursor` would make the compiler
+    // reload every array pointer once per link.
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
+    float local[C * BT] = {};
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        // Sparse rows (hierarchical sets) read a scattered ring per link: ask for the one kAhead links
+        // on, and for the slot of the one after that, while this link is summed.
+        if (k + 2 * kAhead < end) {
+            __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
+            const RingSlot& next = slots[source[k + kAhead]];
+            const int lag = int(distance[k + kAhead] * inv_bin);
+            const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * C;
+            for (int line = 0; line < (C * (BT + 1) * 4 + 63) / 64 && line < 4; ++line)
+                __builtin_prefetch(at + 16 * line);
+        }
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        if (t.lag < BT) continue;
+        const RingSlot& slot = slots[source[k]];
+        const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
+        // Two separate accumulations: written as one sum, the compiler (no -ffast-math) must round
+        // w0 h + w1 h first, which costs a multiply, an FMA and an add instead of two FMAs.
+        for (int e = 0; e < C * BT; ++e) {
+            local[e] += t.w0 * h[e + C];
+            local[e] += t.w1 * h[e];
+        }
+    }
+    if (k == cursor) return;  // no link of this window in this source tile: nothing to add
+    cursor = k;
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+}
+
+// The same for any lane count C and windows of BT bins: the sums (C * BT floats) in a local array,
+// each link one contiguous multiply-add over it, which vectorises over bins and lanes alike.
+template <int BT>
+void gather_lanes(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
+                  float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
+                  float* acc, std::size_t stride) {
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
+    const int len = C * BT;
+    float local[kMaxLanes * BT];
+    std::fill_n(local, len, 0.0f);
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        if (k + 2 * kAhead < end) {  // as in gather_long
+            __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
+            const RingSlot& next = slots[source[k + kAhead]];
+            const int lag = int(distance[k + kAhead] * inv_bin);
+            const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * std::size_t(C);
+            for (int line = 0; line < 4; ++line) __builtin_prefetch(at + 16 * line);
+        }
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        if (t.lag < BT) continue;
+        const RingSlot& slot = slots[source[k]];
+        const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * std::size_t(C);
+        for (int e = 0; e < len; ++e) {  // two accumulations, as in gather_long
+            local[e] += t.w0 * h[e + C];
+            local[e] += t.w1 * h[e];
+        }
+    }
+    if (k == cursor) return;
+    cursor = k;
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+}
+
+}  // namespace
+
+// The same for windows longer than kLongestWindow without a specialisation (long blocks): summed
+// straight into the accumulators, a bin's lanes at a time.
+void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
+                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0,
+                     int C, int bt, float* __restrict acc, std::size_t stride) {
+    const std::uint32_t* __restrict source = links.source.data();
+    const float* __restrict distance = links.distance.data();
+    const float* __restrict ff = links.ff.data();
+    std::uint64_t k = cursor;
+    for (; k < end && source[k] < source_end; ++k) {
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        if (t.lag < bt) continue;
+        const float* __restrict h =
+            ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);
+        for (int b = 0; b < bt; ++b) {
+            float* __restrict a = acc + std::size_t(b) * stride;
+            const float* __restrict hb = h + std::size_t(b) * std::size_t(C);
+            for (int c = 0; c < C; ++c) {  // two accumulations, as in gather_long
+                a[c] += t.w0 * hb[c + C];
+                a[c] += t.w1 * hb[c];
+            }
+        }
+    }
+    cursor = k;
+}
+
+namespace {
+
+// The long-link kernel for C channels and windows of `bins` bins (the block's and the longer
+// windows up to kLongestWindow), or null for the generic one.
+template <int C>
+GatherKernel kernel_for(int bins) {
+    switch (bins) {
+        case 1: return gather_long<C, 1>;
+        case 2: return gather_long<C, 2>;
+        case 4: return gather_long<C, 4>;
+        case 8: return gather_long<C, 8>;
+        case 16: return gather_long<C, 16>;
+        case 32: return gather_long<C, 32>;
+        case 64:  // grey scenes only: 3 x 64 sums do not fit in registers
+            if constexpr (C == 1) return gather_long<C, 64>;
+            return nullptr;
+        default: return nullptr;
+    }
+}
+
+}  // namespace
+
+// Lane counts with kernels of their own: one or three channels of one illumination, a grey batch of 8
+// or 16. Any other count takes the generic kernels (gather_lanes, a run-time lane loop).
+GatherKernel pick_kernel(int C, int bins) {
+    switch (C) {
+        case 1: return kernel_for<1>(bins);
+        case 3: return kernel_for<3>(bins);
+        case 8: return kernel_for<8>(bins);
+        case 16: return kernel_for<16>(bins);
+        default: return nullptr;
+    }
+}
+
+// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
+LaneKernel lane_kernel_for(int bins) {
+    switch (bins) {
+        case 1: return gather_lanes<1>;
+        case 2: return gather_lanes<2>;
+        case 4: return gather_lanes<4>;
+        case 8: return gather_lanes<8>;
+        case 16: return gather_lanes<16>;
+        case 32: return gather_lanes<32>;
+        default: return nullptr;
+    }
+}
+
+}  // namespace tprf::solver_detail

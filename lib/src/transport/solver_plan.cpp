@@ -1,0 +1,423 @@
+// The transient solver's plan: sorting the links into the long pass, the bin-by-bin lists and the
+// tinted lists, the windows, the same-bin sweeps' bound, the rings and the blocks (solver_plan.h).
+
+#include "solver_plan.h"
+
+#include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/link_set.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+
+namespace tprf::solver_detail {
+namespace {
+
+// Whether link k carries a tint other than {1, 1, 1} (which leaves it a grey link).
+bool tinted_link(const Links& links, std::uint64_t k) {
+    if (links.tint.empty() || links.tint[k] == 0) return false;
+    const std::array<float, 3>& f = links.tints[links.tint[k]];
+    return !(f[0] == 1.0f && f[1] == 1.0f && f[2] == 1.0f);
+}
+
+bool any_tinted(const Links& links) {
+    for (std::uint64_t k = 0; k < links.tint.size(); ++k)
+        if (tinted_link(links, k)) return true;
+    return false;
+}
+
+// Link k's taps in each colour, from `source` (a patch or its position).
+TintedLink tinted_taps(const Links& links, std::uint64_t k, std::uint32_t source, float inv_bin, DelayMode mode) {
+    TintedLink out{source, 0, {}, {}};
+    const std::array<float, 3>& f = links.tints[links.tint[k]];
+    for (int c = 0; c < 3; ++c) {
+        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k] * f[std::size_t(c)]);
+        out.lag = t.lag;
+        out.w0[c] = t.w0;
+        out.w1[c] = t.w1;
+    }
+    return out;
+}
+
+LayerPlan plan_layers(int max_bounces, int bounce_terms) {
+    LayerPlan plan;
+    if (max_bounces >= 0) {
+        plan.exact = max_bounces + 1;
+        for (int l = 0; l < plan.exact; ++l) plan.source.push_back(l - 1);
+        plan.terms = bounce_terms > 0 ? plan.exact : 0;
+    } else if (bounce_terms > 1) {
+        plan.exact = bounce_terms - 1;
+        for (int l = 0; l < plan.exact; ++l) plan.source.push_back(l - 1);
+        plan.total = plan.exact;
+        plan.source.push_back(plan.total);
+        plan.terms = bounce_terms;
+    } else {
+        plan.total = 0;
+        plan.source.push_back(0);
+    }
+    return plan;
+}
+
+// The links that have to be applied bin by bin (lag < bt), as lists by receiver patch; the tinted
+// ones (sized only when some link is tinted), long ones included.
+struct BinLinks {
+    std::vector<std::vector<ShortLink>> shorts;
+    std::vector<std::vector<SameBinLink>> same;
+    std::vector<std::vector<TintedLink>> tinted_long, tinted_shorts;
+    std::vector<std::vector<TintedSameLink>> tinted_same;
+};
+
+// Adds a link of lag < bt between patches (the same-bin system takes a lag-0 link's w0 tap).
+void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, const Taps& t, float scale) {
+    if (t.lag == 0) {
+        out.same[receiver].push_back({source, t.w0 * scale});
+        out.shorts[receiver].push_back({source, 0, 0.0f, t.w1 * scale});
+    } else {
+        out.shorts[receiver].push_back({source, t.lag, t.w0 * scale, t.w1 * scale});
+    }
+}
+
+// Adds tinted link k from patch s to patch i: as add_bin_link adds a grey one when it is shorter than a
+// block, else to the tinted long list, which reads a block and one bin of the source's ring.
+void add_tinted_link(BinLinks& out, SolvePlan& plan, const Links& links, std::uint64_t k, std::size_t i,
+                     std::uint32_t s) {
+    TPRF_CHECK(i < plan.n && s < plan.n);  // only links between patches are tinted (Links::tint)
+    TintedLink t = tinted_taps(links, k, s, plan.inv_bin_f, plan.delay);
+    if (t.lag >= plan.bt) {
+        plan.send_window[s] = std::max(plan.send_window[s], plan.bt);
+        out.tinted_long[i].push_back(t);
+        return;
+    }
+    if (t.lag == 0) {
+        out.tinted_same[i].push_back({s, {t.w0[0], t.w0[1], t.w0[2]}});
+        std::fill_n(t.w0, 3, 0.0f);
+    }
+    out.tinted_shorts[i].push_back(t);
+}
+
+// The tinted lists as CSR: long ones by receiver patch, the others by position, naming their source's.
+void flatten_tinted(BinLinks& bins, SolvePlan& plan) {
+    plan.tinted_long_row.assign(plan.n + 1, 0);
+    plan.tinted_short_row.assign(plan.n + 1, 0);
+    plan.tinted_same_row.assign(plan.n + 1, 0);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        plan.tinted_long.insert(plan.tinted_long.end(), bins.tinted_long[i].begin(), bins.tinted_long[i].end());
+        plan.tinted_long_row[i + 1] = plan.tinted_long.size();
+    }
+    for (std::size_t q = 0; q < plan.n; ++q) {
+        const std::size_t i = plan.order[q];
+        for (TintedLink l : bins.tinted_shorts[i]) {
+            l.source = plan.position[l.source];
+            plan.tinted_short.push_back(l);
+        }
+        for (TintedSameLink l : bins.tinted_same[i]) {
+            l.source = plan.position[l.source];
+            plan.tinted_same.push_back(l);
+        }
+        plan.tinted_short_row[q + 1] = plan.tinted_short.size();
+        plan.tinted_same_row[q + 1] = plan.tinted_same.size();
+    }
+}
+
+// Sorts every link into the long pass (lag >= bt), the bin-by-bin pass (0 < lag < bt) or both the
+// bin-by-bin and the same-bin system (lag 0: its w0 tap is within the bin). The bin-by-bin passes
+// touch patches only: a link shorter than a block with a cluster at either end (which the
+// hierarchical build avoids when it knows the bin) is applied as the links between their patches,
+// the receiver's each taking the whole link (push), the source's each its share of the area (pull).
+void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
+    const ClusterTree& tree = *plan.tree;
+    BinLinks bins;
+    bins.shorts.resize(plan.n);
+    bins.same.resize(plan.n);
+    const bool tinted = any_tinted(links);
+    if (tinted) {
+        bins.tinted_long.resize(plan.n);
+        bins.tinted_shorts.resize(plan.n);
+        bins.tinted_same.resize(plan.n);
+    }
+    plan.send_lag.assign(plan.m, 0);
+    plan.send_window.assign(plan.m, 0);
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
+            const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            plan.max_lag = std::max(plan.max_lag, t.lag);
+            const std::uint32_t s = links.source[k];
+            plan.send_lag[s] = std::max(plan.send_lag[s], t.lag);
+            if (tinted && tinted_link(links, k)) {
+                add_tinted_link(bins, plan, links, k, i, s);
+                continue;
+            }
+            if (t.lag >= plan.bt) {
+                plan.send_window[s] = std::max(plan.send_window[s], plan.window_bins(plan.window_of(t.lag)));
+                continue;
+            }
+            if (i < plan.n && s < plan.n) {
+                add_bin_link(bins, i, s, t, 1.0f);
+                continue;
+            }
+            for (std::uint32_t r = tree.first[i]; r < tree.last[i]; ++r)
+                for (std::uint32_t q = tree.first[s]; q < tree.last[s]; ++q) {
+                    const std::uint32_t leaf = tree.leaf_order[q];
+                    add_bin_link(bins, tree.leaf_order[r], leaf, t, float(tree.area[leaf] / tree.area[s]));
+                }
+        }
+    }
+    plan.order.assign(tree.leaf_order.begin(), tree.leaf_order.end());
+    plan.position.assign(plan.n, 0);
+    for (std::size_t q = 0; q < plan.n; ++q) plan.position[plan.order[q]] = std::uint32_t(q);
+    for (std::size_t i = 0; i < plan.n; ++i) {
+        for (ShortLink& l : bins.shorts[i]) l.source = plan.position[l.source];
+        for (SameBinLink& l : bins.same[i]) l.source = plan.position[l.source];
+    }
+    plan.short_row.assign(plan.n + 1, 0);
+    plan.same_row.assign(plan.n + 1, 0);
+    plan.albedo.resize(plan.n * std::size_t(plan.C));
+    for (std::size_t q = 0; q < plan.n; ++q) {
+        const std::size_t i = plan.order[q];
+        plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
+        plan.same_links.insert(plan.same_links.end(), bins.same[i].begin(), bins.same[i].end());
+        std::vector<ShortLink>().swap(bins.shorts[i]);
+        std::vector<SameBinLink>().swap(bins.same[i]);
+        plan.short_row[q + 1] = plan.short_links.size();
+        plan.same_row[q + 1] = plan.same_links.size();
+        for (int c = 0; c < plan.C; ++c)
+            plan.albedo[q * std::size_t(plan.C) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
+    }
+    if (tinted) flatten_tinted(bins, plan);
+}
+
+// plan.sorted: the grey links of every row (tinted ones have lists of their own), each row stably
+// sorted by window when `by_window`, so that sources stay non-decreasing within a window.
+template <class WindowFn>
+void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, WindowFn window) {
+    Links& out = plan.sorted;
+    out.row.assign(links.row.size(), 0);
+    out.source.reserve(links.size());
+    out.ff.reserve(links.size());
+    out.distance.reserve(links.size());
+    std::vector<std::uint64_t> order;
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        order.clear();
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
+            if (!tinted_link(links, k)) order.push_back(k);
+        if (by_window)
+            std::stable_sort(order.begin(), order.end(),
+                             [&](std::uint64_t a, std::uint64_t b) { return window(links, a) < window(links, b); });
+        for (std::uint64_t k : order) {
+            out.source.push_back(links.source[k]);
+            out.ff.push_back(links.ff[k]);
+            out.distance.push_back(links.distance[k]);
+        }
+        out.row[i + 1] = out.source.size();
+    }
+}
+
+// The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
+// hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
+// other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
+// links only: a set with tinted links is copied without them.
+void plan_windows(const Links& links, SolvePlan& plan) {
+    plan.acc_bins = std::max(plan.bt, kLongestWindow);
+    plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
+    TPRF_CHECK_LE(plan.windows, kMaxWindows);
+    plan.links = &links;
+    const std::size_t S = std::size_t(plan.windows);
+    plan.segments.assign(plan.m * (S + 1), 0);
+    auto window = [&](const Links& l, std::uint64_t k) {
+        return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
+    };
+    const bool tinted = any_tinted(links);
+    bool ordered = true;
+    for (std::size_t i = 0; i < plan.m && ordered && S > 1; ++i)
+        for (std::uint64_t k = links.row[i] + 1; k < links.row[i + 1] && ordered; ++k)
+            ordered = window(links, k - 1) <= window(links, k);
+    if (tinted || !ordered) {
+        copy_grey_links(links, plan, S > 1, window);
+        plan.links = &plan.sorted;
+    }
+    const Links& l = *plan.links;
+    if (S == 1) {
+        for (std::size_t i = 0; i < plan.m; ++i) {
+            plan.segments[2 * i] = l.row[i];
+            plan.segments[2 * i + 1] = l.row[i + 1];
+        }
+        return;
+    }
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        std::uint64_t k = l.row[i];
+        for (std::size_t s = 0; s < S; ++s) {
+            while (k < l.row[i + 1] && window(l, k) < int(s)) ++k;
+            plan.segments[i * (S + 1) + s] = k;
+        }
+        plan.segments[i * (S + 1) + S] = l.row[i + 1];
+    }
+}
+
+// An upper bound of the spectral radius of the same-bin operator M (M_ij = albedo_i w_ij, the largest
+// albedo and the largest tinted weight over channels, so that it bounds every channel's operator): by
+// Collatz and Wielandt, rho(M) <= max_i (Mv)_i / v_i for any positive v, and power iterations from v = 1
+// bring that bound down to rho. M is similar to a symmetric matrix (the weights are reciprocal:
+// A_i w_ij = A_j w_ji, a tinted link's reverse passing the same mirrors), so its spectrum lies in
+// [-rho, rho], the interval that the Chebyshev weights assume.
+double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
+    const std::size_t n = plan.n;
+    std::vector<double> v(n, 1.0), y(n);
+    double bound = 0.0;
+    for (int iteration = 0; iteration < 24; ++iteration) {
+        bound = 0.0;
+        double top = 0.0;
+        for (std::size_t q = 0; q < n; ++q) {  // by position, as the links
+            double sum = 0.0;
+            for (std::uint64_t k = plan.same_row[q]; k < plan.same_row[q + 1]; ++k)
+                sum += double(plan.same_links[k].w) * v[plan.same_links[k].source];
+            if (!plan.tinted_same.empty())
+                for (std::uint64_t k = plan.tinted_same_row[q]; k < plan.tinted_same_row[q + 1]; ++k) {
+                    const TintedSameLink& l = plan.tinted_same[k];
+                    sum += double(std::max({l.w[0], l.w[1], l.w[2]})) * v[l.source];
+                }
+            y[q] = patches.albedo[plan.order[q]].maxCoeff() * sum;
+            bound = std::max(bound, y[q] / v[q]);
+            top = std::max(top, y[q]);
+        }
+        if (!(top > 0.0)) return 0.0;
+        for (std::size_t i = 0; i < n; ++i) v[i] = y[i] / top + 1e-3;  // kept positive
+    }
+    return bound;
+}
+
+// The subtrees that threads take whole during push and pull: the highest nodes with at most
+// `cut` patches below, so that there are several per thread; the clusters above them, in preorder.
+void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
+    const std::size_t cut = std::max<std::size_t>(32, t.leaves / (16 * std::size_t(std::max(plan.threads, 1))));
+    std::vector<std::uint32_t> stack{t.root()};
+    while (!stack.empty()) {
+        const std::uint32_t c = stack.back();
+        stack.pop_back();
+        if (t.last[c] - t.first[c] <= cut || t.is_leaf(c)) {
+            plan.subtrees.push_back(c);
+            continue;
+        }
+        plan.top.push_back(c);
+        const auto [a, b] = t.children[c - t.leaves];
+        stack.push_back(b);
+        stack.push_back(a);
+    }
+    std::sort(plan.top.begin(), plan.top.end());  // preorder ids: parents first
+}
+
+// Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in as many
+// sweeps as there are orders), so they sweep plain Jacobi.
+void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
+    if (plan.L != 1 || plan.layers.source[0] != 0 || !plan.same_bin()) return;
+    const double rho = same_bin_radius(patches, plan);
+    if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
+    double w = 1.0;
+    for (int k = 1; k <= kMaxSweeps; ++k) {
+        w = k == 1 ? 1.0 : k == 2 ? 1.0 / (1.0 - 0.5 * rho * rho) : 1.0 / (1.0 - 0.25 * rho * rho * w);
+        plan.omega.push_back(float(w));
+    }
+}
+
+// Every node's ring of C lanes per bin: patches' rings in leaf order (the bin-by-bin passes store them
+// in that order), then clusters'.
+void plan_rings(SolvePlan& plan) {
+    plan.slots.resize(plan.m);
+    for (std::size_t at = 0; at < plan.m; ++at) {
+        const std::size_t k = at < plan.n ? plan.order[at] : at;
+        const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
+        const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
+        plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
+        plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
+        plan.ring = std::max(plan.ring, length);
+    }
+    std::vector<int>().swap(plan.send_lag);
+    std::vector<int>().swap(plan.send_window);
+}
+
+}  // namespace
+
+// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
+// first block (plan_blocks moves the start to the batch's earliest pulse).
+SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
+                    int illuminations, int channels) {
+    const Links& links = set.links;
+    SolvePlan plan;
+    plan.n = patches.size();
+    plan.m = set.nodes();
+    plan.tree = &set.tree;
+    plan.clusters = set.tree.clusters() > 0;
+    plan.threads = thread_count(options.threads);
+    if (plan.clusters) cut_subtrees(set.tree, plan);
+    if (links.size() < kDenseRow * plan.m) plan.source_tile = std::max<std::size_t>(plan.m, 1);
+    plan.bt = int(std::bit_ceil(unsigned(std::clamp(options.block_bins, 1, 4096))));
+    // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
+    if (plan.clusters && set.block_bins > 0)
+        while (plan.bt > 1 && plan.bt > set.block_bins) plan.bt /= 2;
+    plan.K = illuminations;
+    plan.channels = channels;
+    plan.C = illuminations * channels;
+    plan.delay = options.delay;
+    plan.start_m = time.start_m();
+    plan.inv_bin = 1.0 / time.bin_width_m();
+    plan.inv_bin_f = float(plan.inv_bin);
+    plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
+    plan.L = plan.layers.layers();
+    plan_windows(links, plan);
+    plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
+    split_links(patches, links, plan);
+    plan_sweeps(patches, plan);
+    plan_rings(plan);
+    plan.T = time.bins;
+    plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
+    for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
+    for (int s = 0; s < plan.windows; ++s) {
+        plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s));
+        if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s));
+    }
+    return plan;
+}
+
+// Light sent before the window opens still travels: the march starts at the batch's earliest pulse,
+// aligned to the longest window, so that every window starts at the first block.
+void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
+    std::int64_t first_pulse_bin = std::min<std::int64_t>(0, plan.first_emitted);
+    for (const Illumination* illumination : batch)
+        for (const Pulse& p : illumination->pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
+    const std::int64_t align = plan.acc_bins;
+    plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + align - 1) / align) * align;
+    plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
+}
+
+// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
+std::size_t working_bytes(const SolvePlan& p) {
+    const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
+    const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_iterate, m_previous, m_same
+    const std::size_t states = 2 + (p.same_radius > 0.0 ? 1 : 0) + (p.same_bin() ? 1 : 0);
+    const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
+                               L * std::size_t(p.recent_bins) * p.n * C + states * state +
+                               (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
+    return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
+           p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t) +
+           p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() +
+           p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
+           p.tinted_same.size() * sizeof(TintedSameLink) +
+           (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);
+}
+
+bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch) {
+    auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
+    for (const Rgb& a : patches.albedo)
+        if (!grey(a)) return false;
+    for (std::uint16_t t : links.tint)
+        if (!(links.tints[t][0] == links.tints[t][1] && links.tints[t][1] == links.tints[t][2])) return false;
+    for (const Illumination* illumination : batch)
+        for (const Pulse& p : illumination->pulses)
+            if (!grey(p.energy)) return false;
+    return true;
+}
+
+}  // namespace tprf::solver_detail

@@ -1,0 +1,261 @@
+#pragma once
+// The transient solver's plan (solver.cpp marches it): every size, list and ring geometry fixed before
+// a march starts, the link kinds it sorts links into, and the long-link kernels' signatures. Internal
+// to lib/src/transport: solver_plan.cpp builds a plan, solver_kernels.cpp holds the kernels.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/links.h"
+#include "tprf/transport/solver.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <type_traits>
+#include <vector>
+
+namespace tprf {
+
+struct PatchSet;
+struct LinkSet;
+struct ClusterTree;
+
+namespace solver_detail {
+
+// Most values marched per patch and bin: the three colours of kMaxBatch illuminations.
+constexpr int kMaxLanes = 3 * kMaxBatch;
+
+// A link's delay as two taps: B_src[t - lag] * w0 + B_src[t - lag - 1] * w1. Nearest rounds the delay
+// to a whole bin; linear spreads a bin of the source (taken as uniform over the bin) over the two
+// bins it overlaps once shifted, so that the mean arrival time is exact and no energy is lost.
+struct Taps {
+    int lag;
+    float w0;
+    float w1;
+};
+
+// In single precision: it runs once per link and block in the hot loop. Delays stay below 2^24 bins, so
+// the fraction keeps at least a few thousandths of a bin.
+inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
+    const float d = distance * inv_bin;
+    if (mode == DelayMode::Nearest) return {int(d + 0.5f), ff, 0.0f};
+    const int lag = int(d);  // d >= 0: truncation is the floor
+    const float frac = d - float(lag);
+    return {lag, ff * (1.0f - frac), ff * frac};
+}
+
+struct ShortLink {
+    std::uint32_t source;  // the source patch's position (SolvePlan::order)
+    int lag;     // < block length; lag 0 keeps only its w1 tap here (w0 is in the same-bin list)
+    float w0;
+    float w1;
+};
+
+struct SameBinLink {
+    std::uint32_t source;  // the source patch's position (SolvePlan::order)
+    float w;
+};
+
+// A link through tinted mirrors or glass (Links::tint), between patches: its taps in each colour, ff x
+// tints[t][c] split as link_taps splits a grey link's. The long-pass kernels and the lists above keep
+// to grey links, whose one weight serves every lane; the few tinted ones have lists of their own.
+struct TintedLink {
+    std::uint32_t source;  // long list: the source patch; bin-by-bin list: its position
+    int lag;               // as ShortLink's (lag 0: the w1 taps only, w0 is in the same-bin list)
+    float w0[3];
+    float w1[3];
+};
+
+struct TintedSameLink {
+    std::uint32_t source;  // the source patch's position
+    float w[3];
+};
+
+// sum[e] += w[c] h[e] over C lanes, c being lane e's colour: lanes come in threes, one per colour, or
+// are grey (`channels` 1), when every tint is grey too and w[0] serves them all.
+inline void add_tinted(float* __restrict sum, const float* w, const float* __restrict h, int C, int channels) {
+    if (channels == 1) {
+        for (int e = 0; e < C; ++e) sum[e] += w[0] * h[e];
+        return;
+    }
+    for (int e = 0; e + 3 <= C; e += 3)  // C is 3 K
+        for (int c = 0; c < 3; ++c) sum[e + c] += w[c] * h[e + c];
+}
+
+// Which rings exist, what each gathers from and where each pulse order goes (see SolveBlock).
+struct LayerPlan {
+    std::vector<int> source;  // per layer: the layer it gathers from, -1 for none
+    int total = -1;           // layer that holds every order, or -1 when the total is the sum of layers
+    int exact = 0;            // layers 0..exact-1 hold exactly one order each
+    int terms = 0;            // per-order terms in the output
+
+    int layers() const { return int(source.size()); }
+};
+
+// Where node m's ring of recent radiosity lives in a layer's ring array: `length` bins (a power of
+// two, as long as the node's longest outgoing link needs), then a mirror of the first bins, so that
+// any window of a block plus one bin is contiguous.
+struct RingSlot {
+    std::uint64_t offset;  // floats
+    std::int32_t mask;     // length - 1
+    std::int32_t length;
+    std::int32_t mirror;   // bins mirrored after the ring: the longest window a long link reads, plus one
+};
+
+using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
+                              const float*, const RingSlot*, std::int64_t, float*, std::size_t);
+using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
+                            const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
+
+// Calls fn with the lane count C as a std::integral_constant where the bin-by-bin passes are
+// specialised for it (as pick_kernel), else with 0: lanes counted at run time.
+template <class Fn>
+void with_lanes(int C, Fn&& fn) {
+    switch (C) {
+        case 1: return fn(std::integral_constant<int, 1>{});
+        case 3: return fn(std::integral_constant<int, 3>{});
+        case 8: return fn(std::integral_constant<int, 8>{});
+        case 16: return fn(std::integral_constant<int, 16>{});
+        default: return fn(std::integral_constant<int, 0>{});
+    }
+}
+
+// Tiles of the long-link pass (March::long_pass): a tile of 256 receivers walks its links in tiles of
+// 64 sources, so that those sources' rings (64 x ring x 3 floats, under 0.5 MB for rings of 512) stay
+// in a core's L2 while every receiver of the tile reads them (sizes measured, bench/RESULTS.md). A
+// batch's lanes make them larger; tiles of fewer sources for more lanes (8 for 24 lanes, 12 for 16)
+// measured no faster on the Cornell box (bench/solver_bench.cpp, BM_TransientSolveBatch).
+constexpr std::size_t kReceiverTile = 256;
+constexpr std::size_t kSourceTile = 64;
+// Links per receiver below which the sources are not tiled.
+constexpr std::size_t kDenseRow = 256;
+// Most same-bin sweeps in one bin.
+constexpr int kMaxSweeps = 200;
+// The long pass's longest window, bins: links at least this long are applied this many bins at a
+// time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
+constexpr int kLongestWindow = 32;
+constexpr int kMaxWindows = 16;
+
+// Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
+// the range of blocks. Computed once; the march only executes it.
+struct SolvePlan {
+    std::size_t n = 0;              // patches (the leaves: they emit, reflect and are output)
+    std::size_t m = 0;              // nodes: patches, then clusters (rings, gathers)
+    const ClusterTree* tree = nullptr;
+    bool clusters = false;          // push and pull run (a link set with clusters)
+    // With clusters: the subtrees that threads take whole (their patches and clusters) and the
+    // clusters above them, in preorder.
+    std::vector<std::uint32_t> top, subtrees;
+    // Sources per tile of the long pass: kSourceTile for dense rows; one tile for sparse ones
+    // (hierarchical links), whose rows would otherwise be walked once per empty tile.
+    std::size_t source_tile = kSourceTile;
+    int threads = 1;
+    int bt = 0;                     // block length, bins (a power of two)
+    // Windows of the long pass: window s is bt << s bins long and is applied at the blocks that
+    // start at its multiples, to the links of delay >= its length (and below the next window's;
+    // the last takes every longer one). The accumulators hold the next `acc_bins` bins.
+    int windows = 1;
+    int acc_bins = 0;               // the last window's length: bt << (windows - 1)
+    // Per receiver: where its links of each window start, then where its row ends (windows + 1
+    // offsets); with one window, the whole row (the kernel skips links shorter than the block).
+    std::vector<std::uint64_t> segments;
+    const Links* links = nullptr;   // the set's links, or `sorted` (plan_windows): the grey ones, by window
+    Links sorted;
+    // Lanes: every value the march keeps per node and bin (rings, accumulators, recent bins, emission,
+    // sweep state) is C floats, illumination k's colour c in lane k * channels + c.
+    int K = 1;                      // illuminations marched together
+    int channels = 3;               // per illumination: 1 for a grey scene (every albedo and pulse), else 3
+    int C = 3;                      // lanes, K x channels
+    // The lane that holds illumination k's colour c (a grey lane serves all three).
+    int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
+    DelayMode delay = DelayMode::Linear;
+    double start_m = 0.0, inv_bin = 0.0;
+    float inv_bin_f = 0.0f;
+    LayerPlan layers;
+    int L = 0;                      // layers
+    // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
+    std::vector<std::uint64_t> short_row, same_row;  // by receiver position
+    std::vector<ShortLink> short_links;
+    std::vector<SameBinLink> same_links;
+    // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
+    // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
+    // rows too, when no link is tinted.
+    std::vector<std::uint64_t> tinted_long_row, tinted_short_row, tinted_same_row;
+    std::vector<TintedLink> tinted_long, tinted_short;
+    std::vector<TintedSameLink> tinted_same;
+    bool same_bin() const { return !same_links.empty() || !tinted_same.empty(); }
+    // The bin-by-bin passes visit patches in the cluster tree's leaf order (near patches together)
+    // and keep their state by position in it: short and same-bin links name their source's position.
+    std::vector<std::uint32_t> order;     // position -> patch
+    std::vector<std::uint32_t> position;  // patch -> position
+    std::vector<float> albedo;            // by position, C per patch: each lane's colour
+    // Where node i's values are kept in arrays over nodes that the bin-by-bin passes read: patches
+    // by position, clusters by id.
+    std::size_t node_slot(std::size_t i) const { return i < n ? position[i] : i; }
+    // Chebyshev acceleration of the same-bin sweeps: an upper bound of the spectral radius of the
+    // same-bin operator (albedo x weights), or 0 to sweep plain Jacobi.
+    double same_radius = 0.0;
+    std::vector<float> omega;  // Chebyshev weights of sweeps 1..kMaxSweeps
+    int max_lag = 0;
+    // Rings: the window [t - lag - 1, t] of every read from a node must fit, plus one block; mirrored
+    // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
+    // link needs: most patches of a hierarchical set send only to near ones (or not at all).
+    std::vector<int> send_lag;      // per node: its longest outgoing link's lag, bins
+    std::vector<int> send_window;   // per node: its longest outgoing long link's window, bins (0: none)
+    std::vector<RingSlot> slots;    // per node
+    std::size_t ring_floats = 0;    // per layer
+    int ring = 0;                   // longest ring
+    std::int64_t T = 0, b_begin = 0, blocks = 0;
+    std::int64_t first_emitted = 0;  // first bin handed to the sink (SolverOptions::first_bin)
+    int fed_layers = 0;             // layers that gather from links
+    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
+    LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
+
+    std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
+    // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
+    // every node together), so that the bin-by-bin passes read them contiguously.
+    std::size_t acc_at(std::size_t i, std::int64_t bin) const { return acc_at_slot(node_slot(i), bin); }
+    std::size_t acc_at_slot(std::size_t slot, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
+    }
+    std::size_t acc_stride() const { return m * std::size_t(C); }
+    // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators and by
+    // position: what the bin-by-bin passes read (a few bins of every patch, contiguous), besides the rings.
+    int recent_bins = 0;
+    std::size_t recent_at(std::size_t q, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * n + q) * std::size_t(C);
+    }
+    int window_bins(int s) const { return bt << s; }
+    // The window of a link `lag` bins long: -1 below the block.
+    int window_of(int lag) const {
+        if (lag < bt) return -1;
+        return std::min(int(std::bit_width(unsigned(lag / bt))) - 1, windows - 1);
+    }
+    // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
+    std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
+};
+
+/// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
+/// first block (plan_blocks moves the start to the batch's earliest pulse).
+SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
+                    int illuminations, int channels);
+/// Moves the march's start to the batch's earliest pulse, aligned to the longest window.
+void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch);
+/// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
+std::size_t working_bytes(const SolvePlan& p);
+/// Whether the march can run on one channel: every albedo, link tint and pulse grey.
+bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch);
+
+/// The long-link kernel for C lanes and windows of `bins` bins, or null (solver_kernels.cpp).
+GatherKernel pick_kernel(int C, int bins);
+/// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
+LaneKernel lane_kernel_for(int bins);
+/// Any lane count and window length, summed straight into the accumulators.
+void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
+                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
+                     int bins, float* acc, std::size_t stride);
+
+}  // namespace solver_detail
+}  // namespace tprf
