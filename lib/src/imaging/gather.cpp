@@ -187,7 +187,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             const std::size_t first = direct.size();
             direct_arrivals(sp, share, patches, sources, vis, options, direct);
             if (sp.tint != 0)
-                for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tints[sp.tint];
+                for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tint_of(sp);
         }
         std::sort(run_taps[k].begin(), run_taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
             return std::tie(a.patch, a.leg, a.tint, a.weight) < std::tie(b.patch, b.leg, b.tint, b.weight);

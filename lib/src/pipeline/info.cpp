@@ -163,11 +163,18 @@ std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ?
 
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
+// Whether some mirror or glass reflects the channels unalike: its links are tinted (Links::tint).
+bool tinted_mirrors(const Scene& scene) {
+    return std::any_of(scene.objects.begin(), scene.objects.end(),
+                       [](const Object& o) { return !grey(o.material.reflectance); });
+}
+
 // The solver marches one channel when every albedo, every source and every mirror's reflectance is grey
-// (as the solver decides: a tinted mirror's links are tinted).
+// (as the solver decides).
 bool scene_grey(const Scene& scene) {
+    if (tinted_mirrors(scene)) return false;
     for (const Object& o : scene.objects)
-        if (!grey(o.albedo) || !grey(o.emission) || !grey(o.material.reflectance)) return false;
+        if (!grey(o.albedo) || !grey(o.emission)) return false;
     for (const Light& l : scene.lights) {
         if (const auto* p = std::get_if<PointLight>(&l); p && !grey(p->intensity)) return false;
         if (const auto* p = std::get_if<Laser>(&l); p && !grey(p->power)) return false;
@@ -232,7 +239,7 @@ double near_gap_m(const PatchCensus& census, double bin_m) {
     return std::clamp(std::floor(4.0 * size / bin_m), 1.0, 8.0) * bin_m;
 }
 
-// Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver.cpp
+// Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver_plan.cpp
 // plan_layers): {layers, solver terms, per-bounce cubes}.
 std::array<int, 3> bounce_layout(const SolverSettings& s) {
     const int cubes = s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0;
@@ -403,14 +410,10 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     const double outputs = (1.0 + terms + 1.0 + cubes) * n * kBlockBins * 3 * 4;  // solver's and films' blocks
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
-    // Tinted mirrors: the march keeps its own copy of the grey links (solver.cpp plan_windows).
-    for (const Object& o : scene.objects)
-        if (!grey(o.material.reflectance)) {
-            lists += double(e.links) * kLinkBytes;
-            break;
-        }
+    // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).
+    if (tinted_mirrors(scene)) lists += double(e.links) * kLinkBytes;
     e.solver_bytes = to_size(rings + blocks + outputs + lists);
-    // Layers that gather from links (solver.cpp plan_layers): all but the first order's, or the one total.
+    // Layers that gather from links (solver_plan.cpp plan_layers): all but the first order's, or the one total.
     const double fed = (layers == 1 && scene.solver.max_bounces < 0) ? 1 : layers - 1;
     const double link_bins = double(e.links) * scene.time.bins * fed;
     e.seconds.solve = link_bins * (kLinkBinSeconds[e.channels == 1 ? 0 : 1] +

@@ -74,8 +74,6 @@ struct MirrorChain {
     Unfolding unfold;                              ///< R1 R2 ... Rk
 
     Vec3 image(const Vec3& y) const { return unfold(y); }
-    /// Whether the chain reflects the channels alike.
-    bool grey() const { return tint[0] == tint[1] && tint[1] == tint[2]; }
 };
 
 /// The specular planes of a scene, one per mirror or glass object, from its patches. Throws Error (the
