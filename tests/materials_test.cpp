@@ -135,7 +135,7 @@ json echo_scene(double bin) {
     const double fov = 2.0 * std::atan(0.5 * side / 2.0) * 180.0 / M_PI;
     return {{"time", {{"bins", int(std::lround(4.0 / bin))}, {"bin_width", bin}}},
             {"camera", {{"position", {0.25, 0.25, 2.0}}, {"look_at", {0.25, 0.25, 0}}, {"up", {0, 1, 0}},
-                        {"fov", fov}, {"width", 64}, {"height", 64}}},
+                        {"fov", fov}, {"width", 64}, {"height", 64}, {"footprint", false}}},  // point samples
             {"objects", json::array({b, glass})},
             {"patches", {{"max_edge", 0.025}}},
             {"solver", {{"bounces", true}}}};

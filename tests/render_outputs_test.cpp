@@ -351,7 +351,7 @@ TEST_F(RenderOutputs, FramesAndStreaksAreSlicesOfTheCubeWithRowZeroAtTheTop) {
     const json scene = {
         {"time", {{"bins", T}, {"bin_width", w}, {"start", start}}},
         {"camera", {{"position", {3, 0, 1}}, {"look_at", {0, 0, 1}}, {"up", {0, 0, 1}}, {"fov", 40},
-                    {"width", W}, {"height", H}}},
+                    {"width", W}, {"height", H}, {"footprint", false}}},  // point samples: exact first bins
         {"lights", {{{"type", "point"}, {"position", vec(light)}, {"intensity", 1.0}}}},
         {"objects", {{{"type", "rectangle"}, {"origin", vec(corner0)}, {"u", vec(u)}, {"v", vec(v)}, {"albedo", 0.5}}}},
         {"patches", {{"max_edge", 0.25}}}};
@@ -557,7 +557,9 @@ TEST_F(RenderOutputs, SupersampledPixelsConvergeToTheFootprintAverage) {
     std::map<int, Image> steady;
     std::map<int, Cube> cubes;
     for (int spp : {1, 4, 16}) {
-        const fs::path out = render("spp" + std::to_string(spp), lit_plane(T, w, W, H, spp));
+        json scene = lit_plane(T, w, W, H, spp);
+        scene["camera"]["footprint"] = false;  // point samples: the first light is the earliest sample's
+        const fs::path out = render("spp" + std::to_string(spp), scene);
         ASSERT_FALSE(out.empty());
         steady.emplace(spp, read_image(out / "steady.npy"));
         cubes.emplace(spp, read_cube(out / "transient.npy"));
@@ -610,6 +612,95 @@ TEST_F(RenderOutputs, SupersampledPixelsConvergeToTheFootprintAverage) {
     EXPECT_LE(worst[4], 1.2 * worst[1] / 16);
 }
 
+TEST_F(RenderOutputs, AFootprintSpreadsEachPixelOverThePathsOfItsSquare) {
+    // The plane under a point light of SupersampledPixels, in bins of 1 cm. A pixel's true time profile
+    // is its square's light binned by path: by a 64 x 64 midpoint rule, each point's exact radiance at
+    // its exact path. With camera.footprint (the default), each sample spreads its light over the paths
+    // of its cell to first order; without, each sample is one instant.
+    const int W = 16, H = 16, T = 450, dense = 64;  // paths from 2.3 m to 4.1 m
+    const double w = 0.01, rho = 0.6, intensity = 2.0;
+    const Vec3 light(0.3, -0.2, 0.8);
+    const Pinhole cam(lit_plane(T, w, W, H)["camera"]);
+    std::vector<double> truth(std::size_t(W * H * T), 0.0), earliest(std::size_t(W * H), 1e30);
+    for (int r = 0; r < H; ++r)
+        for (int c = 0; c < W; ++c)
+            for (int i = 0; i < dense; ++i)
+                for (int k = 0; k < dense; ++k) {
+                    const Vec3 d = cam.ray(c + (i + 0.5) / dense, r + (k + 0.5) / dense);
+                    const Vec3 x = cam.position + to_plane(cam.position, d, Vec3::Zero(), Vec3::UnitZ()) * d;
+                    const double path = (x - cam.position).norm() + (light - x).norm();
+                    const double value = lambert_point(rho, intensity, light, x, Vec3::UnitZ()) / (dense * dense);
+                    ASSERT_LT(path, T * w);
+                    truth[std::size_t((r * W + c) * T) + std::size_t(std::floor(path / w))] += value;
+                }
+    // The square's earliest path: on a lattice that holds its corners and edges, where it lies but for
+    // pixels that hold the point nearest to both camera and light (there the path is flat to first order).
+    for (int r = 0; r < H; ++r)
+        for (int c = 0; c < W; ++c)
+            for (int i = 0; i <= dense; ++i)
+                for (int k = 0; k <= dense; ++k) {
+                    const Vec3 d = cam.ray(c + double(i) / dense, r + double(k) / dense);
+                    const Vec3 x = cam.position + to_plane(cam.position, d, Vec3::Zero(), Vec3::UnitZ()) * d;
+                    const double path = (x - cam.position).norm() + (light - x).norm();
+                    earliest[std::size_t(r * W + c)] = std::min(earliest[std::size_t(r * W + c)], path);
+                }
+    // Median over pixels of the relative L1 of the time profile against the truth.
+    const auto error = [&](const Cube& cube) {
+        std::vector<double> e;
+        for (int r = 0; r < H; ++r)
+            for (int c = 0; c < W; ++c) {
+                double diff = 0.0, sum = 0.0;
+                for (int t = 0; t < T; ++t) {
+                    const double want = truth[std::size_t((r * W + c) * T + t)];
+                    diff += std::abs(cube.at(r, c, t) - want);
+                    sum += want;
+                }
+                e.push_back(diff / sum);
+            }
+        std::nth_element(e.begin(), e.begin() + long(e.size() / 2), e.end());
+        return e[e.size() / 2];
+    };
+    std::map<std::pair<int, bool>, double> median;
+    std::map<std::pair<int, bool>, Image> steady;
+    int checked = 0;
+    const auto m = [&](int spp, bool footprint) { return median.at(std::pair(spp, footprint)); };
+    for (const int spp : {1, 4, 16})
+        for (const bool footprint : {true, false}) {
+            json scene = lit_plane(T, w, W, H, spp);
+            scene["camera"]["footprint"] = footprint;
+            const fs::path out = render("fp" + std::to_string(spp) + (footprint ? "on" : "off"), scene);
+            ASSERT_FALSE(out.empty());
+            const Cube cube = read_cube(out / "transient.npy");
+            median[std::pair(spp, footprint)] = error(cube);
+            steady.emplace(std::pair(spp, footprint), read_image(out / "steady.npy"));
+            if (!footprint) continue;
+            // The first light is the square's earliest path, to the bin. The spread is linear in the
+            // cell and never before the earliest path at the cell's corners, which are traced to first
+            // order: the first light may move by a second-order sliver either way (measured: under
+            // 0.5 mm at spp 1). Pixels whose earliest path lies within 1 mm of a bin edge are skipped.
+            for (int r = 0; r < H; ++r)
+                for (int c = 0; c < W; ++c) {
+                    const double e = earliest[std::size_t(r * W + c)];
+                    const double x = e / w, k = std::floor(x);
+                    if ((x - k) * w < 1e-3 || (k + 1 - x) * w < 1e-3) continue;
+                    EXPECT_EQ(cube.first_bin(r, c), int(k)) << "spp " << spp << " pixel " << r << "," << c;
+                    ++checked;
+                }
+        }
+    EXPECT_GT(checked, 3 * W * H * 3 / 4);
+    MEASURED("footprint: median pixel profile error, spp 1/4/16: %.4f %.4f %.4f (point samples %.4f %.4f %.4f)\n",
+             m(1, true), m(4, true), m(16, true), m(1, false), m(4, false), m(16, false));
+    for (const int spp : {1, 4, 16}) {
+        EXPECT_LT(m(spp, true), 0.25 * m(spp, false)) << "spp " << spp;
+        // The footprint moves light in time only: the steady image is the samples' own.
+        const Image& a = steady.at(std::pair(spp, true));
+        const Image& b = steady.at(std::pair(spp, false));
+        for (int r = 0; r < H; ++r)
+            for (int c = 0; c < W; ++c) EXPECT_NEAR(a.at(r, c), b.at(r, c), 1e-6 * b.at(r, c)) << r << "," << c;
+    }
+    EXPECT_LT(m(4, true), m(1, true));
+}
+
 TEST_F(RenderOutputs, LaserSpotReturnsAtItsPathAndLightsTheWallAsALambertianPoint) {
     // A floor (z = 0) and a back wall (y = 1, facing -y). The laser hits the floor at the point that the
     // centre pixel of the 31 x 31 image looks at. SPEC: the spot reflects as a Lambertian point of
@@ -621,7 +712,7 @@ TEST_F(RenderOutputs, LaserSpotReturnsAtItsPathAndLightsTheWallAsALambertianPoin
     const json scene = {
         {"time", {{"bins", T}, {"bin_width", w}}},
         {"camera", {{"position", {0, -1.8, 1.2}}, {"look_at", vec(spot)}, {"up", {0, 0, 1}}, {"fov", 50},
-                    {"width", N}, {"height", N}}},
+                    {"width", N}, {"height", N}, {"footprint", false}}},  // point samples: exact first bins
         {"lights", {{{"type", "laser"}, {"origin", vec(origin)}, {"target", vec(spot)}, {"power", power}}}},
         {"objects",
          {{{"type", "rectangle"}, {"origin", {-1, -1, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}}, {"albedo", rho_floor}},
@@ -691,7 +782,7 @@ TEST_F(RenderOutputs, AreaLitFloorMatchesTheFormFactorToTheEmitter) {
     const json scene = {
         {"time", {{"bins", T}, {"bin_width", w}}},
         {"camera", {{"position", {0, -2.5, 1.0}}, {"look_at", {0, 0, 0}}, {"up", {0, 0, 1}}, {"fov", 50},
-                    {"width", N}, {"height", N}}},
+                    {"width", N}, {"height", N}, {"footprint", false}}},  // point samples: exact first bins
         {"objects",
          {{{"type", "rectangle"}, {"origin", {-1.5, -1.5, 0}}, {"u", {3, 0, 0}}, {"v", {0, 3, 0}}, {"albedo", rho}},
           {{"type", "rectangle"}, {"origin", {-0.5, -0.5, h}}, {"u", {0, 1, 0}}, {"v", {1, 0, 0}},
@@ -756,6 +847,7 @@ TEST_F(RenderOutputs, CornellBoxConservesEnergyAndLightsTheBackWallFirstWhereGeo
     scene["time"]["bin_width"] = w;
     scene["camera"]["width"] = N;
     scene["camera"]["height"] = N;
+    scene["camera"]["footprint"] = false;  // point samples: the first light is where the samples' geometry says
     for (json& o : scene["objects"])
         if (o.contains("file"))
             o["file"] = (fs::path(TPRF_SOURCE_DIR) / "meshes" / o["file"].get<std::string>()).string();
@@ -858,7 +950,7 @@ TEST_F(RenderOutputs, TwoSidedRectangleIsLitFromBehindAndOneSidedIsBlack) {
     const auto scene = [&](bool two_sided, double camera_z) {
         return json{{"time", {{"bins", T}, {"bin_width", w}}},
                     {"camera", {{"position", {0, 0, camera_z}}, {"look_at", {0, 0, 0}}, {"up", {0, 1, 0}}, {"fov", 60},
-                                {"width", N}, {"height", N}}},
+                                {"width", N}, {"height", N}, {"footprint", false}}},  // point samples
                     {"lights", {{{"type", "point"}, {"position", vec(light)}, {"intensity", intensity}}}},
                     {"objects", {{{"type", "rectangle"}, {"origin", {-1, -1, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}},
                                   {"albedo", rho}, {"two_sided", two_sided}}}},
@@ -905,6 +997,7 @@ TEST_F(RenderOutputs, BounceCubesSumToTheCubeAndStartWhereGeometrySays) {
     const double w = 0.02;
     json scene = corner(T, w);
     scene["solver"] = {{"bounces", true}};
+    scene["camera"]["footprint"] = false;  // point samples: the first light is the pixel centre's path
     const fs::path out = render("corner", scene);
     ASSERT_FALSE(out.empty());
     const Cube total = read_cube(out / "transient.npy");

@@ -41,12 +41,13 @@ fs::path write_scene(const fs::path& dir, const nlohmann::json& j) {
     return file;
 }
 
-// A two-plane corner (floor z=0 and wall x=0, 1 x 1 m), a point light and a camera looking into it.
+// A two-plane corner (floor z=0 and wall x=0, 1 x 1 m), a point light and a camera looking into it. Point
+// samples (no footprint): the tests check each pixel against its centre's exact paths.
 nlohmann::json corner_scene(int bins, double width, bool unwarp = false) {
     return {
         {"time", {{"bins", bins}, {"bin_width", width}}},
         {"camera", {{"position", {1.6, 0.5, 0.6}}, {"look_at", {0.3, 0.5, 0.3}}, {"up", {0, 0, 1}}, {"fov", 60},
-                    {"width", 24}, {"height", 20}, {"spp", 1}, {"unwarp", unwarp}}},
+                    {"width", 24}, {"height", 20}, {"spp", 1}, {"unwarp", unwarp}, {"footprint", false}}},
         {"lights", {{{"type", "point"}, {"position", {0.6, 0.3, 0.7}}, {"intensity", 1.0}}}},
         {"objects", {{{"type", "rectangle"}, {"origin", {0, 0, 0}}, {"u", {1, 0, 0}}, {"v", {0, 1, 0}}, {"albedo", 0.6}},
                      {{"type", "rectangle"}, {"origin", {0, 0, 0}}, {"u", {0, 1, 0}}, {"v", {0, 0, 1}}, {"albedo", 0.5}}}},
@@ -439,7 +440,7 @@ TEST(AreaLight, AFloorUnderASquareEmitterHasItsExactRadianceAndFirstArrivalAtEve
     const nlohmann::json s = {
         {"time", {{"bins", 400}, {"bin_width", bin}}},
         {"camera", {{"position", {0.3, -0.8, 1.6}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 0, 1}}, {"fov", 50},
-                    {"width", 24}, {"height", 24}}},
+                    {"width", 24}, {"height", 24}, {"footprint", false}}},  // point samples: the centre's paths
         {"objects",
          {{{"type", "rectangle"}, {"origin", {-0.5, -0.5, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}}, {"albedo", 0.7}},
           {{"type", "rectangle"}, {"origin", {0.3, 0.3, 0.6}}, {"u", {0, 0.4, 0}}, {"v", {0.4, 0, 0}},

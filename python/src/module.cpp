@@ -312,6 +312,7 @@ py::object scene_camera(const PyScene& s) {
     d["spp"] = c.spp;
     d["fov"] = c.fov_deg;
     d["unwarp"] = c.unwarp;
+    d["footprint"] = c.footprint;
     return d;
 }
 

@@ -302,14 +302,15 @@ void Visibility::trace(const Vec3& origin, const Vec3& direction, std::vector<Tr
         double path, weight;
         Rgb tint;
         int reflections, crossings;
+        Eigen::Matrix3d turn;
     };
-    std::vector<Ray> stack{{origin, direction, 0.0, 1.0, Rgb::Ones(), 0, 0}};
+    std::vector<Ray> stack{{origin, direction, 0.0, 1.0, Rgb::Ones(), 0, 0, Eigen::Matrix3d::Identity()}};
     while (!stack.empty()) {
         const Ray r = stack.back();
         stack.pop_back();
         const RayHit h = intersect(r.origin, r.direction, std::numeric_limits<double>::infinity());
         if (!h.hit) continue;
-        out.push_back({h, r.path + h.distance, r.weight, r.tint});
+        out.push_back({h, r.path + h.distance, r.weight, r.tint, r.turn});
         const int plane = plane_of(h.patch);
         if (plane < 0) continue;
         const SpecularPlane& s = m_planes[std::size_t(plane)];
@@ -317,11 +318,12 @@ void Visibility::trace(const Vec3& origin, const Vec3& direction, std::vector<Tr
         const double path = r.path + h.distance;
         if (s.transmittance > 0.0 && r.crossings < 64)
             stack.push_back({h.point, r.direction, path, r.weight * s.transmittance, r.tint, r.reflections,
-                             r.crossings + 1});
+                             r.crossings + 1, r.turn});
         if (s.reflects_from(side) && r.reflections < m_max_specular) {
             const Vec3 reflected = r.direction - 2.0 * s.normal.dot(r.direction) * s.normal;
+            const Eigen::Matrix3d householder = Eigen::Matrix3d::Identity() - 2.0 * s.normal * s.normal.transpose();
             stack.push_back({h.point, reflected, path, r.weight * s.reflectance, r.tint * s.tint, r.reflections + 1,
-                             r.crossings});
+                             r.crossings, householder * r.turn});
         }
     }
 }

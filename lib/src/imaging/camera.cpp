@@ -1,6 +1,7 @@
 #include "tprf/imaging/camera.h"
 
 #include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 
 #include <cmath>
@@ -25,34 +26,84 @@ void subpixel(int s, int spp, double& sx, double& sy) {
 
 }  // namespace
 
-Vec3 camera_ray(const Camera& camera, double column, double row) {
-    const Vec3 forward = (camera.look_at - camera.position).normalized();
-    const Vec3 right = forward.cross(camera.up).normalized();
-    const Vec3 up = right.cross(forward);
-    const double tan_half = std::tan(0.5 * camera.fov_deg * M_PI / 180.0);
-    const double aspect = double(camera.width) / double(camera.height);
-    const double x = (2.0 * column / camera.width - 1.0) * tan_half * aspect;
-    const double y = (1.0 - 2.0 * row / camera.height) * tan_half;
-    return (forward + x * right + y * up).normalized();
+namespace {
+
+// The pinhole's frame: the unnormalised direction through (column, row) is forward + x right + y up,
+// x and y linear in column and row.
+struct Pinhole {
+    Vec3 forward, right, up;
+    double x_per_column, y_per_row, x0, y0;
+
+    explicit Pinhole(const Camera& camera) {
+        forward = (camera.look_at - camera.position).normalized();
+        right = forward.cross(camera.up).normalized();
+        up = right.cross(forward);
+        const double tan_half = std::tan(0.5 * camera.fov_deg * M_PI / 180.0);
+        const double aspect = double(camera.width) / double(camera.height);
+        x_per_column = 2.0 / camera.width * tan_half * aspect;
+        x0 = -tan_half * aspect;
+        y_per_row = -2.0 / camera.height * tan_half;
+        y0 = tan_half;
+    }
+    Vec3 direction(double column, double row) const {
+        return forward + (x0 + x_per_column * column) * right + (y0 + y_per_row * row) * up;
+    }
+};
+
+// Half-axes of a sample's cell (half_px pixels either side of it) on the surface it reaches: ray
+// differentials through the reflections `turn`, onto the plane of normal n at distance `path` along
+// the unfolded ray (first order; a cell that meets the plane almost edge-on is capped at 100 times the
+// cell's width across the ray, rather than spread to infinity).
+void cell_on_surface(const Pinhole& pin, const Vec3& direction, const Eigen::Matrix3d& turn, double path,
+                     const Vec3& n, double half_px, SensingPoint& sp) {
+    const Vec3 d = turn * direction;  // unnormalised, unfolded
+    const double s = path / direction.norm(), nd = n.dot(d);
+    const auto on_surface = [&](const Vec3& change) {
+        const Vec3 across = s * (turn * change) * half_px;
+        const Vec3 along = -d * (n.dot(across) / nd);
+        const double cap = 100.0 * across.norm();
+        return std::abs(nd) > 0.0 && along.norm() <= cap ? Vec3(across + along) : Vec3(across);
+    };
+    const Vec3 du = on_surface(pin.x_per_column * pin.right), dv = on_surface(pin.y_per_row * pin.up);
+    sp.du = du.cast<float>();
+    sp.dv = dv.cast<float>();
+    if (sp.leg > 0.0f) {  // the leg |x - camera'| changes by the unit direction's component along the axis
+        const Vec3 unit = d.normalized();
+        sp.leg_du = float(unit.dot(du));
+        sp.leg_dv = float(unit.dot(dv));
+    }
 }
 
-SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int threads) {
+}  // namespace
+
+Vec3 camera_ray(const Camera& camera, double column, double row) {
+    return Pinhole(camera).direction(column, row).normalized();
+}
+
+SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, const Visibility& vis, int threads) {
     const int spp = std::max(1, camera.spp);
+    const Pinhole pin(camera);
+    const double half_px = 0.5 / std::sqrt(double(spp));  // a sample's share of the pixel, as a square
     std::vector<std::vector<SensingPoint>> by_row(std::size_t(camera.height));
     std::vector<std::vector<Rgb>> row_tints(std::size_t(camera.height));  // per point, with mirrors
     const bool specular = !vis.planes().empty();
+    const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
         std::vector<TracedHit> hits;
         for (int c = 0; c < camera.width; ++c)
             for (int s = 0; s < spp; ++s) {
                 double sx, sy;
                 subpixel(s, spp, sx, sy);
-                const Vec3 dir = camera_ray(camera, c + sx, double(r) + sy);
+                const Vec3 towards = pin.direction(c + sx, double(r) + sy);
+                const Vec3 dir = towards.normalized();
                 const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
                 if (!specular) {
                     const RayHit h = vis.intersect(camera.position, dir, std::numeric_limits<double>::infinity());
                     if (!h.hit || !h.front) continue;
-                    by_row[r].push_back({pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
+                    SensingPoint& sp = by_row[r].emplace_back(
+                        SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
+                    if (camera.footprint)
+                        cell_on_surface(pin, towards, straight, h.distance, patches.normal[h.patch], half_px, sp);
                     continue;
                 }
                 // Into mirrors and through glass: every diffuse front side the ray reaches, with its
@@ -61,8 +112,10 @@ SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int th
                 vis.trace(camera.position, dir, hits);
                 for (const TracedHit& t : hits) {
                     if (!t.hit.front) continue;
-                    by_row[r].push_back({pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path),
-                                         float(t.weight)});
+                    SensingPoint& sp = by_row[r].emplace_back(SensingPoint{
+                        pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path), float(t.weight)});
+                    if (camera.footprint)
+                        cell_on_surface(pin, towards, t.turn, t.path, patches.normal[t.hit.patch], half_px, sp);
                     row_tints[r].push_back(t.tint);
                 }
             }
@@ -80,7 +133,7 @@ SensingPoints pinhole_points(const Camera& camera, const Visibility& vis, int th
 
 Gather prepare_camera(const Camera& camera, const PatchSet& patches, const LightSources& sources,
                       const Visibility& visibility, const GatherOptions& options) {
-    const SensingPoints points = pinhole_points(camera, visibility, options.threads);
+    const SensingPoints points = pinhole_points(camera, patches, visibility, options.threads);
     if (options.progress) options.progress("camera", 0.3);
     return gather_points(points, camera.width, camera.height, patches, sources, visibility, options);
 }

@@ -2,6 +2,7 @@
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
+#include "tprf/core/time_kernel.h"
 #include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
@@ -11,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <tuple>
 
 namespace tprf {
@@ -55,8 +57,18 @@ std::vector<std::pair<std::uint32_t, double>> kernel_weights(const PatchSet& pat
 
 // Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
 // with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
-// spread over their paths (merged per bin of the time axis, when there is one).
-void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patches, const AreaSource& a,
+// spread over their paths (per bin of the time axis, when there is one).
+// The sensing point's cell (zero for a point).
+Footprint footprint_of(const SensingPoint& sp) {
+    return {sp.du.cast<double>(), sp.dv.cast<double>(), sp.leg, sp.leg_du, sp.leg_dv};
+}
+
+// One of a pixel's `count` samples (a run of sensing points), the index-th.
+struct RunSample {
+    std::size_t index = 0, count = 1;
+};
+
+void area_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const AreaSource& a,
                    const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
     const Vec3& n = patches.normal[sp.patch];
     const double ff = point_polygon_form_factor(sp.point, n, a.polygon(), a.count, a.normal);
@@ -65,50 +77,179 @@ void area_arrivals(const SensingPoint& sp, double weight, const PatchSet& patche
     thread_local std::vector<AreaPair> pairs;
     pairs.clear();
     const double origin = options.time ? options.time->start_m() - sp.leg : 0.0;  // bin edges, as merged below
-    double total = arrive_area(a, sp.point, n, vis,
-                               area_sampling(a, sp.point, bin_m, origin, options.emitter_rays, options.penumbra_rays),
-                               pairs);
+    // The pixel's samples share its penumbra rays, each at its own offsets in the cells (R2 sequence).
+    const int penumbra = std::max(options.emitter_rays, int(double(options.penumbra_rays) / double(at.count)));
+    AreaSampling sampling = area_sampling(a, sp.point, bin_m, origin, options.emitter_rays, penumbra);
+    if (at.count > 1) {
+        sampling.jitter_u = std::fmod(0.5 + 0.7548776662466927 * double(at.index), 1.0);
+        sampling.jitter_v = std::fmod(0.5 + 0.5698402909980532 * double(at.index), 1.0);
+    }
+    sampling.footprint = footprint_of(sp);
+    double total = arrive_area(a, sp.point, n, vis, sampling, pairs);
     if (!(total > 0.0) && (total = arrive_area_centroid(a, sp.point, n, vis, pairs)) == 0.0) return;
     const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
-    if (options.time) pairs = merge_pairs_by_bin(pairs, bin_m, options.time->start_m() - sp.leg);
     for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});
 }
 
-// Exact direct light of every point and area source at the sensing point, seen along its leg.
-void direct_arrivals(const SensingPoint& sp, double weight, const PatchSet& patches, const LightSources& sources,
-                     const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
+// Light arriving at `path` from a sensing point, spread over the paths of the point's cell (its path
+// changes by +- a and +- b along its half-axes, never before `lowest`) and cut at the bins of the time
+// axis: one arrival per bin it touches. Without a time axis, one arrival.
+void add_over_cell(std::uint32_t output, double path, double a, double b, double lowest, const Rgb& radiance,
+                   std::uint8_t order, const TimeAxis* time, std::vector<DirectArrival>& out) {
+    if (!time) {
+        out.push_back({output, path, radiance, order});
+        return;
+    }
+    spread_over_bins(path, a, b, time->bin_width_m(), time->start_m(), lowest,
+                     [&](double at, double share) { out.push_back({output, at, radiance * share, order}); });
+}
+
+
+// A pixel's samples, when they can share the timing of an area source's light: all of them (spp points,
+// each its own sample, with its cell), in the open (no mirror or glass on the way) and on one flat
+// surface (one object, one plane).
+bool one_flat_pixel(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches) {
+    if (count < 2 || double(count) != std::round(1.0 / weight)) return false;
+    if (pts[0].du.isZero() && pts[0].dv.isZero()) return false;  // point samples: each at its own paths
+    const Vec3& n = patches.normal[pts[0].patch];
+    const double reach = 1e-6 * (1.0 + pts[0].point.norm());
+    for (std::size_t h = 0; h < count; ++h) {
+        const SensingPoint& sp = pts[h];
+        if (sp.throughput != 1.0f || sp.tint != 0 || patches.object[sp.patch] != patches.object[pts[0].patch] ||
+            patches.normal[sp.patch].dot(n) < 1.0 - 1e-12 || std::abs(n.dot(sp.point - pts[0].point)) > reach)
+            return false;
+        if (h > 0 && sp.output != pts[0].output) return false;
+    }
+    return true;
+}
+
+// Direct light of area source a at a pixel's samples that one_flat_pixel admits, when the shared shadow
+// test finds the source wholly open: from the pixel's four outermost samples (along its two axes), a ray
+// to the centre of each cell of the coarse shadow grid that faces it. Then each sample's radiance is
+// albedo L_e F(x) with its own exact F, and the light of all of them is timed together, as the pixel's
+// centre sees the source's cells, spread over the paths of the whole pixel (its samples' cells side by
+// side: sqrt(spp) times a sample's half-axes). False (nothing added) when any ray is blocked or dimmed.
+bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
+                         const AreaSource& a, const Visibility& vis, const GatherOptions& options,
+                         std::vector<DirectArrival>& out) {
+    Vec3 centre = Vec3::Zero(), du = Vec3::Zero(), dv = Vec3::Zero();
+    double leg = 0.0, leg_du = 0.0, leg_dv = 0.0;
+    for (std::size_t h = 0; h < count; ++h) {
+        centre += pts[h].point;
+        leg += pts[h].leg;
+        du += pts[h].du.cast<double>();
+        dv += pts[h].dv.cast<double>();
+        leg_du += pts[h].leg_du;
+        leg_dv += pts[h].leg_dv;
+    }
+    const double mean = 1.0 / double(count), side = std::sqrt(double(count));
+    centre *= mean;
+    leg *= mean;
+    // The four samples farthest out along +-u +-v.
+    const Vec3 u = du.normalized(), v = dv.normalized();
+    std::size_t outer[4] = {0, 0, 0, 0};
+    double best[4] = {-1e300, -1e300, -1e300, -1e300};
+    for (std::size_t h = 0; h < count; ++h) {
+        const Vec3 r = pts[h].point - centre;
+        const double x = r.dot(u), y = r.dot(v);
+        const double score[4] = {x + y, x - y, -x + y, -x - y};
+        for (int k = 0; k < 4; ++k)
+            if (score[k] > best[k]) {
+                best[k] = score[k];
+                outer[k] = h;
+            }
+    }
+    const Vec3& n = patches.normal[pts[0].patch];
+    const AreaSampling probe = area_sampling(a, centre, 0.0, 0.0, options.emitter_rays, options.penumbra_rays);
+    const int g = probe.shadow;
+    const double lift = vis.epsilon();
+    for (const std::size_t h : outer) {
+        const Vec3& x = pts[h].point;
+        for (int c = 0; c < g * g; ++c) {
+            const Vec3 y = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
+            if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
+            if (vis.passes(a.chain, x + lift * n, y + lift * a.normal) != 1.0) return false;
+        }
+    }
+    Rgb radiance = Rgb::Zero();
+    for (std::size_t h = 0; h < count; ++h) {
+        const double ff = point_polygon_form_factor(pts[h].point, n, a.polygon(), a.count, a.normal);
+        if (ff > 0.0) radiance += patches.albedo[pts[h].patch] * (ff * weight);
+    }
+    if (!(radiance > 0.0).any()) return true;
+    thread_local std::vector<AreaPair> pairs;
+    pairs.clear();
+    const double bin_m = options.time->bin_width_m();
+    AreaSampling sampling = area_sampling(a, centre, bin_m, options.time->start_m() - leg, 0, 0);
+    sampling.footprint = {side * mean * du, side * mean * dv, leg, side * mean * leg_du, side * mean * leg_dv};
+    double total = arrive_area_open(a, centre, n, sampling, pairs);  // the rays above found it open
+    if (!(total > 0.0)) {
+        pairs.push_back({(centre - a.centroid).norm(), 1.0});
+        total = 1.0;
+    }
+    radiance *= a.radiance / total;
+    for (const AreaPair& q : pairs) out.push_back({pts[0].output, q.path + leg, radiance * q.weight, 1});
+    return true;
+}
+
+// Exact direct light of every point and area source at the sensing point, seen along its leg; a point
+// source's light is spread over the paths of the point's cell.
+void direct_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const LightSources& sources,
+                     const Visibility& vis, const GatherOptions& options, const std::vector<char>& pixel_done,
+                     std::vector<DirectArrival>& out) {
     const Rgb& albedo = patches.albedo[sp.patch];
+    const Footprint f = footprint_of(sp);
     for (const PointSource& source : sources.points) {
         if (source.patch == sp.patch) continue;
         PointArrival a;
         if (!arrive(source, sp.point, patches.normal[sp.patch], vis, a)) continue;
-        out.push_back({sp.output, a.path + sp.leg, a.reflected(albedo) * (weight / M_PI), source.order});
+        const Vec3 away = (sp.point - source.position).normalized();  // |x - source| changes along it
+        const double lowest = f.empty() ? a.path : source.path + f.least_at_corners([&](const Vec3& offset) {
+            return (sp.point + offset - source.position).norm();
+        });
+        add_over_cell(sp.output, a.path + sp.leg, away.dot(f.du) + f.leg_du, away.dot(f.dv) + f.leg_dv, lowest + sp.leg,
+                      a.reflected(albedo) * (weight / M_PI), source.order, options.time, out);
     }
-    for (const AreaSource& a : sources.areas) area_arrivals(sp, weight, patches, a, vis, options, out);
+    for (std::size_t k = 0; k < sources.areas.size(); ++k)
+        if (!pixel_done[k]) area_arrivals(sp, at, weight, patches, sources.areas[k], vis, options, out);
 }
 
 // One output's arrivals in path order; with a time axis, those that share a bin and an order are summed
-// (in path order) into the earliest of them: exact for the film, which places each arrival by its bin.
+// into the first of them: exact for the film, which places each arrival by its bin. Arrivals before the
+// window share one bin per order, as do those after it (the steady image counts them all).
 void order_arrivals(std::vector<DirectArrival>& v, const TimeAxis* time) {
-    const auto by_path = [](const DirectArrival& a, const DirectArrival& b) {
-        return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
-    };
     if (!time) {
-        std::sort(v.begin(), v.end(), by_path);
+        std::sort(v.begin(), v.end(), [](const DirectArrival& a, const DirectArrival& b) {
+            return a.path != b.path ? a.path < b.path : a.radiance[0] < b.radiance[0];
+        });
         return;
     }
-    const double inv_bin = 1.0 / time->bin_width_m(), start = time->start_m();
-    const auto key = [&](const DirectArrival& a) { return std::pair(std::floor((a.path - start) * inv_bin), a.order); };
-    std::sort(v.begin(), v.end(),
-              [&](const DirectArrival& a, const DirectArrival& b) { return key(a) != key(b) ? key(a) < key(b) : by_path(a, b); });
-    std::size_t kept = 0;
-    for (std::size_t k = 0; k < v.size(); ++k) {
-        if (kept > 0 && key(v[kept - 1]) == key(v[k]))
-            v[kept - 1].radiance += v[k].radiance;
-        else
-            v[kept++] = v[k];
+    if (v.empty()) return;
+    const double inv_bin = 1.0 / time->bin_width_m(), start = time->start_m(), bins = double(time->bins);
+    const auto bin = [&](const DirectArrival& a) {
+        return std::int64_t(std::clamp(std::floor((a.path - start) * inv_bin), -1.0, bins));
+    };
+    std::int64_t lo = bin(v[0]), hi = lo;
+    int orders = 0;
+    for (const DirectArrival& a : v) {
+        lo = std::min(lo, bin(a));
+        hi = std::max(hi, bin(a));
+        orders = std::max(orders, int(a.order) + 1);
     }
-    v.resize(kept);
+    // Dense sums over the bins the arrivals touch, one per (bin, order); an empty one has a NaN path.
+    thread_local std::vector<DirectArrival> sums;
+    sums.assign(std::size_t(hi - lo + 1) * std::size_t(orders), {0, std::numeric_limits<double>::quiet_NaN(), Rgb::Zero(), 0});
+    for (const DirectArrival& a : v) {
+        DirectArrival& s = sums[std::size_t(bin(a) - lo) * std::size_t(orders) + a.order];
+        if (std::isnan(s.path)) {
+            s = a;
+        } else {
+            s.radiance += a.radiance;
+        }
+    }
+    v.clear();
+    for (const DirectArrival& s : sums)
+        if (!std::isnan(s.path)) v.push_back(s);
 }
 
 // The outputs' lists as one CSR: run k holds the points of output outputs[k] (in output order), and its
@@ -178,6 +319,14 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
     const double weight = points.weight;
     parallel_for(runs, {options.threads, 64, true}, [&](std::size_t k) {
         std::vector<DirectArrival>& direct = run_direct[k];
+        // Area sources whose light this pixel's samples share (area_pixel_arrivals); the others per sample.
+        thread_local std::vector<char> pixel_done;
+        pixel_done.assign(sources.areas.size(), 0);
+        const std::size_t count = run_start[k + 1] - run_start[k];
+        if (options.time && !sources.areas.empty() && one_flat_pixel(&pts[run_start[k]], count, weight, patches))
+            for (std::size_t a = 0; a < sources.areas.size(); ++a)
+                pixel_done[a] = area_pixel_arrivals(&pts[run_start[k]], count, weight, patches, sources.areas[a], vis,
+                                                    options, direct);
         for (std::size_t h = run_start[k]; h < run_start[k + 1]; ++h) {
             const SensingPoint& sp = pts[h];
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
@@ -185,7 +334,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
                 run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
             const std::size_t first = direct.size();
-            direct_arrivals(sp, share, patches, sources, vis, options, direct);
+            direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options, pixel_done, direct);
             if (sp.tint != 0)
                 for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tint_of(sp);
         }

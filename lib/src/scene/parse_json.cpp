@@ -41,7 +41,7 @@ E parse_choice(const Node& n, std::string_view what, std::initializer_list<std::
 }
 
 Camera parse_camera(const Node& n) {
-    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp"});
+    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp", "footprint"});
     Camera c;
     c.position = n.child("position").vec3();
     c.look_at = n.child("look_at").vec3();
@@ -51,6 +51,7 @@ Camera parse_camera(const Node& n) {
     c.height = n.child("height").integer();
     if (const auto spp = n.find("spp")) c.spp = spp->integer();
     if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
+    if (const auto footprint = n.find("footprint")) c.footprint = footprint->boolean();
     return c;
 }
 

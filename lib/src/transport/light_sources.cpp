@@ -1,5 +1,7 @@
 #include "tprf/transport/light_sources.h"
 
+#include "tprf/core/time_kernel.h"
+
 #include "tprf/core/error.h"
 #include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/patches.h"
@@ -232,7 +234,7 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, dou
         double far = 0.0;
         for (int k = 0; k < a.count; ++k) far = std::max(far, (a.corners[std::size_t(k)] - x).norm());
         const double spread = far - distance_to_polygon(x, a.polygon(), a.count, a.normal);
-        s.timing = int(std::clamp(std::ceil(0.5 * spread / bin_m), 2.0, 32.0));
+        s.timing = int(std::clamp(std::ceil(spread / (kAreaBinsPerTimingCell * bin_m)), 2.0, 32.0));
         s.bin_m = bin_m;
         s.origin = origin;
     }
@@ -243,28 +245,59 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, dou
 
 namespace {
 
-// The light `weight` of cell (u, v) of an m x m grid over source a, whose centre is `path` from x,
-// spread evenly over the cell's paths to first order (path +- the change of |y - x| along the cell's
-// half-axes, never before `nearest`) and cut at the bin edges: one pair per bin it touches.
-void cell_box(const AreaSource& a, const Vec3& x, int u, int v, int m, double path, double nearest,
-              const AreaSampling& s, double weight, std::vector<AreaPair>& out) {
-    const double cu = (u + 0.5) / m, cv = (v + 0.5) / m, h = 0.5 / m;
+// The light `weight` of cell (u, v) of an m x m grid over source a, whose point (its centre, unless
+// jittered) is `path` from x,
+// spread over the cell's paths to first order (a trapezoid over the path's changes along the cell's
+// half-axes; with x's own cell, when it has one, the trapezoid of the same variance as the four
+// changes), never before `nearest` (the earliest path from x's cell, less x's leg), and cut at the bin
+// edges: one pair per bin it touches.
+void cell_spread(const AreaSource& a, const Vec3& x, int u, int v, int m, double path, double nearest,
+                 const AreaSampling& s, double weight, std::vector<AreaPair>& out) {
+    const double cu = (u + s.jitter_u) / m, cv = (v + s.jitter_v) / m, h = 0.5 / m;
     const Vec3 dir = (a.point(cu, cv) - x) / path;
-    const double spread = 0.5 * (std::abs(dir.dot(a.point(cu + h, cv) - a.point(cu - h, cv))) +
-                                 std::abs(dir.dot(a.point(cu, cv + h) - a.point(cu, cv - h))));
-    const double lo = std::max(path - spread, std::min(nearest, path)), hi = path + spread;
-    const double first = std::floor((lo - s.origin) / s.bin_m), last = std::floor((hi - s.origin) / s.bin_m);
-    if (!(hi > lo) || first == last) {
-        out.push_back({std::max(lo, std::min(path, hi)), weight});
-        return;
+    const Footprint& f = s.footprint;
+    const double half[4] = {0.5 * dir.dot(a.point(cu + h, cv) - a.point(cu - h, cv)),
+                            0.5 * dir.dot(a.point(cu, cv + h) - a.point(cu, cv - h)), f.leg_du - dir.dot(f.du),
+                            f.leg_dv - dir.dot(f.dv)};
+    const double lowest = std::min(nearest, path);
+    double wide, narrow;
+    equivalent_trapezoid(half, 4, wide, narrow);
+    spread_over_bins(path, wide, narrow, s.bin_m, s.origin, lowest,
+                     [&](double at, double share) { out.push_back({at, weight * share}); });
+}
+
+}  // namespace
+
+namespace {
+
+// The timing cells of an m x m grid over source a that face x (m = s.timing, or `finer` where given):
+// appends each one's pairs with its weight times open(u, v, m) (0: blocked), and returns the weight of
+// every cell that faces x, blocked or not.
+template <class Open>
+double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s, int m, Open&& open,
+                    std::vector<AreaPair>& out) {
+    const auto distance = [&](const Vec3& offset) {
+        return distance_to_polygon(x + offset, a.polygon(), a.count, a.normal);
+    };
+    double nearest = s.bin_m > 0.0 ? distance(Vec3::Zero()) : 0.0;
+    if (s.bin_m > 0.0 && !s.footprint.empty()) nearest = std::min(nearest, s.footprint.least_at_corners(distance));
+    double total = 0.0;
+    for (int c = 0; c < m * m; ++c) {
+        const int u = c % m, v = c / m;
+        const Vec3 d = a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) - x;
+        const double r2 = d.squaredNorm(), path = std::sqrt(r2);
+        const double w = std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2) / (double(m) * m);
+        if (!(w > 0.0)) continue;
+        total += w;
+        const double o = open(u, v, m);
+        if (!(o > 0.0)) continue;
+        if (s.bin_m > 0.0) {
+            cell_spread(a, x, u, v, m, path, nearest, s, w * o, out);
+        } else {
+            out.push_back({path, w * o});
+        }
     }
-    const double per_metre = weight / (hi - lo);
-    for (double b = first; b <= last; ++b) {
-        const double start = s.origin + b * s.bin_m, from = std::max(lo, start);
-        const double overlap = std::min(hi, start + s.bin_m) - from;
-        // The middle of the overlap: well inside the bin, whatever the rounding of its edges.
-        if (overlap > 0.0) out.push_back({from + 0.5 * overlap, per_metre * overlap});
-    }
+    return total;
 }
 
 }  // namespace
@@ -273,16 +306,13 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
                    std::vector<AreaPair>& out) {
     const double lift = vis.epsilon();
     const int coarse = s.shadow;
-    // The kernel from x to the centre of cell (u, v) of an m x m grid over the source, and its path.
-    const auto kernel = [&](int u, int v, int m, double& path) {
-        const Vec3 d = a.point((u + 0.5) / m, (v + 0.5) / m) - x;
-        const double r2 = d.squaredNorm();
-        path = std::sqrt(r2);
-        return std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2);
-    };
-    // The share of light that passes between x and the cell's centre (0: blocked).
+    // The share of light that passes between x and the centre of cell (u, v) of an m x m grid (0: blocked).
     const auto open_to = [&](int u, int v, int m) {
-        return vis.passes(a.chain, x + lift * n, a.point((u + 0.5) / m, (v + 0.5) / m) + lift * a.normal);
+        return vis.passes(a.chain, x + lift * n, a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) + lift * a.normal);
+    };
+    const auto faces = [&](int u, int v, int m) {
+        const Vec3 d = a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) - x;
+        return n.dot(d) > 0.0 && a.normal.dot(d) < 0.0;
     };
     // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
     // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
@@ -290,40 +320,25 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     coarse_open.assign(std::size_t(coarse * coarse), -1.0);  // -1: not tested
     bool any_open = false, any_blocked = false;
     for (int c = 0; c < coarse * coarse; ++c) {
-        double path;
         const int u = c % coarse, v = c / coarse;
-        if (!(kernel(u, v, coarse, path) > 0.0)) continue;
+        if (!faces(u, v, coarse)) continue;
         const double o = open_to(u, v, coarse);
         coarse_open[std::size_t(c)] = o;
         (o > 0.0 ? any_open : any_blocked) = true;
     }
-    const bool penumbra = any_open && any_blocked;
-    const int m = penumbra ? std::max(s.timing, s.penumbra) : s.timing;
-    const double nearest = s.bin_m > 0.0 ? distance_to_polygon(x, a.polygon(), a.count, a.normal) : 0.0;
-    double total = 0.0;
-    for (int c = 0; c < m * m; ++c) {
-        const int u = c % m, v = c / m;
-        double path;
-        const double w = kernel(u, v, m, path) / (double(m) * m);
-        if (!(w > 0.0)) continue;
-        total += w;
-        double open;
-        if (penumbra) {
-            open = open_to(u, v, m);
-        } else {
-            const int cu = u * coarse / m, cv = v * coarse / m;
-            double& o = coarse_open[std::size_t(cv * coarse + cu)];
-            if (o < 0.0) o = open_to(cu, cv, coarse);  // its centre faces away, this pair does not
-            open = o;
-        }
-        if (!(open > 0.0)) continue;
-        if (s.bin_m > 0.0) {
-            cell_box(a, x, u, v, m, path, nearest, s, w * open, out);
-        } else {
-            out.push_back({path, w * open});
-        }
-    }
-    return total;
+    if (any_open && any_blocked)  // a penumbra
+        return timing_cells(a, x, n, s, std::max(s.timing, s.penumbra), open_to, out);
+    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int m) {
+        const int cu = u * coarse / m, cv = v * coarse / m;
+        double& o = coarse_open[std::size_t(cv * coarse + cu)];
+        if (o < 0.0) o = open_to(cu, cv, coarse);  // its centre faces away, this pair does not
+        return o;
+    }, out);
+}
+
+double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
+                        std::vector<AreaPair>& out) {
+    return timing_cells(a, x, n, s, s.timing, [](int, int, int) { return 1.0; }, out);
 }
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,

@@ -2,6 +2,9 @@
 /// Distributions in time as point masses on a grid: a pulse's shape, a sensor's timing jitter (and,
 /// next, the spread of delays on a link). Every operation keeps the total mass and the mean exactly.
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <vector>
 
 namespace tprf {
@@ -44,5 +47,64 @@ TimeKernel resample(const TimeKernel& k, double step);
 /// The distribution of the sum of two independent offsets (pulse and jitter): both put on one grid,
 /// fine enough for the finer of the two unless that would make the grid or the pairwise sum too large.
 TimeKernel convolve(const TimeKernel& a, const TimeKernel& b);
+
+/// The share of a sum of two independent offsets, uniform in [-a, a] and [-b, b], that lies at or before
+/// x: how a path that changes linearly along a cell's two half-axes is spread over the cell (a
+/// trapezoid; a box when one of a, b is 0, a step when both are). Negative a, b count as their magnitude.
+inline double trapezoid_cdf(double x, double a, double b) {
+    a = std::abs(a);
+    b = std::abs(b);
+    if (a < b) std::swap(a, b);
+    if (!(a > 0.0)) return x >= 0.0 ? 1.0 : 0.0;
+    if (x <= -a - b) return 0.0;
+    if (x >= a + b) return 1.0;
+    if (b <= 1e-9 * a) return std::clamp((x + a) / (2.0 * a), 0.0, 1.0);
+    // (q(x + a + b) - q(x + a - b) - q(x - a + b) + q(x - a - b)) / (8 a b), q(y) = max(y, 0)^2: on each
+    // piece only the terms that are on, so that nothing cancels.
+    if (x <= b - a) {  // the rising ramp
+        const double y = x + a + b;
+        return y * y / (8.0 * a * b);
+    }
+    if (x <= a - b) return (x + a) / (2.0 * a);  // the flat top
+    const double y = a + b - x;                    // the falling ramp, from above
+    return 1.0 - y * y / (8.0 * a * b);
+}
+
+/// Two half-widths whose trapezoid has the mean (0) and the variance of the sum of n independent
+/// uniform offsets of half-widths h[0..n): the largest, and the root sum of squares of the others
+/// (exact for n <= 2). How a cell's own spread and the spread of a cell it is seen from combine.
+inline void equivalent_trapezoid(const double* h, int n, double& a, double& b) {
+    double largest = 0.0, squares = 0.0;
+    for (int i = 0; i < n; ++i) {
+        largest = std::max(largest, std::abs(h[i]));
+        squares += h[i] * h[i];
+    }
+    a = largest;
+    b = std::sqrt(std::max(0.0, squares - largest * largest));
+}
+
+/// The trapezoid centre + (offsets uniform in [-a, a] and [-b, b]) cut at the bin edges origin +
+/// k bin_m: calls emit(path, share) once per bin it touches, in increasing bins, `path` a point inside
+/// the bin's part of the support and the shares summing to 1. Light before `lowest` (a bound the linear
+/// spread must not cross: the shortest path there is) is counted in lowest's bin.
+template <class Emit>
+void spread_over_bins(double centre, double a, double b, double bin_m, double origin, double lowest, Emit&& emit) {
+    const double reach = std::abs(a) + std::abs(b);
+    const double lo = std::max(centre - reach, std::min(lowest, centre)), hi = centre + reach;
+    const double first = std::floor((lo - origin) / bin_m), last = std::floor((hi - origin) / bin_m);
+    if (!(hi > lo) || !(last > first)) {
+        emit(std::clamp(centre, lo, hi), 1.0);
+        return;
+    }
+    double below = 0.0;
+    for (double k = first; k <= last; ++k) {
+        const double start = origin + k * bin_m, end = std::min(hi, start + bin_m), from = std::max(lo, start);
+        const double upto = k == last ? 1.0 : trapezoid_cdf(end - centre, a, b);
+        const double share = upto - below;
+        below = std::max(below, upto);
+        // The middle of the overlap: well inside the bin, whatever the rounding of its edges.
+        if (share > 0.0) emit(0.5 * (from + end), share);
+    }
+}
 
 }  // namespace tprf

@@ -28,6 +28,9 @@ struct TracedHit {
     double path = 0.0;          ///< metres from the ray's origin, every specular leg included
     double weight = 1.0;        ///< product of the (mean) reflectances and transmittances on the way
     Rgb tint = Rgb::Ones();     ///< product of the reflections' tints (SpecularPlane::tint)
+    /// The reflections' linear part: the last piece's direction is turn * (the ray's direction), and so
+    /// are the changes of direction of neighbouring rays (ray differentials through mirrors).
+    Eigen::Matrix3d turn = Eigen::Matrix3d::Identity();
 };
 
 /// A bounding-volume hierarchy over every patch polygon, and the specular planes of the scene (mirrors

@@ -16,8 +16,11 @@ class Visibility;
 Vec3 camera_ray(const Camera& camera, double column, double row);
 
 /// Traces the camera's samples (a g x g grid per pixel when spp is a square, spp = 1 the centre, else
-/// the R2 sequence). Samples that see nothing, or the back of a one-sided surface, give no point.
-SensingPoints pinhole_points(const Camera& camera, const Visibility& visibility, int threads = 0);
+/// the R2 sequence). Samples that see nothing, or the back of a one-sided surface, give no point. Each
+/// point carries its share of the pixel as a cell on the surface (SensingPoint::du, dv): the square of
+/// side 1 / sqrt(spp) pixels around it, by ray differentials through mirrors and onto the patch's plane.
+SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, const Visibility& visibility,
+                             int threads = 0);
 
 /// pinhole_points, then gather_points: everything the film needs for this camera.
 Gather prepare_camera(const Camera& camera, const PatchSet& patches, const LightSources& sources,

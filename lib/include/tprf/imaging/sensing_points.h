@@ -22,6 +22,15 @@ struct SensingPoint {
     float throughput = 1.0f;
     /// Where tinted mirrors colour the way: an index into SensingPoints::tints (0: grey).
     std::uint16_t tint = 0;
+    /// The leg's change across the point's cell, metres (0 when unwarped): leg + leg_du * s + leg_dv * t
+    /// at point + du * s + dv * t, s and t in [-1, 1].
+    float leg_du = 0.0f, leg_dv = 0.0f;
+    /// The point's cell on the surface: what the point stands for, when it is one sample of a pixel
+    /// (a pinhole camera's sample: its share of the pixel square, traced onto the surface to first
+    /// order), as two half-axes, metres. Zero for a point that is itself the measurement (a capture's
+    /// sensor point). The gather spreads the point's direct light over the paths of its cell, so that a
+    /// pixel's light is spread over the times its footprint spans rather than over spp instants.
+    Eigen::Vector3f du = Eigen::Vector3f::Zero(), dv = Eigen::Vector3f::Zero();
 };
 
 /// A set of sensing points, in output order (non-decreasing `output`).

@@ -26,6 +26,10 @@ struct Camera {
     int height = 0;                 ///< pixels, > 0
     int spp = 1;                    ///< samples per pixel, > 0
     bool unwarp = false;            ///< leave the camera leg out of every sample's time
+    /// Spread each sample's direct light over the paths of its share of the pixel (SensingPoint::du,
+    /// dv): a pixel integrates its footprint in time, not spp instants. False: point samples, each
+    /// sample's light at its own exact path (beyond SPEC; docs/scene.md).
+    bool footprint = true;
 };
 
 /// Isotropic point light: irradiance at x is intensity * cos(theta) / r^2.

@@ -11,7 +11,9 @@
 
 #include "tprf/core/types.h"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -130,6 +132,32 @@ struct AreaPair {
     double weight = 0.0;
 };
 
+/// A surface point's cell, when the point stands for one (a pixel sample's share of its pixel): the
+/// points point + s du + t dv, s and t in [-1, 1], each seen along a straight leg from one (virtual)
+/// sensor, `leg` metres long at the point and changing by leg_du and leg_dv along the half-axes. Zero
+/// half-axes: a point.
+struct Footprint {
+    Vec3 du = Vec3::Zero(), dv = Vec3::Zero();
+    double leg = 0.0, leg_du = 0.0, leg_dv = 0.0;
+
+    bool empty() const { return du.isZero() && dv.isZero(); }
+    /// The leg at point + s du + t dv, exactly (0 when there is no leg: unwarped).
+    double leg_at(double s, double t) const {
+        if (!(leg > 0.0)) return 0.0;
+        const Vec3 d = s * du + t * dv;
+        return std::sqrt(std::max(0.0, leg * leg + 2.0 * leg * (s * leg_du + t * leg_dv) + d.squaredNorm()));
+    }
+    /// The least over the cell's four corners of distance(corner) + leg_at(corner) - leg: with a convex
+    /// distance, the earliest path through the cell (less the point's leg) unless it lies inside.
+    template <class Distance>
+    double least_at_corners(Distance&& distance) const {
+        double best = std::numeric_limits<double>::infinity();
+        for (const double s : {-1.0, 1.0})
+            for (const double t : {-1.0, 1.0}) best = std::min(best, distance(Vec3(s * du + t * dv)) + leg_at(s, t) - leg);
+        return best;
+    }
+};
+
 /// Shadow rays from a surface point to an area source first, and where they disagree (the defaults of
 /// IlluminationOptions and GatherOptions).
 inline constexpr int kAreaShadowRays = 16;
@@ -140,26 +168,43 @@ struct AreaSampling {
     int timing = 4;     ///< cells per side that time the light
     int shadow = 4;     ///< cells per side that shadow rays test first
     int penumbra = 16;  ///< cells per side, a ray each, where those disagree (or `timing`, if finer)
-    /// When > 0, each cell's light is spread evenly over its paths, its centre's path +- the path's
-    /// first-order change across the cell (never before x's distance to the source), and cut at the
-    /// bin edges origin + k bin_m: one pair per bin it touches. When 0, one pair at the centre's path.
+    /// When > 0, each cell's light is spread over its paths as they change to first order along the
+    /// cell's two half-axes (never before x's distance to the source), and cut at the bin edges
+    /// origin + k bin_m: one pair per bin it touches. When 0, one pair at the centre's path.
     double bin_m = 0.0;
     double origin = 0.0;
+    /// The surface point's own cell, when it stands for one (a pixel sample's): each pair's light is
+    /// spread over the paths of both cells, the source's and the point's, to first order, and never
+    /// before the earliest path at the point's cell's corners.
+    Footprint footprint;
+    /// Where in its cell each grid's point lies, as a fraction of the cell along u and v (0.5: the
+    /// centre). The samples of one pixel take different offsets, so that together they see more points
+    /// of the source than one grid has.
+    double jitter_u = 0.5, jitter_v = 0.5;
 };
 
-/// The sampling of source a seen from x: timing cells whose paths span about two bins of `bin_m`
-/// (2 to 32 per side; 4 when bin_m is 0), their light cut at the bin edges `origin` + k bin_m, and
-/// shadow grids of about `shadow_rays` and `penumbra_rays` cells.
+/// Bins of the time axis that one timing cell of an area source spans, about: each cell's light is
+/// spread over its paths to first order (a trapezoid), so a cell may span several bins.
+inline constexpr double kAreaBinsPerTimingCell = 4.0;
+
+/// The sampling of source a seen from x: timing cells whose paths span about kAreaBinsPerTimingCell
+/// bins of `bin_m` (2 to 32 per side; 4 when bin_m is 0), their light cut at the bin edges `origin` +
+/// k bin_m, and shadow grids of about `shadow_rays` and `penumbra_rays` cells.
 AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, double origin, int shadow_rays,
                            int penumbra_rays);
 
 /// The light of area source a at the point x with unit normal n: appends to `out` the pairs between x
-/// and the cells' centres that shadow rays find unblocked (to the shadow grid's cells; where those
+/// and the cells' points (their centres, unless jittered) that shadow rays find unblocked (to the shadow grid's cells; where those
 /// disagree, a penumbra, to every cell of the finer grid), and returns the weight of all pairs, blocked
 /// or not (0 when no cell centre faces x). The unblocked share of the weight is the share of the
 /// exact form factor point_polygon_form_factor(x, n, a) that reaches x.
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& visibility,
                    const AreaSampling& sampling, std::vector<AreaPair>& out);
+
+/// arrive_area with every cell open (no shadow rays): for a caller that has found the source wholly
+/// visible from x by rays of its own.
+double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& sampling,
+                        std::vector<AreaPair>& out);
 
 /// When no cell centre of `a` faces x, yet F > 0 (a sliver near x's horizon): one pair along the path
 /// from x to a's centroid, of weight 1, if that ray is unblocked. Returns the weight added (1 or 0).
