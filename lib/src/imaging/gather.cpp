@@ -124,11 +124,12 @@ bool one_flat_pixel(const SensingPoint* pts, std::size_t count, double weight, c
 }
 
 // Direct light of area source a at a pixel's samples that one_flat_pixel admits, when the shared shadow
-// test finds the source wholly open: from the pixel's four outermost samples (along its two axes), a ray
-// to the centre of each cell of the coarse shadow grid that faces it. Then each sample's radiance is
-// albedo L_e F(x) with its own exact F, and the light of all of them is timed together, as the pixel's
-// centre sees the source's cells, spread over the paths of the whole pixel (its samples' cells side by
-// side: sqrt(spp) times a sample's half-axes). False (nothing added) when any ray is blocked or dimmed.
+// test finds the source wholly open or wholly hidden: from the pixel's four outermost samples (along its
+// two axes), a ray to the centre of each cell of the coarse shadow grid that faces it. Open: each
+// sample's radiance is albedo L_e F(x) with its own exact F, and the light of all of them is timed
+// together, as the pixel's centre sees the source's cells, spread over the paths of the whole pixel
+// (its samples' cells side by side: sqrt(spp) times a sample's half-axes). Hidden: no light. False
+// (nothing added) when the rays disagree or glass dims one: the samples are then gathered one by one.
 bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
                          const AreaSource& a, const Visibility& vis, const GatherOptions& options,
                          std::vector<DirectArrival>& out) {
@@ -163,14 +164,19 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
     const AreaSampling probe = area_sampling(a, centre, 0.0, 0.0, options.emitter_rays, options.penumbra_rays);
     const int g = probe.shadow;
     const double lift = vis.epsilon();
+    bool open = false, blocked = false;
     for (const std::size_t h : outer) {
         const Vec3& x = pts[h].point;
         for (int c = 0; c < g * g; ++c) {
             const Vec3 y = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
             if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
-            if (vis.passes(a.chain, x + lift * n, y + lift * a.normal) != 1.0) return false;
+            const double passed = vis.passes(a.chain, x + lift * n, y + lift * a.normal);
+            if (passed != 1.0 && passed != 0.0) return false;  // dimmed by glass: each sample alone
+            (passed == 1.0 ? open : blocked) = true;
+            if (open && blocked) return false;  // a penumbra
         }
     }
+    if (blocked) return true;  // wholly in its shadow
     Rgb radiance = Rgb::Zero();
     for (std::size_t h = 0; h < count; ++h) {
         const double ff = point_polygon_form_factor(pts[h].point, n, a.polygon(), a.count, a.normal);
