@@ -24,7 +24,6 @@ script itself can be tested on a build without hierarchical links (e.g. --method
 """
 
 import argparse
-import csv
 import datetime
 import json
 import os
@@ -51,13 +50,7 @@ def parse_args():
     p.add_argument("--bin-width", type=float, default=None)
     p.add_argument("--size", type=int, default=None, help="camera width and height")
     p.add_argument("--spp", type=int, default=None)
-    p.add_argument("--rebin", type=int, default=4)
-    p.add_argument("--lit", type=float, default=1e-3, help="lit pixel: profile >= LIT x the brightest pixel's")
-    p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--timeout", type=float, default=None)
-    p.add_argument("--tprf", default=tr.default_tprf())
-    p.add_argument("--out", default=str(tr.ROOT / "bench" / "out"))
-    p.add_argument("--name", default=None)
+    tr.add_run_args(p)
     return p.parse_args()
 
 
@@ -111,22 +104,14 @@ def plot(rows, ref, path):
         ax.axvline(ref.record[xkey], color="grey", linestyle="--", label=f"flat: {tr.fmt(ref.record[xkey])}")
         ax.axhline(0.01, color="C0", linestyle=":", linewidth=0.8)
         ax.axhline(0.005, color="C1", linestyle=":", linewidth=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("error against flat links")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"hierarchical vs flat links: {ref.title} (labels: tolerance; dotted: 1% and 0.5%)", fontsize=9)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        tr.style_loglog(ax, xlabel, "error against flat links")
+    tr.finish_figure(fig, axes, f"hierarchical vs flat links: {ref.title} (labels: tolerance; dotted: 1% and 0.5%)",
+                     path)
 
 
 def main():
     args = parse_args()
-    tr.check_tprf(args.tprf)
-    base = tr.load_scene(args.scene)
-    tr.set_camera_time(base, args)
+    base = tr.base_scene(args)
     if args.max_edge:
         base.setdefault("patches", {})["max_edge"] = args.max_edge
     stem = pathlib.Path(args.scene).stem
@@ -182,24 +167,8 @@ def main():
 
     ref.record.update(tolerance=None, method=args.reference_method)
     all_rows = [ref.record] + rows
-    keys = []
-    for r in all_rows:
-        keys += [k for k in r if k not in keys]
-    with open(out / f"{name}.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(all_rows)
-    (out / f"{name}.json").write_text(json.dumps(
-        {"date": when, "host": platform.node(), "cores": os.cpu_count(), "settings": vars(args),
-         "reference": ref.record, "rows": rows}, indent=1) + "\n")
-    written = [out / f"{name}.csv", out / f"{name}.json"]
-    if rows:
-        try:
-            plot(rows, ref, out / f"{name}.png")
-            written.append(out / f"{name}.png")
-        except ImportError as e:
-            print(f"no plot ({e}): run with a Python that has matplotlib (Debian: /usr/bin/python3)")
-    print("\nwrote " + ", ".join(str(p) for p in written))
+    tr.write_results(out, name, args, when, {"reference": ref.record, "rows": rows}, all_rows,
+                     (lambda path: plot(rows, ref, path)) if rows else None)
 
 
 if __name__ == "__main__":

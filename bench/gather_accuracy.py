@@ -5,16 +5,18 @@ with its seconds.
 
 usage: /usr/bin/python3 bench/gather_accuracy.py [--scene meshes/corner.json] [--size 64] [--bins 600]
            [--spp 4,16,64,256] [--max-edge 0.1,0.05,0.025] [--ref-spp 1024] [--ref-max-edge 0.0125]
-           [--ref-tolerance 0.0003] [--ref-check] [--rebin 4] [--lit 1e-3] [--threads N]
+           [--ref-tolerance 0.0003] [--ref-check] [--keep-reference] [--rebin 4] [--lit 1e-3] [--threads N]
            [--tprf build/bin/tprf] [--out bench/out] [--name NAME]
 
 The reference is a tprf render with many samples per pixel (--ref-spp) and small patches (--ref-max-edge;
 hierarchical links at --ref-tolerance, so that it fits in memory): converged in the two quantities the
-sweep varies. It is kept in OUT/NAME-reference/ with the settings that made it and reused while the
-binary and the settings are unchanged (delete it to render it again). --ref-check also renders the
-reference at twice its patch size and a quarter of its spp, and prints how far each is from it: the
-reference's own error is well below those (both errors fall at least linearly), so a sweep's error is
-meaningful down to about a third of the smaller of them.
+sweep varies. It is kept in OUT/NAME-reference/ with the settings and the binary (commit, size, time) that made it,
+and reused while both are unchanged, or with --keep-reference while the settings are (a reference at
+many samples and small patches stays converged across changes that only make fewer samples cheaper or
+better; delete the folder to render it again). --ref-check also renders the
+reference's spp at twice its patch size (compared with the reference) and a quarter of its spp at that
+patch size (compared with the former): the reference's own error is well below those (both errors fall
+at least linearly), so a sweep's error is meaningful down to about a third of the larger of them.
 
 Metrics (as bench/accuracy_vs_flat.py): per lit pixel, the relative L1 of its time profile after summing
 every --rebin bins, over the reference's; the median and the 90th percentile over the pixels whose
@@ -25,7 +27,6 @@ max_edge along spp; and against gather seconds).
 """
 
 import argparse
-import csv
 import datetime
 import hashlib
 import json
@@ -33,6 +34,7 @@ import os
 import pathlib
 import platform
 import shutil
+import subprocess
 import sys
 import tempfile
 
@@ -55,13 +57,9 @@ def parse_args():
     p.add_argument("--ref-max-edge", type=float, default=0.0125)
     p.add_argument("--ref-tolerance", type=float, default=0.0003)
     p.add_argument("--ref-check", action="store_true")
-    p.add_argument("--rebin", type=int, default=4)
-    p.add_argument("--lit", type=float, default=1e-3)
-    p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--timeout", type=float, default=None)
-    p.add_argument("--tprf", default=tr.default_tprf())
-    p.add_argument("--out", default=str(tr.ROOT / "bench" / "out"))
-    p.add_argument("--name", default=None)
+    p.add_argument("--keep-reference", action="store_true",
+                   help="reuse a kept reference of the same settings even if another binary made it")
+    tr.add_run_args(p)
     return p.parse_args()
 
 
@@ -74,25 +72,33 @@ def variant(base, spp, max_edge, method, tolerance=None):
 
 
 def binary_stamp(path):
+    """The binary's size and time, and the commit of the checkout (what made a kept reference)."""
     st = os.stat(path)
-    return f"{st.st_size}-{int(st.st_mtime)}"
+    try:
+        commit = subprocess.run(["git", "-C", str(tr.ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = "unknown"
+    return f"{commit}:{st.st_size}-{int(st.st_mtime)}"
 
 
 def reference(args, base, out, name):
     """The reference render's directory, rendered unless a kept one has the same scene and binary."""
     scene = variant(base, args.ref_spp, args.ref_max_edge, "hierarchical", args.ref_tolerance)
-    key = hashlib.sha256(json.dumps([scene, binary_stamp(args.tprf)], sort_keys=True).encode()).hexdigest()
+    key = hashlib.sha256(json.dumps(scene, sort_keys=True).encode()).hexdigest()
     ref_dir = out / f"{name}-reference"
     stamp = ref_dir / "settings.sha256"
-    if stamp.exists() and stamp.read_text().strip() == key and (ref_dir / "transient.npy").exists():
-        print(f"[gather] reusing the reference in {ref_dir}", file=sys.stderr)
-        return ref_dir, json.loads((ref_dir / "record.json").read_text())
+    if stamp.exists() and (ref_dir / "transient.npy").exists():
+        kept_key, _, kept_binary = stamp.read_text().strip().partition(" ")
+        if kept_key == key and (args.keep_reference or kept_binary == binary_stamp(args.tprf)):
+            print(f"[gather] reusing the reference in {ref_dir} (made by {kept_binary or '?'})", file=sys.stderr)
+            return ref_dir, json.loads((ref_dir / "record.json").read_text())
     shutil.rmtree(ref_dir, ignore_errors=True)
     print(f"[gather] reference: spp {args.ref_spp}, max_edge {args.ref_max_edge}, hierarchical "
           f"{args.ref_tolerance:g} ...", file=sys.stderr, flush=True)
     rec, run_dir = tr.render(args.tprf, scene, out, f"{name}-reference", args.threads, args.timeout, keep=True)
     (run_dir / "record.json").write_text(json.dumps(rec))
-    stamp.write_text(key + "\n")
+    stamp.write_text(f"{key} {binary_stamp(args.tprf)}\n")
     return run_dir, rec
 
 
@@ -113,22 +119,13 @@ def plot(rows, title, path):
                 ax.annotate(f"{r['spp']}", (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
         for level in (0.02, 0.005):
             ax.axhline(level, color="grey", linestyle=":", linewidth=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("median pixel rel. L1 of the time profile")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"{title} (labels: spp; dotted: 2% and 0.5%)", fontsize=9)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        tr.style_loglog(ax, xlabel, "median pixel rel. L1 of the time profile")
+    tr.finish_figure(fig, axes, f"{title} (labels: spp; dotted: 2% and 0.5%)", path)
 
 
 def main():
     args = parse_args()
-    tr.check_tprf(args.tprf)
-    base = tr.load_scene(args.scene)
-    tr.set_camera_time(base, args)
+    base = tr.base_scene(args)
     stem = pathlib.Path(args.scene).stem
     name = args.name or f"gather_{stem}"
     out = pathlib.Path(args.out)
@@ -138,6 +135,9 @@ def main():
 
     ref_dir, ref_rec = reference(args, base, out, name)
     ref = Reference(ref_dir, args.rebin, args.lit)
+    if not ref.lit.any():
+        sys.exit(f"gather_accuracy: no light reaches the camera in the reference's window ({ref_dir}): "
+                 "more --bins or a wider --bin-width")
     cam = base["camera"]
     title = (f"{stem}, {cam['width']}x{cam['height']} px, {base['time']['bins']} bins; reference spp "
              f"{args.ref_spp}, max_edge {args.ref_max_edge:g} ({ref_rec['patches']} patches)")
@@ -145,14 +145,22 @@ def main():
     rows, checks = [], []
     try:
         if args.ref_check:
-            for label, spp, edge in [("ref max_edge x2", args.ref_spp, 2 * args.ref_max_edge),
-                                     ("ref spp / 4", max(1, args.ref_spp // 4), args.ref_max_edge)]:
-                print(f"[gather] check: {label} ...", file=sys.stderr, flush=True)
-                rec, run_dir = tr.render(args.tprf, variant(base, spp, edge, "hierarchical", args.ref_tolerance),
-                                         scratch, "check", args.threads, args.timeout, keep=True)
-                rec.update(ref.errors(run_dir), check=label)
-                shutil.rmtree(run_dir)
-                checks.append(rec)
+            # Patches: the reference's spp at twice its patch size, against the reference. Samples: a
+            # quarter of its spp at that patch size, against the first check (spp converges the same
+            # way at either patch size, and this avoids a second link stage at the reference's).
+            print("[gather] check: ref max_edge x2 ...", file=sys.stderr, flush=True)
+            coarse = variant(base, args.ref_spp, 2 * args.ref_max_edge, "hierarchical", args.ref_tolerance)
+            rec, coarse_dir = tr.render(args.tprf, coarse, scratch, "check_patches", args.threads, args.timeout, keep=True)
+            rec.update(ref.errors(coarse_dir), check="ref max_edge x2, against the reference")
+            checks.append(rec)
+            print("[gather] check: ref spp / 4 ...", file=sys.stderr, flush=True)
+            coarse["camera"]["spp"] = max(1, args.ref_spp // 4)
+            rec, run_dir = tr.render(args.tprf, coarse, scratch, "check_spp", args.threads, args.timeout, keep=True)
+            rec.update(Reference(coarse_dir, args.rebin, args.lit).errors(run_dir),
+                       check="ref spp / 4 at max_edge x2, against the first check")
+            shutil.rmtree(run_dir)
+            shutil.rmtree(coarse_dir)
+            checks.append(rec)
         for edge in edges:
             for spp in spps:
                 print(f"[gather] max_edge {edge:g}, spp {spp} ...", file=sys.stderr, flush=True)
@@ -179,24 +187,8 @@ def main():
                                        tr.fmt(r["seconds.total"], 3), tr.fmt(r["peak_rss_mb"], 4),
                                        pct(r["transient_rel_l1_median"]), pct(r["transient_rel_l1_p90"]),
                                        pct(r["steady_rel_l1"])] for r in rows]))
-    keys = []
-    for r in checks + rows:
-        keys += [k for k in r if k not in keys]
-    with open(out / f"{name}.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(checks + rows)
-    (out / f"{name}.json").write_text(json.dumps(
-        {"date": when, "host": platform.node(), "cores": os.cpu_count(), "settings": vars(args),
-         "reference": ref_rec, "checks": checks, "rows": rows}, indent=1) + "\n")
-    written = [out / f"{name}.csv", out / f"{name}.json"]
-    if rows:
-        try:
-            plot(rows, title, out / f"{name}.png")
-            written.append(out / f"{name}.png")
-        except ImportError as e:
-            print(f"no plot ({e}): run with a Python that has matplotlib (Debian: /usr/bin/python3)")
-    print("\nwrote " + ", ".join(str(p) for p in written))
+    tr.write_results(out, name, args, when, {"reference": ref_rec, "checks": checks, "rows": rows}, checks + rows,
+                     (lambda path: plot(rows, title, path)) if rows else None)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,6 @@ OUT/.sweep-scratch-* that is removed at the end (cubes can be GBs; /tmp may be i
 """
 
 import argparse
-import csv
 import datetime
 import json
 import math
@@ -153,13 +152,7 @@ def report(args, rows, stopped, out, name):
         print(f"\nstopped: {stopped}")
 
     csv_path, json_path = out / f"{name}.csv", out / f"{name}.json"
-    keys = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(csv_path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
+    tr.write_csv(csv_path, rows)
     settings = {k: v for k, v in vars(args).items()}
     json_path.write_text(json.dumps({"date": when, "host": platform.node(), "cores": os.cpu_count(),
                                      "settings": settings, "stopped": stopped, "exponents": fits,

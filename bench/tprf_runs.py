@@ -140,6 +140,77 @@ def loglog_slope(xs, ys):
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
 
 
+def write_csv(path, rows):
+    """The rows (dicts) as a CSV whose columns are every key of any row, in first-seen order."""
+    import csv
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def style_loglog(ax, xlabel, ylabel):
+    """Log axes, labels and a light grid (matplotlib axes)."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def add_run_args(parser, rebin=True):
+    """The options every accuracy script shares: --rebin, --lit (when rebin), --threads, --timeout,
+    --tprf, --out, --name."""
+    if rebin:
+        parser.add_argument("--rebin", type=int, default=4)
+        parser.add_argument("--lit", type=float, default=1e-3,
+                            help="lit pixel: profile >= LIT x the brightest pixel's")
+    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--timeout", type=float, default=None)
+    parser.add_argument("--tprf", default=default_tprf())
+    parser.add_argument("--out", default=str(ROOT / "bench" / "out"))
+    parser.add_argument("--name", default=None)
+
+
+def write_results(out, name, args, when, extra, csv_rows, draw=None):
+    """OUT/NAME.csv (csv_rows), OUT/NAME.json (date, host, cores, the settings and `extra`) and, when
+    draw is given, OUT/NAME.png drawn by draw(path) (skipped, with a note, without matplotlib); prints
+    what it wrote."""
+    import platform
+    out = pathlib.Path(out)
+    write_csv(out / f"{name}.csv", csv_rows)
+    record = {"date": when, "host": platform.node(), "cores": os.cpu_count(), "settings": vars(args)}
+    (out / f"{name}.json").write_text(json.dumps({**record, **extra}, indent=1) + "\n")
+    written = [out / f"{name}.csv", out / f"{name}.json"]
+    if draw:
+        try:
+            draw(out / f"{name}.png")
+            written.append(out / f"{name}.png")
+        except ImportError as e:
+            print(f"no plot ({e}): run with a Python that has matplotlib (Debian: /usr/bin/python3)")
+    print("\nwrote " + ", ".join(str(p) for p in written))
+
+
+def finish_figure(fig, axes, title, path):
+    """The first axes' legend, the title, the PNG written and the figure closed."""
+    import matplotlib.pyplot as plt
+    axes[0].legend(fontsize=7)
+    fig.suptitle(title, fontsize=9)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def base_scene(args):
+    """The binary checked, and args.scene loaded with --size, --spp, --bins, --bin-width applied."""
+    check_tprf(args.tprf)
+    base = load_scene(args.scene)
+    set_camera_time(base, args)
+    return base
+
+
 def markdown_table(headers, rows):
     lines = ["| " + " | ".join(headers) + " |", "| " + " | ".join("---" for _ in headers) + " |"]
     lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
