@@ -1,6 +1,7 @@
 #include "tprf/imaging/camera.h"
 
 #include "tprf/core/parallel.h"
+#include "tprf/core/random.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 
@@ -19,9 +20,7 @@ void subpixel(int s, int spp, double& sx, double& sy) {
         sy = (s / g + 0.5) / g;
         return;
     }
-    const double a1 = 0.7548776662466927, a2 = 0.5698402909980532;  // 1/phi2, 1/phi2^2
-    sx = std::fmod(0.5 + a1 * (s + 1), 1.0);
-    sy = std::fmod(0.5 + a2 * (s + 1), 1.0);
+    r2_point(double(s + 1), sx, sy);
 }
 
 }  // namespace

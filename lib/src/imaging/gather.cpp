@@ -2,6 +2,7 @@
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
+#include "tprf/core/random.h"
 #include "tprf/core/time_kernel.h"
 #include "tprf/geometry/form_factors.h"
 #include "tprf/geometry/neighbours.h"
@@ -55,9 +56,6 @@ std::vector<std::pair<std::uint32_t, double>> kernel_weights(const PatchSet& pat
     return weights;
 }
 
-// Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
-// with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
-// spread over their paths (per bin of the time axis, when there is one).
 // The sensing point's cell (zero for a point).
 Footprint footprint_of(const SensingPoint& sp) {
     return {sp.du.cast<double>(), sp.dv.cast<double>(), sp.leg, sp.leg_du, sp.leg_dv};
@@ -68,6 +66,9 @@ struct RunSample {
     std::size_t index = 0, count = 1;
 };
 
+// Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
+// with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
+// spread over their paths and over the point's cell (per bin of the time axis, when there is one).
 void area_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const AreaSource& a,
                    const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
     const Vec3& n = patches.normal[sp.patch];
@@ -80,10 +81,7 @@ void area_arrivals(const SensingPoint& sp, RunSample at, double weight, const Pa
     // The pixel's samples share its penumbra rays, each at its own offsets in the cells (R2 sequence).
     const int penumbra = std::max(options.emitter_rays, int(double(options.penumbra_rays) / double(at.count)));
     AreaSampling sampling = area_sampling(a, sp.point, bin_m, origin, options.emitter_rays, penumbra);
-    if (at.count > 1) {
-        sampling.jitter_u = std::fmod(0.5 + 0.7548776662466927 * double(at.index), 1.0);
-        sampling.jitter_v = std::fmod(0.5 + 0.5698402909980532 * double(at.index), 1.0);
-    }
+    if (at.count > 1) r2_point(double(at.index), sampling.jitter_u, sampling.jitter_v);
     sampling.footprint = footprint_of(sp);
     double total = arrive_area(a, sp.point, n, vis, sampling, pairs);
     if (!(total > 0.0) && (total = arrive_area_centroid(a, sp.point, n, vis, pairs)) == 0.0) return;
@@ -103,7 +101,6 @@ void add_over_cell(std::uint32_t output, double path, double a, double b, double
     spread_over_bins(path, a, b, time->bin_width_m(), time->start_m(), lowest,
                      [&](double at, double share) { out.push_back({output, at, radiance * share, order}); });
 }
-
 
 // A pixel's samples, when they can share the timing of an area source's light: all of them (spp points,
 // each its own sample, with its cell), in the open (no mirror or glass on the way) and on one flat

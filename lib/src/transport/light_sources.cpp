@@ -245,16 +245,20 @@ AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, dou
 
 namespace {
 
-// The light `weight` of cell (u, v) of an m x m grid over source a, whose point (its centre, unless
-// jittered) is `path` from x,
-// spread over the cell's paths to first order (a trapezoid over the path's changes along the cell's
+// The point of cell (u, v) of an m x m grid over source a: its centre, unless the sampling is jittered.
+Vec3 cell_point(const AreaSource& a, const AreaSampling& s, int u, int v, int m) {
+    return a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m);
+}
+
+// The light `weight` of cell (u, v) of an m x m grid over source a, whose point (cell_point) is `path`
+// from x, spread over the cell's paths to first order (a trapezoid over the path's changes along the cell's
 // half-axes; with x's own cell, when it has one, the trapezoid of the same variance as the four
 // changes), never before `nearest` (the earliest path from x's cell, less x's leg), and cut at the bin
 // edges: one pair per bin it touches.
 void cell_spread(const AreaSource& a, const Vec3& x, int u, int v, int m, double path, double nearest,
                  const AreaSampling& s, double weight, std::vector<AreaPair>& out) {
     const double cu = (u + s.jitter_u) / m, cv = (v + s.jitter_v) / m, h = 0.5 / m;
-    const Vec3 dir = (a.point(cu, cv) - x) / path;
+    const Vec3 dir = (cell_point(a, s, u, v, m) - x) / path;
     const Footprint& f = s.footprint;
     const double half[4] = {0.5 * dir.dot(a.point(cu + h, cv) - a.point(cu - h, cv)),
                             0.5 * dir.dot(a.point(cu, cv + h) - a.point(cu, cv - h)), f.leg_du - dir.dot(f.du),
@@ -266,12 +270,7 @@ void cell_spread(const AreaSource& a, const Vec3& x, int u, int v, int m, double
                      [&](double at, double share) { out.push_back({at, weight * share}); });
 }
 
-}  // namespace
-
-namespace {
-
-// The timing cells of an m x m grid over source a that face x (m = s.timing, or `finer` where given):
-// appends each one's pairs with its weight times open(u, v, m) (0: blocked), and returns the weight of
+// The timing cells of an m x m grid over source a that face x: appends each one's pairs with its weight times open(u, v, m) (0: blocked), and returns the weight of
 // every cell that faces x, blocked or not.
 template <class Open>
 double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s, int m, Open&& open,
@@ -284,7 +283,7 @@ double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const Are
     double total = 0.0;
     for (int c = 0; c < m * m; ++c) {
         const int u = c % m, v = c / m;
-        const Vec3 d = a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) - x;
+        const Vec3 d = cell_point(a, s, u, v, m) - x;
         const double r2 = d.squaredNorm(), path = std::sqrt(r2);
         const double w = std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2) / (double(m) * m);
         if (!(w > 0.0)) continue;
@@ -308,10 +307,10 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     const int coarse = s.shadow;
     // The share of light that passes between x and the centre of cell (u, v) of an m x m grid (0: blocked).
     const auto open_to = [&](int u, int v, int m) {
-        return vis.passes(a.chain, x + lift * n, a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) + lift * a.normal);
+        return vis.passes(a.chain, x + lift * n, cell_point(a, s, u, v, m) + lift * a.normal);
     };
     const auto faces = [&](int u, int v, int m) {
-        const Vec3 d = a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m) - x;
+        const Vec3 d = cell_point(a, s, u, v, m) - x;
         return n.dot(d) > 0.0 && a.normal.dot(d) < 0.0;
     };
     // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a

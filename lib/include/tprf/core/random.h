@@ -20,6 +20,7 @@
 /// agree (sqrt is exact everywhere; glibc's log, cos and sin are correctly rounded in practice).
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 namespace tprf {
@@ -115,5 +116,13 @@ private:
 /// A SPAD's expected counts, photons * max(0, signal) + dark, rounded in two steps on every build (no
 /// fused multiply-add), so that the Poisson draw that follows sees the same mean everywhere.
 double expected_counts(double photons, double signal, double dark);
+
+/// Point k of the R2 low-discrepancy sequence in the unit square (Roberts, "The unreasonable
+/// effectiveness of quasirandom sequences", 2018): ((0.5 + k / phi2) mod 1, (0.5 + k / phi2^2) mod 1),
+/// phi2 the plastic number. Any prefix of it is well spread: it stratifies any count of samples.
+inline void r2_point(double k, double& u, double& v) {
+    u = std::fmod(0.5 + 0.7548776662466927 * k, 1.0);
+    v = std::fmod(0.5 + 0.5698402909980532 * k, 1.0);
+}
 
 }  // namespace tprf
