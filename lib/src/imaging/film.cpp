@@ -12,52 +12,80 @@
 
 namespace tprf {
 
+namespace {
+
+// One gather tap's share of a bin: out[t + lag] += weight B[t].
+struct BinShare {
+    std::uint32_t patch;
+    std::uint16_t tint;
+    std::int32_t lag;
+    std::int64_t first;
+    float weight;
+};
+
+// A pixel's shares as kernels, one per patch and tint, appended to `taps` and `weights`: summed in
+// the order of the sort (the gather's, then the key's), so that the sums do not depend on threads.
+void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& taps, std::vector<float>& weights) {
+    std::stable_sort(shares.begin(), shares.end(), [](const BinShare& a, const BinShare& b) {
+        return std::tie(a.patch, a.tint, a.lag) < std::tie(b.patch, b.tint, b.lag);
+    });
+    for (std::size_t s = 0; s < shares.size();) {
+        std::size_t e = s;
+        std::int64_t first = shares[s].first;
+        while (e < shares.size() && shares[e].patch == shares[s].patch && shares[e].tint == shares[s].tint)
+            first = std::min(first, shares[e++].first);
+        const std::int32_t lag = shares[s].lag;
+        const std::uint32_t length = std::uint32_t(shares[e - 1].lag - lag + 1);
+        taps.push_back({shares[s].patch, lag, first, weights.size(), length, shares[s].tint});
+        weights.resize(weights.size() + length, 0.0f);
+        float* w = weights.data() + taps.back().offset;
+        for (; s < e; ++s) w[shares[s].lag - lag] += shares[s].weight;
+    }
+}
+
+}  // namespace
+
 FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads) {
     const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
     const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
-    using Tap = FilmTaps::Tap;
-    std::vector<std::vector<Tap>> per_pixel(pixels);
+    std::vector<std::vector<FilmTaps::Tap>> per_pixel(pixels);
+    std::vector<std::vector<float>> per_pixel_weights(pixels);
     parallel_for(pixels, {thread_count(threads), 256, true}, [&](std::size_t px) {
-        std::vector<Tap>& out = per_pixel[px];
+        thread_local std::vector<BinShare> shares;
+        shares.clear();
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
             const PixelTap& tap = gather.taps[k];
             const double lag = double(tap.leg) * inv_bin;
-            Tap t{tap.patch, 0, std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin)), tap.weight, 0.0f,
-                  tap.tint};
+            const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
             if (delay == DelayMode::Nearest) {
-                t.lag = std::int32_t(std::floor(lag + 0.5));
+                shares.push_back({tap.patch, tap.tint, std::int32_t(std::floor(lag + 0.5)), first, tap.weight});
             } else {
-                t.lag = std::int32_t(std::floor(lag));
-                const double f = lag - double(t.lag);
-                t.w0 = float(tap.weight * (1.0 - f));
-                t.w1 = float(tap.weight * f);
-            }
-            out.push_back(t);
-        }
-        // In a fixed order (the gather's, then the key's), so that the sums do not depend on threads.
-        std::stable_sort(out.begin(), out.end(), [](const Tap& a, const Tap& b) {
-            return std::tie(a.patch, a.lag, a.first, a.tint) < std::tie(b.patch, b.lag, b.first, b.tint);
-        });
-        std::size_t kept = 0;
-        for (const Tap& t : out) {
-            const Tap* last = kept > 0 ? &out[kept - 1] : nullptr;
-            if (last && last->patch == t.patch && last->lag == t.lag && last->first == t.first && last->tint == t.tint) {
-                out[kept - 1].w0 += t.w0;
-                out[kept - 1].w1 += t.w1;
-            } else {
-                out[kept++] = t;
+                const std::int32_t whole = std::int32_t(std::floor(lag));
+                const double f = lag - double(whole);
+                shares.push_back({tap.patch, tap.tint, whole, first, float(tap.weight * (1.0 - f))});
+                shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * f)});
             }
         }
-        out.resize(kept);
+        merge_shares(shares, per_pixel[px], per_pixel_weights[px]);
     });
     FilmTaps merged;
     for (const Rgb& t : gather.tints) merged.tints.push_back({float(t[0]), float(t[1]), float(t[2])});
     merged.row.assign(pixels + 1, 0);
-    for (std::size_t px = 0; px < pixels; ++px) merged.row[px + 1] = merged.row[px] + per_pixel[px].size();
+    std::size_t weights = 0;
+    for (std::size_t px = 0; px < pixels; ++px) {
+        merged.row[px + 1] = merged.row[px] + per_pixel[px].size();
+        weights += per_pixel_weights[px].size();
+    }
     merged.taps.reserve(merged.row[pixels]);
-    for (auto& v : per_pixel) {
-        merged.taps.insert(merged.taps.end(), v.begin(), v.end());
-        std::vector<Tap>().swap(v);
+    merged.weights.reserve(weights);
+    for (std::size_t px = 0; px < pixels; ++px) {
+        for (FilmTaps::Tap t : per_pixel[px]) {
+            t.offset += merged.weights.size();
+            merged.taps.push_back(t);
+        }
+        merged.weights.insert(merged.weights.end(), per_pixel_weights[px].begin(), per_pixel_weights[px].end());
+        std::vector<FilmTaps::Tap>().swap(per_pixel[px]);
+        std::vector<float>().swap(per_pixel_weights[px]);
     }
     return merged;
 }
@@ -110,49 +138,44 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         }
 }
 
-// One pixel's taps over the block: each reads its patch's profile and shifts it by the last leg,
-// split between two bins.
+// One pixel's taps over the block: each reads its patch's profile and spreads it over its kernel
+// (the pixel's legs to that patch, split between bins).
 void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
-    const std::int64_t T = m_time.bins;
+    const std::int64_t T = m_time.bins, n = std::int64_t(bins);
     float* out = m_cube + px * std::size_t(T) * 3;
     for (std::uint64_t k = m_taps->row[px]; k < m_taps->row[px + 1]; ++k) {
         const FilmTaps::Tap& tap = m_taps->taps[k];
-        const std::int64_t whole = tap.lag, first = tap.first;
-        const float w0 = tap.w0, w1 = tap.w1;
+        const float* kernel = m_taps->weights.data() + tap.offset;
         const float* tint = tap.tint != 0 ? m_taps->tints[tap.tint].data() : nullptr;
-        // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
-        const std::int64_t base = first_bin + whole;  // output bin of the block's bin 0 (w0 tap)
+        const std::int64_t base = first_bin + tap.lag;  // output bin of the block's bin 0 (kernel bin 0)
         const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
-        // Bins t whose w0 target base + t lies before `first` (and their w1 targets up to it).
-        const std::int64_t early = std::clamp<std::int64_t>(first - base, 0, std::int64_t(bins));
-        if (early > 0 && first >= 0 && first < T) {
-            float carried[3] = {0, 0, 0};
-            for (std::int64_t t = 0; t < early; ++t) {
-                const float w = w0 + (base + t + 1 <= first ? w1 : 0.0f);
-                for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
-            }
-            for (int c = 0; c < 3; ++c) out[std::size_t(first) * 3 + std::size_t(c)] += (tint ? tint[c] : 1.0f) * carried[c];
-        }
-        // The rest: two contiguous multiply-adds over bins, each clipped to the window [0, T).
-        auto add = [&](float w, std::int64_t shift, std::int64_t from) {
-            if (w == 0.0f) return;
-            const std::int64_t lo = std::max<std::int64_t>(from, -(base + shift));
-            const std::int64_t hi = std::min<std::int64_t>(std::int64_t(bins), T - (base + shift));
-            if (lo >= hi) return;
-            float* __restrict o = out + std::size_t(base + shift + lo) * 3;
+        const bool carry = tap.first >= 0 && tap.first < T;
+        float carried[3] = {0, 0, 0};
+        for (std::uint32_t j = 0; j < tap.length; ++j) {
+            const float w = kernel[j];
+            if (w == 0.0f) continue;
+            const std::int64_t shift = base + std::int64_t(j);  // output bin of the block's bin 0
+            // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
+            const std::int64_t early = std::clamp<std::int64_t>(tap.first - shift, 0, n);
+            if (carry)
+                for (std::int64_t t = 0; t < early; ++t)
+                    for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
+            // The rest: a contiguous multiply-add over bins, clipped to the window [0, T).
+            const std::int64_t lo = std::max<std::int64_t>(early, -shift), hi = std::min<std::int64_t>(n, T - shift);
+            if (lo >= hi) continue;
+            float* __restrict o = out + std::size_t(shift + lo) * 3;
             const float* __restrict in = b + std::size_t(lo) * 3;
             const std::size_t len = std::size_t(hi - lo) * 3;
             if (tint) {  // through tinted mirrors: a weight per channel
                 const float wc[3] = {w * tint[0], w * tint[1], w * tint[2]};
                 for (std::size_t e = 0; e < len; e += 3)
                     for (int c = 0; c < 3; ++c) o[e + std::size_t(c)] += wc[c] * in[e + std::size_t(c)];
-                return;
+                continue;
             }
             for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
-        };
-        add(w0, 0, early);
-        // A w1 tap at base + t + 1 was carried above when it fell at or before `first`.
-        add(w1, 1, std::max<std::int64_t>(0, first - base));
+        }
+        if (carry)
+            for (int c = 0; c < 3; ++c) out[std::size_t(tap.first) * 3 + std::size_t(c)] += (tint ? tint[c] : 1.0f) * carried[c];
     }
 }
 

@@ -14,46 +14,75 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <tuple>
 
 namespace tprf {
 namespace {
 
-// Patches whose centroids lie near each point: one search wide enough for the largest kernel; each
-// point's own support (twice its patch's circumradius) is applied by kernel_weights.
-Neighbours find_neighbours(const SensingPoints& points, const PatchSet& patches, const std::vector<double>& radius,
+// Interpolation candidates of every patch that holds a sensing point: the patches of the same surface
+// (one object, normals within about 45 degrees) whose centroids lie within three of its circumradii.
+// A point on patch p lies within one circumradius of its centroid and its kernel reaches two more
+// (kernel_weights), so the candidates hold every patch a point's kernel can weigh. One search per
+// patch, not per point.
+struct Candidates {
+    std::vector<std::uint32_t> row;  // patches + 1 offsets into `patch`
+    std::vector<std::uint32_t> patch;
+};
+
+Candidates find_candidates(const SensingPoints& points, const PatchSet& patches, const std::vector<double>& radius,
                            int threads) {
-    double support = 0.0;
-    std::vector<Vec3> queries(points.points.size());
-    for (std::size_t h = 0; h < queries.size(); ++h) {
-        queries[h] = points.points[h].point;
-        support = std::max(support, 2.0 * radius[points.points[h].patch]);
+    std::vector<char> used(patches.size(), 0);
+    for (const SensingPoint& sp : points.points) used[sp.patch] = 1;
+    std::vector<std::uint32_t> which;
+    std::vector<Vec3> queries;
+    double reach = 0.0;
+    for (std::size_t p = 0; p < patches.size(); ++p)
+        if (used[p]) {
+            which.push_back(std::uint32_t(p));
+            queries.push_back(patches.centroid[p]);
+            reach = std::max(reach, 3.0 * radius[p]);
+        }
+    const Neighbours near = radius_search(patches.centroid, queries, reach, threads);
+    std::vector<std::vector<std::uint32_t>> lists(patches.size());
+    for (std::size_t k = 0; k < which.size(); ++k) {
+        const std::uint32_t p = which[k];
+        const double r2 = 9.0 * radius[p] * radius[p];
+        for (std::size_t h = 0; h < near.index[k].size(); ++h) {
+            const std::size_t q = near.index[k][h];
+            if (near.distance2[k][h] < r2 && patches.object[q] == patches.object[p] &&
+                patches.normal[q].dot(patches.normal[p]) >= 0.7)
+                lists[p].push_back(std::uint32_t(q));
+        }
+        std::sort(lists[p].begin(), lists[p].end());  // FLANN's order is its own
     }
-    return radius_search(patches.centroid, queries, support, threads);
+    Candidates c;
+    c.row.assign(patches.size() + 1, 0);
+    for (std::size_t p = 0; p < patches.size(); ++p) c.row[p + 1] = c.row[p] + std::uint32_t(lists[p].size());
+    c.patch.reserve(c.row.back());
+    for (const auto& l : lists) c.patch.insert(c.patch.end(), l.begin(), l.end());
+    return c;
 }
 
-// Interpolation weights at a point on patch p: a smooth compact kernel (1 - (d/support)^2)^2 over the
-// patches of the same surface, so that the profile varies continuously across patch borders and no
-// faceting shows. Normalised; the patch alone when no neighbour is inside the support.
-std::vector<std::pair<std::uint32_t, double>> kernel_weights(const PatchSet& patches, std::uint32_t p, double radius,
-                                                             const std::vector<std::size_t>& near,
-                                                             const std::vector<double>& near_d2) {
-    const double support = 2.0 * radius;
-    const Vec3& np = patches.normal[p];
-    std::vector<std::pair<std::uint32_t, double>> weights;
+// Interpolation weights at point x on patch p: a smooth compact kernel (1 - (d/support)^2)^2, support
+// two circumradii of p, over p's candidates, so that the profile varies continuously across patch
+// borders and no faceting shows. Normalised; the patch alone when no candidate is inside the support.
+void kernel_weights(const PatchSet& patches, std::uint32_t p, const Vec3& x, double radius, const Candidates& c,
+                    std::vector<std::pair<std::uint32_t, double>>& weights) {
+    const double support2 = 4.0 * radius * radius;
+    weights.clear();
     double total = 0.0;
-    for (std::size_t k = 0; k < near.size(); ++k) {
-        const std::size_t q = near[k];
-        if (patches.object[q] != patches.object[p] || patches.normal[q].dot(np) < 0.7) continue;
-        const double u = near_d2[k] / (support * support);
+    for (std::uint32_t k = c.row[p]; k < c.row[p + 1]; ++k) {
+        const std::uint32_t q = c.patch[k];
+        const double u = (patches.centroid[q] - x).squaredNorm() / support2;
         if (u >= 1.0) continue;
         const double w = (1 - u) * (1 - u);
-        weights.emplace_back(std::uint32_t(q), w);
+        weights.emplace_back(q, w);
         total += w;
     }
-    if (total <= 0.0) return {{p, 1.0}};
+    if (total <= 0.0) {
+        weights.assign(1, {p, 1.0});
+        return;
+    }
     for (auto& w : weights) w.second /= total;
-    return weights;
 }
 
 // The sensing point's cell (zero for a point).
@@ -302,7 +331,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
     const std::size_t n = patches.size();
     std::vector<double> radius(n);
     for (std::size_t i = 0; i < n; ++i) radius[i] = circumradius(patches, i);
-    const Neighbours near = find_neighbours(points, patches, radius, options.threads);
+    const Candidates candidates = find_candidates(points, patches, radius, options.threads);
     if (options.progress) options.progress("camera", 0.6);
 
     // Runs of points with one output (a pixel's samples), gathered together so that their arrivals are
@@ -334,16 +363,14 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             const SensingPoint& sp = pts[h];
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
             const double share = weight * double(sp.throughput);
-            for (const auto& [q, w] : kernel_weights(patches, sp.patch, radius[sp.patch], near.index[h], near.distance2[h]))
-                run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
+            thread_local std::vector<std::pair<std::uint32_t, double>> weights;
+            kernel_weights(patches, sp.patch, sp.point, radius[sp.patch], candidates, weights);
+            for (const auto& [q, w] : weights) run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
             const std::size_t first = direct.size();
             direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options, pixel_done, direct);
             if (sp.tint != 0)
                 for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tint_of(sp);
         }
-        std::sort(run_taps[k].begin(), run_taps[k].end(), [](const PixelTap& a, const PixelTap& b) {
-            return std::tie(a.patch, a.leg, a.tint, a.weight) < std::tie(b.patch, b.leg, b.tint, b.weight);
-        });
         order_arrivals(direct, options.time);
         direct.shrink_to_fit();
     });

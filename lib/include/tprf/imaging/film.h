@@ -17,22 +17,26 @@ struct Gather;
 struct Illumination;
 struct SolveBlock;
 
-/// A gather's taps as the films apply them: each split between two bins as the delay mode says, and a
-/// pixel's taps merged wherever they share a patch, a lag and a first bin (a pixel's samples mostly
-/// do), so that each profile is read a few times per pixel, not once per sample and neighbour. The
-/// films' work is linear in the two weights: the merge changes only float rounding.
+/// A gather's taps as the films apply them: one short delay kernel per patch (and tint) a pixel
+/// reads. Each gather tap is split between two bins as the delay mode says (or put in the nearest),
+/// and a pixel's taps of one patch are summed into one kernel over the bins their legs span (a
+/// pixel's samples' legs differ by a few bins at most), so that each profile is read once per pixel
+/// and each of its bins costs one multiply-add per bin of the kernel, not two per sample and
+/// neighbour. The films' work is linear in the weights: the merge changes only float rounding.
 struct FilmTaps {
-    /// out[t + lag] += w0 B[t] and out[t + lag + 1] += w1 B[t]; light before bin `first` is moved to it
-    /// (the earliest bound of its samples).
+    /// out[t + lag + k] += weights[offset + k] B[t] for k < length; light that would reach a bin
+    /// before `first` is moved to it (the earliest bound of the pixel's samples that read the patch).
     struct Tap {
         std::uint32_t patch;
-        std::int32_t lag;    ///< whole bins of the leg
-        std::int64_t first;  ///< the earliest bin any of its light may reach
-        float w0, w1;
-        std::uint16_t tint;  ///< index into `tints` (0: grey): channel c's weights are w0, w1 times tints[tint][c]
+        std::int32_t lag;      ///< whole bins of the shortest leg
+        std::int64_t first;    ///< the earliest bin any of its light may reach
+        std::uint64_t offset;  ///< of its kernel in `weights`
+        std::uint32_t length;  ///< bins of the kernel (>= 1)
+        std::uint16_t tint;    ///< index into `tints` (0: grey): channel c's weights times tints[tint][c]
     };
     std::vector<std::uint64_t> row;  ///< pixels + 1 offsets into `taps`
     std::vector<Tap> taps;
+    std::vector<float> weights;      ///< the taps' kernels, one after another
     std::vector<std::array<float, 3>> tints;  ///< Gather::tints
 };
 
@@ -58,7 +62,7 @@ public:
     /// Adds the exact direct-light arrivals (once).
     void add_direct();
     /// Adds one solved block's light of later bounces: each tap reads its patch's profile (less the
-    /// pulses the camera evaluates exactly) and shifts it by the camera leg, split between two bins.
+    /// pulses the camera evaluates exactly) and spreads it over the pixel's legs (its kernel).
     void add_block(const SolveBlock& block);
 
 private:
