@@ -92,6 +92,7 @@ void BM_FilmBlock(benchmark::State& state) {
     block.radiosity = radiosity.data();
     for (auto _ : state) {
         film.add_block(block);
+        film.finish();
         benchmark::DoNotOptimize(cube.data());
     }
     state.counters["taps"] = double(gather.taps.size());

@@ -836,6 +836,80 @@ TEST_F(RenderOutputs, AreaLitFloorMatchesTheFormFactorToTheEmitter) {
     MEASURED("area-lit floor: worst pixel %.2e of albedo L_e F\n", worst);
 }
 
+TEST_F(RenderOutputs, APixelInAPenumbraTakesTheVisiblePartOfTheEmitterThroughItsSamplesSharedRays) {
+    // A 0.5 m square emitter (L_e = 2) facing down at z = 1 over a floor of albedo 0.7, and an opaque
+    // plate (albedo 0) at z = 0.5 over x < 0. The segment from a floor point (px, py, 0) to an emitter
+    // point (ex, ey, 1) crosses z = 0.5 at x = (px + ex) / 2, so the plate hides exactly the emitter's
+    // part with ex < -px: what the point sees is a rectangle, and Howell's B-3 gives its form factor in
+    // closed form. Nothing else lights the floor (plate and emitter reflect nothing, the floor does not
+    // see itself). The camera, below the plate, sees the floor across the penumbra (-0.25 < px < 0.25)
+    // and into the umbra. Each floor pixel's samples lie on one plane, so the gather shares the
+    // shadow rays of the pixel's samples (gather.cpp, penumbra_open); its radiance must be the pixel
+    // mean of albedo L_e F_visible, measured here over 8 x 8 points of the pixel.
+    const double rho = 0.7, Le = 2.0;
+    const int N = 40;
+    const json scene = {
+        {"time", {{"bins", 300}, {"bin_width", 0.01}}},
+        {"camera", {{"position", {1.1, 0.05, 0.45}}, {"look_at", {0, 0, 0}}, {"up", {0, 0, 1}}, {"fov", 45},
+                    {"width", N}, {"height", N}, {"spp", 16}}},
+        {"objects",
+         {{{"type", "rectangle"}, {"origin", {-1.5, -1.5, 0}}, {"u", {3, 0, 0}}, {"v", {0, 3, 0}}, {"albedo", rho}},
+          {{"type", "rectangle"}, {"origin", {-0.25, -0.25, 1}}, {"u", {0, 0.5, 0}}, {"v", {0.5, 0, 0}},
+           {"albedo", 0.0}, {"emission", Le}},
+          {{"type", "rectangle"}, {"origin", {-2, -2, 0.5}}, {"u", {2, 0, 0}}, {"v", {0, 4, 0}}, {"albedo", 0.0},
+           {"two_sided", true}}}},
+        {"patches", {{"max_edge", 0.1}}}};
+    const fs::path out = render("penumbra", scene);
+    ASSERT_FALSE(out.empty());
+    const Image steady = read_image(out / "steady.npy");
+    const Pinhole cam(scene["camera"]);
+    const auto F = [](double px, double py, bool shadowed) {
+        const double from = shadowed ? std::max(-0.25, -px) : -0.25;
+        return from < 0.25 ? tprf::test::ff_point_to_parallel_rectangle(px, py, from, 0.25, -0.25, 0.25, 1.0) : 0.0;
+    };
+    int penumbra = 0, umbra = 0;
+    double worst = 0.0, worst_unshadowed = 0.0, got_sum = 0.0, visible_sum = 0.0;
+    for (int r = 0; r < N; ++r)
+        for (int c = 0; c < N; ++c) {
+            double visible = 0.0, full = 0.0;
+            bool floor = true;
+            for (int k = 0; k < 64 && floor; ++k) {
+                const Vec3 d = cam.ray(c + (k % 8 + 0.5) / 8, r + (k / 8 + 0.5) / 8);
+                const Vec3 x = cam.position + to_plane(cam.position, d, Vec3::Zero(), Vec3::UnitZ()) * d;
+                // Only pixels wholly on the floor, away from its edges.
+                floor = d.z() < 0.0 && std::abs(x.x()) < 1.2 && std::abs(x.y()) < 1.2;
+                visible += F(x.x(), x.y(), true) / 64;
+                full += F(x.x(), x.y(), false) / 64;
+            }
+            if (!floor) continue;
+            const double got = steady.at(r, c) / (rho * Le);
+            if (visible == 0.0) {
+                // No direct light; what is left is the rounding of the patches' profiles less their
+                // exact pulses (measured 5e-20).
+                EXPECT_LT(steady.at(r, c), 1e-9 * rho * Le) << "umbra pixel " << r << "," << c;
+                ++umbra;
+                continue;
+            }
+            if (visible > 0.999 * full) continue;  // wholly lit: AreaLitFloorMatchesTheFormFactorToTheEmitter
+            ++penumbra;
+            got_sum += got;
+            visible_sum += visible;
+            // Errors relative to the unshadowed light, so that a sliver of penumbra is not a large ratio.
+            // The shared rays cover the source with a grid of at least 16 x 16 cells, one ray each, and
+            // a straight shadow edge crosses one column of it: up to half a column's light, 1/32.
+            worst = std::max(worst, std::abs(got - visible) / full);
+            worst_unshadowed = std::max(worst_unshadowed, std::abs(got - full) / full);
+            EXPECT_NEAR(got, visible, full / 32) << "penumbra pixel " << r << "," << c;
+        }
+    MEASURED("penumbra pixels: %d (%d umbra), worst error / unshadowed light %.2e (as if unshadowed: %.2e); "
+             "all penumbra pixels' light / exact - 1: %.2e\n",
+             penumbra, umbra, worst, worst_unshadowed, got_sum / visible_sum - 1);
+    EXPECT_NEAR(got_sum / visible_sum, 1.0, 0.005);  // the cells' errors do not add up
+    EXPECT_GT(penumbra, 200);
+    EXPECT_GT(umbra, 50);
+    EXPECT_GT(worst_unshadowed, 0.5);  // the shadow matters: the test can fail
+}
+
 TEST_F(RenderOutputs, CornellBoxConservesEnergyAndLightsTheBackWallFirstWhereGeometrySays) {
     // meshes/cornell-box.json with a longer window: 2048 bins of 1 cm (20.48 m instead of 5.12 m, so
     // that the window holds all the light), at 64 x 64 pixels (the cube is 100 MB) and block.obj by its

@@ -8,11 +8,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <tuple>
 
 namespace tprf {
 
 namespace {
+
+// The film's rows are padded for kernels of up to this many bins plus one (longer ones, rare, take the
+// general path); kSlack floats past the last row let the fused loop read a full lane group.
+constexpr std::int64_t kMaxFusedPad = 31;
+constexpr std::size_t kSlack = 8;
 
 // One gather tap's share of a bin: out[t + lag] += weight B[t].
 struct BinShare {
@@ -25,7 +31,8 @@ struct BinShare {
 
 // A pixel's shares as kernels, one per patch and tint, appended to `taps` and `weights`: summed in
 // the order of the sort (the gather's, then the key's), so that the sums do not depend on threads.
-void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& taps, std::vector<float>& weights) {
+void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& taps, std::vector<float>& weights,
+                  std::uint32_t& longest) {
     std::stable_sort(shares.begin(), shares.end(), [](const BinShare& a, const BinShare& b) {
         return std::tie(a.patch, a.tint, a.lag) < std::tie(b.patch, b.tint, b.lag);
     });
@@ -37,6 +44,7 @@ void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& tap
         const std::int32_t lag = shares[s].lag;
         const std::uint32_t length = std::uint32_t(shares[e - 1].lag - lag + 1);
         taps.push_back({shares[s].patch, lag, first, weights.size(), length, shares[s].tint});
+        longest = std::max(longest, length);
         weights.resize(weights.size() + length, 0.0f);
         float* w = weights.data() + taps.back().offset;
         for (; s < e; ++s) w[shares[s].lag - lag] += shares[s].weight;
@@ -50,6 +58,7 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
     const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
     std::vector<std::vector<FilmTaps::Tap>> per_pixel(pixels);
     std::vector<std::vector<float>> per_pixel_weights(pixels);
+    std::vector<std::uint32_t> per_pixel_longest(pixels, 1);
     parallel_for(pixels, {thread_count(threads), 256, true}, [&](std::size_t px) {
         thread_local std::vector<BinShare> shares;
         shares.clear();
@@ -66,7 +75,7 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
                 shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * f)});
             }
         }
-        merge_shares(shares, per_pixel[px], per_pixel_weights[px]);
+        merge_shares(shares, per_pixel[px], per_pixel_weights[px], per_pixel_longest[px]);
     });
     FilmTaps merged;
     for (const Rgb& t : gather.tints) merged.tints.push_back({float(t[0]), float(t[1]), float(t[2])});
@@ -75,6 +84,7 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
     for (std::size_t px = 0; px < pixels; ++px) {
         merged.row[px + 1] = merged.row[px] + per_pixel[px].size();
         weights += per_pixel_weights[px].size();
+        merged.longest = std::max(merged.longest, per_pixel_longest[px]);
     }
     merged.taps.reserve(merged.row[pixels]);
     merged.weights.reserve(weights);
@@ -95,7 +105,8 @@ TransientFilm::TransientFilm(const Gather& gather, const Illumination& illuminat
                              std::shared_ptr<const FilmTaps> taps)
     : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(order),
       m_last_is_tail(last_is_tail), m_threads(thread_count(threads)),
-      m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))) {}
+      m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))),
+      m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, kMaxFusedPad)) {}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -114,8 +125,8 @@ void TransientFilm::add_direct() {
     }
 }
 
-// The block's profiles less the pulses of point and area sources, which the gather evaluates exactly at
-// each sensing point.
+// Keeps the block's profiles less the pulses of point and area sources, which the gather evaluates
+// exactly at each sensing point, after the kept ones.
 void TransientFilm::copy_indirect(const SolveBlock& block) {
     const std::size_t n = block.patches, bins = std::size_t(block.bins);
     const float* source = block.radiosity;
@@ -123,7 +134,20 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         TPRF_CHECK_LT(m_order, block.terms);
         source = block.per_order + std::size_t(m_order) * n * bins * 3;
     }
-    m_indirect.assign(source, source + n * bins * 3);
+    const std::size_t pad = std::size_t(m_pad);
+    if (m_capacity == 0) {  // as many blocks as kFilmBufferBytes hold, at least one
+        const std::size_t fit = kFilmBufferBytes / std::max<std::size_t>(1, n * 3 * sizeof(float));
+        m_capacity = std::max(bins, std::min(fit, kFilmBufferBins) / bins * bins);
+    }
+    const std::size_t stride = (m_capacity + 2 * pad) * 3;
+    if (m_kept == 0) {
+        m_indirect.assign(n * stride + kSlack, 0.0f);
+        m_first_bin = block.first_bin;
+    }
+    TPRF_CHECK_EQ(block.first_bin, m_first_bin + int(m_kept));
+    TPRF_CHECK_LE(m_kept + bins, m_capacity);
+    for (std::size_t i = 0; i < n; ++i)
+        std::copy_n(source + i * bins * 3, bins * 3, m_indirect.data() + i * stride + (pad + m_kept) * 3);
     const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
     for (std::size_t i = 0; i < n; ++i)
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
@@ -131,58 +155,122 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
             if (!p.exact_at_sensors() || !takes_order(p.order)) continue;
             const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
-            float* v = m_indirect.data() + (i * bins + std::size_t(b)) * 3;
+            float* v = m_indirect.data() + i * stride + (pad + m_kept + std::size_t(b)) * 3;
             // What is left is the light of other orders in that bin; float cancellation must not
             // turn an exact zero into a small negative radiance.
             for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(p.energy[c]));
         }
+    m_kept += bins;
+}
+
+// One tap over the block, a bin of its kernel at a time: out[base + t + j] += kernel[j] B[t], where
+// `profile` is the patch's row at the block's bin 0 and `out` the pixel's profile. Light the patch
+// average puts ahead of the earliest possible arrival goes to that bin.
+void TransientFilm::add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t n,
+                               float* out) const {
+    const std::int64_t T = m_time.bins;
+    const float* kernel = m_taps->weights.data() + tap.offset;
+    const float* tint = tap.tint != 0 ? m_taps->tints[tap.tint].data() : nullptr;
+    const bool carry = tap.first >= 0 && tap.first < T;
+    float carried[3] = {0, 0, 0};
+    for (std::uint32_t j = 0; j < tap.length; ++j) {
+        const float w = kernel[j];
+        if (w == 0.0f) continue;
+        const std::int64_t shift = base + std::int64_t(j);  // output bin of the block's bin 0
+        const std::int64_t early = std::clamp<std::int64_t>(tap.first - shift, 0, n);
+        if (carry)
+            for (std::int64_t t = 0; t < early; ++t)
+                for (int c = 0; c < 3; ++c) carried[c] += w * profile[std::size_t(t) * 3 + std::size_t(c)];
+        // The rest: a contiguous multiply-add over bins, clipped to the window [0, T).
+        const std::int64_t lo = std::max<std::int64_t>(early, -shift), hi = std::min<std::int64_t>(n, T - shift);
+        if (lo >= hi) continue;
+        float* __restrict o = out + std::size_t(shift + lo) * 3;
+        const float* __restrict in = profile + std::size_t(lo) * 3;
+        const std::size_t len = std::size_t(hi - lo) * 3;
+        if (tint) {  // through tinted mirrors: a weight per channel
+            const float wc[3] = {w * tint[0], w * tint[1], w * tint[2]};
+            for (std::size_t e = 0; e < len; e += 3)
+                for (int c = 0; c < 3; ++c) o[e + std::size_t(c)] += wc[c] * in[e + std::size_t(c)];
+            continue;
+        }
+        for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
+    }
+    if (carry)
+        for (int c = 0; c < 3; ++c) out[std::size_t(tap.first) * 3 + std::size_t(c)] += (tint ? tint[c] : 1.0f) * carried[c];
+}
+
+// add_kernel for a grey tap whose kernel fits the rows' zero padding: each output bin u of the block's
+// reach [base, base + n + length - 1) takes sum_j kernel[j] B[u - base - j] in one pass (the padding
+// holds the zeros beyond the block), so each output is read and written once, not once per bin of the
+// kernel. The same sums as add_kernel but for float rounding.
+void TransientFilm::add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t n,
+                              float* out) const {
+    const std::int64_t T = m_time.bins, length = std::int64_t(tap.length);
+    const float* kernel = m_taps->weights.data() + tap.offset;
+    // profile[e - 3 base - 3j] = B[u - base - j] for e = 3u + c (zero outside the block, in the padding).
+    const std::int64_t shift = 3 * base;
+    const auto sum = [&](std::int64_t e) {
+        float s = 0.0f;
+        for (std::int64_t j = 0; j < length; ++j) s += kernel[j] * profile[e - shift - 3 * j];
+        return s;
+    };
+    const std::int64_t reach_lo = base, reach_hi = base + n + length - 1;
+    if (tap.first >= 0 && tap.first < T && tap.first > reach_lo) {  // light before the earliest bin
+        float carried[3] = {0, 0, 0};
+        for (std::int64_t u = reach_lo; u < std::min(tap.first, reach_hi); ++u)
+            for (int c = 0; c < 3; ++c) carried[c] += sum(3 * u + c);
+        for (int c = 0; c < 3; ++c) out[std::size_t(tap.first) * 3 + std::size_t(c)] += carried[c];
+    }
+    const std::int64_t e0 = 3 * std::max({reach_lo, tap.first, std::int64_t(0)}), e1 = 3 * std::min(reach_hi, T);
+    // Eight outputs at a time (GCC's and Clang's vector extension: one AVX register under -march=x86-64-v3).
+    typedef float Lanes __attribute__((vector_size(32)));
+    constexpr std::int64_t kLanes = 8;
+    std::int64_t e = e0;
+    for (; e + kLanes <= e1; e += kLanes) {
+        Lanes acc = {}, odd = {}, x, y;  // two sums: half the chain of dependent multiply-adds
+        std::int64_t j = 0;
+        for (; j + 1 < length; j += 2) {
+            std::memcpy(&x, profile + (e - shift - 3 * j), sizeof x);
+            std::memcpy(&y, profile + (e - shift - 3 * j - 3), sizeof y);
+            acc += kernel[j] * x;
+            odd += kernel[j + 1] * y;
+        }
+        if (j < length) {
+            std::memcpy(&x, profile + (e - shift - 3 * j), sizeof x);
+            acc += kernel[j] * x;
+        }
+        std::memcpy(&x, out + e, sizeof x);
+        x += acc + odd;
+        std::memcpy(out + e, &x, sizeof x);
+    }
+    for (; e < e1; ++e) out[e] += sum(e);
 }
 
 // One pixel's taps over the block: each reads its patch's profile and spreads it over its kernel
 // (the pixel's legs to that patch, split between bins).
-void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins) {
-    const std::int64_t T = m_time.bins, n = std::int64_t(bins);
-    float* out = m_cube + px * std::size_t(T) * 3;
+void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins, std::size_t stride) {
+    float* out = m_cube + px * std::size_t(m_time.bins) * 3;
     for (std::uint64_t k = m_taps->row[px]; k < m_taps->row[px + 1]; ++k) {
         const FilmTaps::Tap& tap = m_taps->taps[k];
-        const float* kernel = m_taps->weights.data() + tap.offset;
-        const float* tint = tap.tint != 0 ? m_taps->tints[tap.tint].data() : nullptr;
+        const float* profile = m_indirect.data() + std::size_t(tap.patch) * stride + std::size_t(m_pad) * 3;
         const std::int64_t base = first_bin + tap.lag;  // output bin of the block's bin 0 (kernel bin 0)
-        const float* b = m_indirect.data() + std::size_t(tap.patch) * bins * 3;
-        const bool carry = tap.first >= 0 && tap.first < T;
-        float carried[3] = {0, 0, 0};
-        for (std::uint32_t j = 0; j < tap.length; ++j) {
-            const float w = kernel[j];
-            if (w == 0.0f) continue;
-            const std::int64_t shift = base + std::int64_t(j);  // output bin of the block's bin 0
-            // Light the patch average puts ahead of the earliest possible arrival goes to that bin.
-            const std::int64_t early = std::clamp<std::int64_t>(tap.first - shift, 0, n);
-            if (carry)
-                for (std::int64_t t = 0; t < early; ++t)
-                    for (int c = 0; c < 3; ++c) carried[c] += w * b[std::size_t(t) * 3 + std::size_t(c)];
-            // The rest: a contiguous multiply-add over bins, clipped to the window [0, T).
-            const std::int64_t lo = std::max<std::int64_t>(early, -shift), hi = std::min<std::int64_t>(n, T - shift);
-            if (lo >= hi) continue;
-            float* __restrict o = out + std::size_t(shift + lo) * 3;
-            const float* __restrict in = b + std::size_t(lo) * 3;
-            const std::size_t len = std::size_t(hi - lo) * 3;
-            if (tint) {  // through tinted mirrors: a weight per channel
-                const float wc[3] = {w * tint[0], w * tint[1], w * tint[2]};
-                for (std::size_t e = 0; e < len; e += 3)
-                    for (int c = 0; c < 3; ++c) o[e + std::size_t(c)] += wc[c] * in[e + std::size_t(c)];
-                continue;
-            }
-            for (std::size_t e = 0; e < len; ++e) o[e] += w * in[e];
-        }
-        if (carry)
-            for (int c = 0; c < 3; ++c) out[std::size_t(tap.first) * 3 + std::size_t(c)] += (tint ? tint[c] : 1.0f) * carried[c];
+        if (tap.tint == 0 && std::int64_t(tap.length) <= m_pad + 1)
+            add_fused(tap, profile, base, std::int64_t(bins), out);
+        else
+            add_kernel(tap, profile, base, std::int64_t(bins), out);
     }
 }
 
 void TransientFilm::add_block(const SolveBlock& block) {
     copy_indirect(block);
-    const std::size_t pixels = m_gather.row.size() - 1, bins = std::size_t(block.bins);
-    parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) { add_taps(px, block.first_bin, bins); });
+    if (m_kept + std::size_t(block.bins) > m_capacity) finish();  // the next block would not fit
+}
+
+void TransientFilm::finish() {
+    if (m_kept == 0) return;
+    const std::size_t pixels = m_gather.row.size() - 1, stride = (m_capacity + 2 * std::size_t(m_pad)) * 3;
+    parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) { add_taps(px, m_first_bin, m_kept, stride); });
+    m_kept = 0;
 }
 
 std::vector<float> steady_image(const Gather& gather, const Illumination& illumination, const std::vector<Rgb>& steady) {

@@ -131,78 +131,151 @@ void add_over_cell(std::uint32_t output, double path, double a, double b, double
                      [&](double at, double share) { out.push_back({output, at, radiance * share, order}); });
 }
 
-// A pixel's samples, when they can share the timing of an area source's light: all of them (spp points,
-// each its own sample, with its cell), in the open (no mirror or glass on the way) and on one flat
-// surface (one object, one plane).
-bool one_flat_pixel(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches) {
-    if (count < 2 || double(count) != std::round(1.0 / weight)) return false;
-    if (pts[0].du.isZero() && pts[0].dv.isZero()) return false;  // point samples: each at its own paths
-    const Vec3& n = patches.normal[pts[0].patch];
-    const double reach = 1e-6 * (1.0 + pts[0].point.norm());
+// A pixel's samples in groups that can share the timing of an area source's light: each group the
+// samples (each with its cell) in the open (no mirror or glass on the way) on one flat surface (one
+// object, one plane). A pixel on one wall is one group; one across a crease or a silhouette, one per
+// surface. Point samples, and samples behind mirrors or glass, are in no group (group -1).
+void flat_groups(const SensingPoint* pts, std::size_t count, const PatchSet& patches, std::vector<int>& group,
+                 int& groups) {
+    group.assign(count, -1);
+    groups = 0;
+    thread_local std::vector<std::size_t> first;  // each group's first sample
+    first.clear();
     for (std::size_t h = 0; h < count; ++h) {
         const SensingPoint& sp = pts[h];
-        if (sp.throughput != 1.0f || sp.tint != 0 || patches.object[sp.patch] != patches.object[pts[0].patch] ||
-            patches.normal[sp.patch].dot(n) < 1.0 - 1e-12 || std::abs(n.dot(sp.point - pts[0].point)) > reach)
-            return false;
-        if (h > 0 && sp.output != pts[0].output) return false;
+        if (sp.throughput != 1.0f || sp.tint != 0 || (sp.du.isZero() && sp.dv.isZero())) continue;
+        const Vec3& n = patches.normal[sp.patch];
+        const double reach = 1e-6 * (1.0 + sp.point.norm());
+        for (std::size_t g = 0; g < first.size() && group[h] < 0; ++g) {
+            const SensingPoint& q = pts[first[g]];
+            if (patches.object[q.patch] == patches.object[sp.patch] && patches.normal[q.patch].dot(n) >= 1.0 - 1e-12 &&
+                std::abs(n.dot(sp.point - q.point)) <= reach)
+                group[h] = int(g);
+        }
+        if (group[h] < 0) {
+            group[h] = int(first.size());
+            first.push_back(h);
+        }
     }
-    return true;
+    groups = int(first.size());
 }
 
-// Direct light of area source a at a pixel's samples that one_flat_pixel admits, when the shared shadow
-// test finds the source wholly open or wholly hidden: from the pixel's four outermost samples (along its
-// two axes), a ray to the centre of each cell of the coarse shadow grid that faces it. Open: each
-// sample's radiance is albedo L_e F(x) with its own exact F, and the light of all of them is timed
-// together, as the pixel's centre sees the source's cells, spread over the paths of the whole pixel
-// (its samples' cells side by side: sqrt(spp) times a sample's half-axes). Hidden: no light. False
-// (nothing added) when the rays disagree or glass dims one: the samples are then gathered one by one.
-bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
-                         const AreaSource& a, const Visibility& vis, const GatherOptions& options,
-                         std::vector<DirectArrival>& out) {
-    Vec3 centre = Vec3::Zero(), du = Vec3::Zero(), dv = Vec3::Zero();
-    double leg = 0.0, leg_du = 0.0, leg_dv = 0.0;
+// A group of a pixel's samples as one: their centre, mean leg and footprint, and its four outermost
+// samples (along +-u +-v). The footprint is the samples' cells side by side: along each of the cells'
+// axes, as many cells as the samples' extent spans (8 x 8 for a whole pixel at spp 64, 8 x 3 for the
+// part of it on one side of a crease).
+struct PixelFrame {
+    Vec3 centre = Vec3::Zero();
+    double leg = 0.0;
+    Footprint footprint;
+    std::size_t outer[4] = {0, 0, 0, 0};
+};
+
+PixelFrame pixel_frame(const SensingPoint* pts, std::size_t count) {
+    PixelFrame p;
+    Vec3 du = Vec3::Zero(), dv = Vec3::Zero();
+    double leg_du = 0.0, leg_dv = 0.0;
     for (std::size_t h = 0; h < count; ++h) {
-        centre += pts[h].point;
-        leg += pts[h].leg;
+        p.centre += pts[h].point;
+        p.leg += pts[h].leg;
         du += pts[h].du.cast<double>();
         dv += pts[h].dv.cast<double>();
         leg_du += pts[h].leg_du;
         leg_dv += pts[h].leg_dv;
     }
-    const double mean = 1.0 / double(count), side = std::sqrt(double(count));
-    centre *= mean;
-    leg *= mean;
-    // The four samples farthest out along +-u +-v.
-    const Vec3 u = du.normalized(), v = dv.normalized();
-    std::size_t outer[4] = {0, 0, 0, 0};
-    double best[4] = {-1e300, -1e300, -1e300, -1e300};
+    const double mean = 1.0 / double(count);
+    p.centre *= mean;
+    p.leg *= mean;
+    du *= mean;
+    dv *= mean;
+    // Each sample's offset from the centre as a du + b dv (the cells' axes may be oblique on the surface).
+    const double uu = du.squaredNorm(), uv = du.dot(dv), vv = dv.squaredNorm(), det = uu * vv - uv * uv;
+    double best[4] = {-1e300, -1e300, -1e300, -1e300}, lo_u = 0, hi_u = 0, lo_v = 0, hi_v = 0;
     for (std::size_t h = 0; h < count; ++h) {
-        const Vec3 r = pts[h].point - centre;
-        const double x = r.dot(u), y = r.dot(v);
+        const Vec3 r = pts[h].point - p.centre;
+        const double ru = r.dot(du), rv = r.dot(dv);
+        const double x = det > 0.0 ? (vv * ru - uv * rv) / det : 0.0, y = det > 0.0 ? (uu * rv - uv * ru) / det : 0.0;
+        lo_u = std::min(lo_u, x);
+        hi_u = std::max(hi_u, x);
+        lo_v = std::min(lo_v, y);
+        hi_v = std::max(hi_v, y);
         const double score[4] = {x + y, x - y, -x + y, -x - y};
         for (int k = 0; k < 4; ++k)
             if (score[k] > best[k]) {
                 best[k] = score[k];
-                outer[k] = h;
+                p.outer[k] = h;
             }
     }
-    const Vec3& n = patches.normal[pts[0].patch];
-    const AreaSampling probe = area_sampling(a, centre, 0.0, 0.0, options.emitter_rays, options.penumbra_rays);
-    const int g = probe.shadow;
+    // Cells along each axis: the extent in cells (two half-axes each), plus the one each end sample is in.
+    const double nu = std::round(0.5 * (hi_u - lo_u)) + 1.0, nv = std::round(0.5 * (hi_v - lo_v)) + 1.0;
+    p.footprint = {nu * du, nv * dv, p.leg, nu * mean * leg_du, nv * mean * leg_dv};
+    return p;
+}
+
+enum class Shadow { open, hidden, penumbra, dimmed };
+
+// The shared shadow test: from the pixel's four outermost samples, a ray to the centre of each cell of
+// the coarse shadow grid that faces it, and to the source's rim (rim_probes).
+Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n, const AreaSource& a,
+                    const Visibility& vis, const GatherOptions& options) {
+    const int g = area_sampling(a, p.centre, 0.0, 0.0, options.emitter_rays, options.penumbra_rays).shadow;
+    thread_local std::vector<Vec3> probes;
+    probes.resize(std::size_t(g * g) + 8);
+    int count = 0;
+    for (int c = 0; c < g * g; ++c) probes[std::size_t(count++)] = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
+    count += rim_probes(a, probes.data() + count);
     const double lift = vis.epsilon();
     bool open = false, blocked = false;
-    for (const std::size_t h : outer) {
+    for (const std::size_t h : p.outer) {
         const Vec3& x = pts[h].point;
-        for (int c = 0; c < g * g; ++c) {
-            const Vec3 y = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
+        for (int c = 0; c < count; ++c) {
+            const Vec3& y = probes[std::size_t(c)];
             if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
             const double passed = vis.passes(a.chain, x + lift * n, y + lift * a.normal);
-            if (passed != 1.0 && passed != 0.0) return false;  // dimmed by glass: each sample alone
+            if (passed != 1.0 && passed != 0.0) return Shadow::dimmed;
             (passed == 1.0 ? open : blocked) = true;
-            if (open && blocked) return false;  // a penumbra
         }
     }
-    if (blocked) return true;  // wholly in its shadow
+    return open && blocked ? Shadow::penumbra : blocked ? Shadow::hidden : Shadow::open;
+}
+
+// The open share of each timing cell of `s` (m x m) as the samples see it: a finer grid of about `rays`
+// cells (r x r in each timing cell), one ray each, from the samples in turn (the golden
+// ratio's sequence spreads them over the pixel) to a jittered point of the cell (the R2 sequence). A
+// timing cell that no ray faces counts as open (its light, if any, is the timing's own affair).
+std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, const Vec3& n, const AreaSource& a,
+                                  const AreaSampling& s, const Visibility& vis, int rays) {
+    const int m = s.timing;
+    const int r = std::max(1, int(std::ceil(std::sqrt(double(std::max(rays, 1))) / m)));
+    const int f = m * r;
+    std::vector<double> passed(std::size_t(m * m), 0.0), facing(std::size_t(m * m), 0.0);
+    const double lift = vis.epsilon(), golden = 0.5 * (std::sqrt(5.0) - 1.0);
+    for (int i = 0; i < f * f; ++i) {
+        const int fu = i % f, fv = i / f;
+        double ju, jv, turn;
+        r2_point(double(i + 1), ju, jv);
+        turn = double(i) * golden;
+        const Vec3& x = pts[std::size_t((turn - std::floor(turn)) * double(count))].point;
+        const Vec3 y = a.point((fu + ju) / f, (fv + jv) / f);
+        if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
+        const std::size_t cell = std::size_t((fv / r) * m + fu / r);
+        facing[cell] += 1.0;
+        passed[cell] += vis.passes(a.chain, x + lift * n, y + lift * a.normal);
+    }
+    for (std::size_t c = 0; c < passed.size(); ++c) passed[c] = facing[c] > 0.0 ? passed[c] / facing[c] : 1.0;
+    return passed;
+}
+
+// The light of area source a at a group of samples (or a quarter of one), timed once: as its centre sees
+// the source's cells, spread over the paths of the group's footprint (pixel_frame). Each sample's
+// radiance is albedo L_e F(x) with its own exact F, times the open share of the source: all of it, or,
+// in a penumbra, each timing cell's open share from `rays` rays of the samples (penumbra_open). False
+// (nothing added) when no cell centre faces a penumbra group's centre.
+bool group_light(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
+                 const AreaSource& a, const Visibility& vis, const GatherOptions& options, int rays, bool penumbra,
+                 std::vector<DirectArrival>& out) {
+    const PixelFrame p = pixel_frame(pts, count);
+    const Vec3& n = patches.normal[pts[0].patch];
     Rgb radiance = Rgb::Zero();
     for (std::size_t h = 0; h < count; ++h) {
         const double ff = point_polygon_form_factor(pts[h].point, n, a.polygon(), a.count, a.normal);
@@ -211,23 +284,87 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
     if (!(radiance > 0.0).any()) return true;
     thread_local std::vector<AreaPair> pairs;
     pairs.clear();
-    const double bin_m = options.time->bin_width_m();
-    AreaSampling sampling = area_sampling(a, centre, bin_m, options.time->start_m() - leg, 0, 0);
-    sampling.footprint = {side * mean * du, side * mean * dv, leg, side * mean * leg_du, side * mean * leg_dv};
-    double total = arrive_area_open(a, centre, n, sampling, pairs);  // the rays above found it open
+    AreaSampling sampling = area_sampling(a, p.centre, options.time->bin_width_m(), options.time->start_m() - p.leg, 0, 0);
+    sampling.footprint = p.footprint;
+    double total = 0.0;
+    if (!penumbra) {
+        total = arrive_area_open(a, p.centre, n, sampling, pairs);  // the shared rays found it open
+    } else {
+        const std::vector<double> open = penumbra_open(pts, count, n, a, sampling, vis, rays);
+        total = arrive_area_shaded(a, p.centre, n, sampling,
+                                   [&](int u, int v) { return open[std::size_t(v * sampling.timing + u)]; }, pairs);
+    }
     if (!(total > 0.0)) {
-        pairs.push_back({(centre - a.centroid).norm(), 1.0});
+        if (penumbra) return false;  // no cell centre faces the group's centre: sample by sample
+        pairs.push_back({(p.centre - a.centroid).norm(), 1.0});
         total = 1.0;
     }
     radiance *= a.radiance / total;
-    for (const AreaPair& q : pairs) out.push_back({pts[0].output, q.path + leg, radiance * q.weight, 1});
+    for (const AreaPair& q : pairs) out.push_back({pts[0].output, q.path + p.leg, radiance * q.weight, 1});
     return true;
+}
+
+// Direct light of area source a at a group of a pixel's samples (flat_groups), timed per group rather
+// than per sample. The shared shadow test (probe_shadow) finds the source wholly open (the group is timed
+// as one), wholly hidden (no light) or a penumbra (each quarter of the group timed as one, with its
+// samples' shared rays). False (nothing added) when glass dims a ray, or no cell faces a quarter's
+// centre: the samples are then gathered one by one.
+bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
+                         const AreaSource& a, const Visibility& vis, const GatherOptions& options,
+                         std::vector<DirectArrival>& out) {
+    const PixelFrame p = pixel_frame(pts, count);
+    const Vec3& n = patches.normal[pts[0].patch];
+    const Shadow shadow = probe_shadow(pts, p, n, a, vis, options);
+    if (shadow == Shadow::dimmed) return false;
+    if (shadow == Shadow::hidden) return true;
+    if (shadow == Shadow::open || count < 8)
+        return group_light(pts, count, weight, patches, a, vis, options, options.penumbra_rays,
+                           shadow == Shadow::penumbra, out);
+    // A penumbra: its light comes from part of the pixel more than from the rest, so each quarter of the
+    // samples (by side of the centre along the footprint's axes) is timed over its own footprint.
+    thread_local std::vector<SensingPoint> quarter[4];
+    for (auto& q : quarter) q.clear();
+    const Vec3 u = p.footprint.du, v = p.footprint.dv;
+    for (std::size_t h = 0; h < count; ++h) {
+        const Vec3 r = pts[h].point - p.centre;
+        quarter[(r.dot(u) < 0.0 ? 0 : 1) + (r.dot(v) < 0.0 ? 0 : 2)].push_back(pts[h]);
+    }
+    const std::size_t first = out.size();
+    for (const auto& q : quarter)
+        if (!q.empty() && !group_light(q.data(), q.size(), weight, patches, a, vis, options, options.penumbra_rays,
+                                       true, out)) {
+            out.resize(first);
+            return false;
+        }
+    return true;
+}
+
+// The area sources' light at each group of two or more of a pixel's samples (flat_groups), where
+// area_pixel_arrivals can share it; done[h * areas + a] marks sample h's light of source a as added.
+void shared_area_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
+                          const LightSources& sources, const Visibility& vis, const GatherOptions& options,
+                          std::vector<char>& done, std::vector<DirectArrival>& out) {
+    thread_local std::vector<int> group;
+    thread_local std::vector<SensingPoint> members;
+    int groups = 0;
+    flat_groups(pts, count, patches, group, groups);
+    const std::size_t areas = sources.areas.size();
+    for (int g = 0; g < groups; ++g) {
+        members.clear();
+        for (std::size_t h = 0; h < count; ++h)
+            if (group[h] == g) members.push_back(pts[h]);
+        if (members.size() < 2) continue;
+        for (std::size_t a = 0; a < areas; ++a)
+            if (area_pixel_arrivals(members.data(), members.size(), weight, patches, sources.areas[a], vis, options, out))
+                for (std::size_t h = 0; h < count; ++h)
+                    if (group[h] == g) done[h * areas + a] = 1;
+    }
 }
 
 // Exact direct light of every point and area source at the sensing point, seen along its leg; a point
 // source's light is spread over the paths of the point's cell.
 void direct_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const LightSources& sources,
-                     const Visibility& vis, const GatherOptions& options, const std::vector<char>& pixel_done,
+                     const Visibility& vis, const GatherOptions& options, const char* area_done,
                      std::vector<DirectArrival>& out) {
     const Rgb& albedo = patches.albedo[sp.patch];
     const Footprint f = footprint_of(sp);
@@ -243,7 +380,7 @@ void direct_arrivals(const SensingPoint& sp, RunSample at, double weight, const 
                       a.reflected(albedo) * (weight / M_PI), source.order, options.time, out);
     }
     for (std::size_t k = 0; k < sources.areas.size(); ++k)
-        if (!pixel_done[k]) area_arrivals(sp, at, weight, patches, sources.areas[k], vis, options, out);
+        if (!area_done[k]) area_arrivals(sp, at, weight, patches, sources.areas[k], vis, options, out);
 }
 
 // One output's arrivals in path order; with a time axis, those that share a bin and an order are summed
@@ -351,14 +488,11 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
     const double weight = points.weight;
     parallel_for(runs, {options.threads, 64, true}, [&](std::size_t k) {
         std::vector<DirectArrival>& direct = run_direct[k];
-        // Area sources whose light this pixel's samples share (area_pixel_arrivals); the others per sample.
-        thread_local std::vector<char> pixel_done;
-        pixel_done.assign(sources.areas.size(), 0);
-        const std::size_t count = run_start[k + 1] - run_start[k];
-        if (options.time && !sources.areas.empty() && one_flat_pixel(&pts[run_start[k]], count, weight, patches))
-            for (std::size_t a = 0; a < sources.areas.size(); ++a)
-                pixel_done[a] = area_pixel_arrivals(&pts[run_start[k]], count, weight, patches, sources.areas[a], vis,
-                                                    options, direct);
+        const std::size_t count = run_start[k + 1] - run_start[k], areas = sources.areas.size();
+        // done[h * areas + a]: sample h's light of area source a was added with its group's.
+        thread_local std::vector<char> done;
+        done.assign(count * areas, 0);
+        if (options.time && areas > 0) shared_area_arrivals(&pts[run_start[k]], count, weight, patches, sources, vis, options, done, direct);
         for (std::size_t h = run_start[k]; h < run_start[k + 1]; ++h) {
             const SensingPoint& sp = pts[h];
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
@@ -367,7 +501,8 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             kernel_weights(patches, sp.patch, sp.point, radius[sp.patch], candidates, weights);
             for (const auto& [q, w] : weights) run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
             const std::size_t first = direct.size();
-            direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options, pixel_done, direct);
+            direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options,
+                            done.data() + (h - run_start[k]) * areas, direct);
             if (sp.tint != 0)
                 for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tint_of(sp);
         }

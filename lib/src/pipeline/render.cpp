@@ -178,6 +178,8 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     report.link_bin_updates = stats.link_bin_updates;
     report.seconds.solve = seconds_since(start) - sink_seconds;
     start = Clock::now();
+    c.film->finish();
+    for (auto& f : c.term_films) f->finish();
     c.film->add_direct();
     for (auto& f : c.term_films) f->add_direct();
     report.seconds.gather += sink_seconds + seconds_since(start);

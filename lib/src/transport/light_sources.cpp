@@ -301,6 +301,18 @@ double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const Are
 
 }  // namespace
 
+int rim_probes(const AreaSource& a, Vec3* out) {
+    const auto inset = [&](const Vec3& p) { return Vec3(a.centroid + (1.0 - 1e-3) * (p - a.centroid)); };
+    int k = 0;
+    for (int c = 0; c < a.count; ++c) {
+        const Vec3& p = a.corners[std::size_t(c)];
+        const Vec3& q = a.corners[std::size_t((c + 1) % a.count)];
+        out[k++] = inset(p);
+        out[k++] = inset(0.5 * (p + q));
+    }
+    return k;
+}
+
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis, const AreaSampling& s,
                    std::vector<AreaPair>& out) {
     const double lift = vis.epsilon();
@@ -325,6 +337,15 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
         coarse_open[std::size_t(c)] = o;
         (o > 0.0 ? any_open : any_blocked) = true;
     }
+    if (any_open != any_blocked) {  // the grid agrees: so must the rim
+        Vec3 rim[8];
+        const int count = rim_probes(a, rim);
+        for (int k = 0; k < count && !(any_open && any_blocked); ++k) {
+            const Vec3 d = rim[k] - x;
+            if (!(n.dot(d) > 0.0) || !(a.normal.dot(d) < 0.0)) continue;
+            (vis.passes(a.chain, x + lift * n, rim[k] + lift * a.normal) > 0.0 ? any_open : any_blocked) = true;
+        }
+    }
     if (any_open && any_blocked)  // a penumbra
         return timing_cells(a, x, n, s, std::max(s.timing, s.penumbra), open_to, out);
     return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int m) {
@@ -338,6 +359,11 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
 double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
                         std::vector<AreaPair>& out) {
     return timing_cells(a, x, n, s, s.timing, [](int, int, int) { return 1.0; }, out);
+}
+
+double arrive_area_shaded(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
+                          const std::function<double(int, int)>& open, std::vector<AreaPair>& out) {
+    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int) { return open(u, v); }, out);
 }
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,

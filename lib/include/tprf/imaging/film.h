@@ -37,11 +37,16 @@ struct FilmTaps {
     std::vector<std::uint64_t> row;  ///< pixels + 1 offsets into `taps`
     std::vector<Tap> taps;
     std::vector<float> weights;      ///< the taps' kernels, one after another
+    std::uint32_t longest = 1;       ///< the longest kernel's length
     std::vector<std::array<float, 3>> tints;  ///< Gather::tints
 };
 
 /// The film taps of `gather` on `time` (in an order that does not depend on `threads`).
 FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads = 0);
+
+/// How much of the solve's output a film keeps before filming it (TransientFilm::add_block).
+inline constexpr std::size_t kFilmBufferBytes = std::size_t(16) << 20;
+inline constexpr std::size_t kFilmBufferBins = 256;
 
 /// Accumulates radiance into a transient cube of shape (H, W, T, 3), pixel-major (each pixel's time
 /// profile contiguous), which the caller owns (typically a memory-mapped .npy). Bin values are
@@ -62,13 +67,17 @@ public:
     /// Adds the exact direct-light arrivals (once).
     void add_direct();
     /// Adds one solved block's light of later bounces: each tap reads its patch's profile (less the
-    /// pulses the camera evaluates exactly) and spreads it over the pixel's legs (its kernel).
+    /// pulses the camera evaluates exactly) and spreads it over the pixel's legs (its kernel). Blocks
+    /// come in order; they are kept until kFilmBufferBytes of them (at most kFilmBufferBins bins) are
+    /// there and filmed together, so that each pixel's profile is visited in fewer, longer runs.
     void add_block(const SolveBlock& block);
+    /// Films the blocks still kept: call it after the last add_block.
+    void finish();
 
 private:
     bool takes_order(int order) const;
     void copy_indirect(const SolveBlock& block);
-    void add_taps(std::size_t pixel, int first_bin, std::size_t bins);
+    void add_taps(std::size_t pixel, int first_bin, std::size_t bins, std::size_t stride);
 
     const Gather& m_gather;
     const Illumination& m_illumination;
@@ -77,8 +86,18 @@ private:
     int m_order;
     bool m_last_is_tail;
     int m_threads;
-    std::vector<float> m_indirect;  ///< N x bins x 3 scratch, one block
+    void add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
+    void add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
+
+    /// The kept blocks' profiles: N rows of `m_pad` zero bins, `m_capacity` bins (the kept ones, then
+    /// zeros) and `m_pad` zero bins (x 3), so that a kernel of up to m_pad + 1 bins reads every bin it
+    /// needs without a test.
+    std::vector<float> m_indirect;
+    int m_first_bin = 0;          ///< the first kept bin
+    std::size_t m_kept = 0;       ///< bins kept
+    std::size_t m_capacity = 0;   ///< bins a row holds (0 until the first block)
     std::shared_ptr<const FilmTaps> m_taps;
+    std::int64_t m_pad = 0;
 };
 
 /// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same

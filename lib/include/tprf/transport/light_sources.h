@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <functional>
 #include <vector>
 
 namespace tprf {
@@ -193,10 +194,17 @@ inline constexpr double kAreaBinsPerTimingCell = 4.0;
 AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, double origin, int shadow_rays,
                            int penumbra_rays);
 
+/// Points on the rim of area source a that the shadow test probes besides its grid's cell centres: its
+/// corners and the middles of its sides, each moved a thousandth of the way to the centroid. A shadow
+/// edge that hides a sliver along a side (narrower than half a cell) misses every cell centre but
+/// not the rim. Writes up to 8 points; returns how many.
+int rim_probes(const AreaSource& a, Vec3* out);
+
 /// The light of area source a at the point x with unit normal n: appends to `out` the pairs between x
 /// and the cells' points (their centres, unless jittered) that shadow rays find unblocked (to the shadow grid's cells; where those
 /// disagree, a penumbra, to every cell of the finer grid), and returns the weight of all pairs, blocked
-/// or not (0 when no cell centre faces x). The unblocked share of the weight is the share of the
+/// or not (0 when no cell centre faces x). The rim (rim_probes) is tested with the shadow grid: when
+/// its rays disagree with the grid's, it is a penumbra too. The unblocked share of the weight is the share of the
 /// exact form factor point_polygon_form_factor(x, n, a) that reaches x.
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& visibility,
                    const AreaSampling& sampling, std::vector<AreaPair>& out);
@@ -205,6 +213,12 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
 /// visible from x by rays of its own.
 double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& sampling,
                         std::vector<AreaPair>& out);
+
+/// arrive_area_open with each timing cell's pairs weighted by the open share the caller found for it,
+/// `open(u, v)` in [0, 1] for cell (u, v) of the sampling's timing grid: for a pixel whose samples
+/// shared shadow rays of their own.
+double arrive_area_shaded(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& sampling,
+                          const std::function<double(int, int)>& open, std::vector<AreaPair>& out);
 
 /// When no cell centre of `a` faces x, yet F > 0 (a sliver near x's horizon): one pair along the path
 /// from x to a's centroid, of weight 1, if that ray is unblocked. Returns the weight added (1 or 0).
