@@ -15,9 +15,8 @@ namespace tprf {
 
 namespace {
 
-// The film's rows are padded for kernels of up to this many bins plus one (longer ones, rare, take the
-// general path); kSlack floats past the last row let the fused loop read a full lane group.
-constexpr std::int64_t kMaxFusedPad = 31;
+// kSlack floats past the last row let the fused loop read a full lane group.
+constexpr std::int64_t kMaxFusedPad = std::int64_t(kFilmPadBins);
 constexpr std::size_t kSlack = 8;
 
 // One gather tap's share of a bin: out[t + lag] += weight B[t].
@@ -135,10 +134,7 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         source = block.per_order + std::size_t(m_order) * n * bins * 3;
     }
     const std::size_t pad = std::size_t(m_pad);
-    if (m_capacity == 0) {  // as many blocks as kFilmBufferBytes hold, at least one
-        const std::size_t fit = kFilmBufferBytes / std::max<std::size_t>(1, n * 3 * sizeof(float));
-        m_capacity = std::max(bins, std::min(fit, kFilmBufferBins) / bins * bins);
-    }
+    if (m_capacity == 0) m_capacity = film_buffer_bins(n, bins);
     const std::size_t stride = (m_capacity + 2 * pad) * 3;
     if (m_kept == 0) {
         m_indirect.assign(n * stride + kSlack, 0.0f);

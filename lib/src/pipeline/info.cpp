@@ -6,6 +6,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
+#include "tprf/imaging/film.h"
 #include "tprf/pipeline/capture.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/transport/link_set.h"
@@ -407,7 +408,8 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     const double share = scene.links.method == LinkMethod::Hierarchical ? hierarchical_ring_share(n) : 1.0;
     const double rings = L * nodes * (share * e.ring_bins + kBlockBins + 1) * C * 4;
     const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
-    const double outputs = (1.0 + terms + 1.0 + cubes) * n * kBlockBins * 3 * 4;  // solver's and films' blocks
+    // The solver's blocks and the films' kept profiles (film_buffer_bytes).
+    const double outputs = (1.0 + terms) * n * kBlockBins * 3 * 4 + (1.0 + cubes) * film_buffer_bytes(census.patches, kBlockBins);
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
     // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).

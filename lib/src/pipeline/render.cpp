@@ -315,7 +315,9 @@ void render_share(const Scene& scene, RenderOptions options) {
 SolveStats render_camera(const Scene& scene, const RenderOptions& options, const Transport& transport,
                          Arrays& arrays, RenderReport& report) {
     Cubes cubes;
+    const auto open_start = Clock::now();
     open_cubes(scene, options, transport, arrays, cubes);
+    report.seconds.gather += seconds_since(open_start);  // the films' taps (and the cubes' files)
     const SolveStats stats = solve_into_cubes(scene, options, transport, cubes, report);
     const auto write_start = Clock::now();
     if (options.progress) options.progress("write", 0.0);

@@ -6,6 +6,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/scene/scene.h"
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -47,6 +48,21 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
 /// How much of the solve's output a film keeps before filming it (TransientFilm::add_block).
 inline constexpr std::size_t kFilmBufferBytes = std::size_t(16) << 20;
 inline constexpr std::size_t kFilmBufferBins = 256;
+/// Kernels of up to this many bins plus one are applied in one pass (the film's rows are padded with
+/// this many zero bins on each side); longer ones, rare, a bin of the kernel at a time.
+inline constexpr std::size_t kFilmPadBins = 31;
+
+/// Bins of the solve's output a film keeps for `patches` patches and solver blocks of `block_bins`:
+/// as many whole blocks as kFilmBufferBytes hold, up to kFilmBufferBins, at least one.
+inline std::size_t film_buffer_bins(std::size_t patches, std::size_t block_bins) {
+    const std::size_t fit = kFilmBufferBytes / std::max<std::size_t>(1, patches * 3 * sizeof(float));
+    return std::max(block_bins, std::min(fit, kFilmBufferBins) / block_bins * block_bins);
+}
+
+/// Bytes of one film's kept profiles (an upper bound: its rows' padding as if some kernel were long).
+inline double film_buffer_bytes(std::size_t patches, std::size_t block_bins) {
+    return double(patches) * 3 * sizeof(float) * double(film_buffer_bins(patches, block_bins) + 2 * kFilmPadBins);
+}
 
 /// Accumulates radiance into a transient cube of shape (H, W, T, 3), pixel-major (each pixel's time
 /// profile contiguous), which the caller owns (typically a memory-mapped .npy). Bin values are
