@@ -18,11 +18,20 @@
 namespace tprf {
 namespace {
 
+// The interpolation kernel's support, in circumradii of the patch a point lies on. The patch profile is
+// already its patch's average, so a wider kernel blurs it further: on the Cornell box (96 x 96, 800
+// bins, 2,520 patches) against a converged render, the median pixel error at spp 16 was 1.27% at 2,
+// 1.05% at 1.75, 1.02% at 1.6, 1.10% at 1.5 and 1.24% at 1.4 (where the kernel barely reaches the
+// neighbours' centroids, 1.41 circumradii away on a grid of squares, and the patches begin to show);
+// 1.6 also gave the lowest or nearly lowest 90th percentile there, at 5,375 patches and on the corner
+// (bench/RESULTS.md).
+constexpr double kSupportRadii = 1.6;
+
 // Interpolation candidates of every patch that holds a sensing point: the patches of the same surface
-// (one object, normals within about 45 degrees) whose centroids lie within three of its circumradii.
-// A point on patch p lies within one circumradius of its centroid and its kernel reaches two more
-// (kernel_weights), so the candidates hold every patch a point's kernel can weigh. One search per
-// patch, not per point.
+// (one object, normals within about 45 degrees) whose centroids lie within 1 + kSupportRadii of its
+// circumradii. A point on patch p lies within one circumradius of its centroid and its kernel reaches
+// kSupportRadii more (kernel_weights), so the candidates hold every patch a point's kernel can weigh.
+// One search per patch, not per point.
 struct Candidates {
     std::vector<std::uint32_t> row;  // patches + 1 offsets into `patch`
     std::vector<std::uint32_t> patch;
@@ -39,13 +48,13 @@ Candidates find_candidates(const SensingPoints& points, const PatchSet& patches,
         if (used[p]) {
             which.push_back(std::uint32_t(p));
             queries.push_back(patches.centroid[p]);
-            reach = std::max(reach, 3.0 * radius[p]);
+            reach = std::max(reach, (1.0 + kSupportRadii) * radius[p]);
         }
     const Neighbours near = radius_search(patches.centroid, queries, reach, threads);
     std::vector<std::vector<std::uint32_t>> lists(patches.size());
     for (std::size_t k = 0; k < which.size(); ++k) {
         const std::uint32_t p = which[k];
-        const double r2 = 9.0 * radius[p] * radius[p];
+        const double r2 = (1.0 + kSupportRadii) * (1.0 + kSupportRadii) * radius[p] * radius[p];
         for (std::size_t h = 0; h < near.index[k].size(); ++h) {
             const std::size_t q = near.index[k][h];
             if (near.distance2[k][h] < r2 && patches.object[q] == patches.object[p] &&
@@ -63,11 +72,11 @@ Candidates find_candidates(const SensingPoints& points, const PatchSet& patches,
 }
 
 // Interpolation weights at point x on patch p: a smooth compact kernel (1 - (d/support)^2)^2, support
-// two circumradii of p, over p's candidates, so that the profile varies continuously across patch
+// kSupportRadii circumradii of p, over p's candidates, so that the profile varies continuously across patch
 // borders and no faceting shows. Normalised; the patch alone when no candidate is inside the support.
 void kernel_weights(const PatchSet& patches, std::uint32_t p, const Vec3& x, double radius, const Candidates& c,
                     std::vector<std::pair<std::uint32_t, double>>& weights) {
-    const double support2 = 4.0 * radius * radius;
+    const double support2 = kSupportRadii * kSupportRadii * radius * radius;
     weights.clear();
     double total = 0.0;
     for (std::uint32_t k = c.row[p]; k < c.row[p + 1]; ++k) {
