@@ -89,6 +89,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
     const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
         std::vector<TracedHit> hits;
+        by_row[r].reserve(std::size_t(camera.width) * std::size_t(spp));
         for (int c = 0; c < camera.width; ++c)
             for (int s = 0; s < spp; ++s) {
                 double sx, sy;
