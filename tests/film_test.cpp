@@ -1,0 +1,157 @@
+// The film (imaging/film.h) against its definition, tap by tap: each gather tap reads its patch's
+// profile and puts it `leg` later, split between two bins (or in the nearest), and light that would
+// come before the earliest bin of the pixel's samples that read that patch is moved to that bin. The
+// film merges a pixel's taps of a patch into one kernel, keeps several solver blocks, pads its rows
+// and applies short grey kernels in one pass (tinted or long ones a bin of the kernel at a time): none
+// of that may change the sums beyond float rounding.
+
+#include "tprf/core/time_axis.h"
+#include "tprf/imaging/film.h"
+#include "tprf/imaging/gather.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/solver.h"
+#include "test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <random>
+#include <tuple>
+#include <vector>
+
+namespace {
+
+using tprf::DelayMode;
+using tprf::Gather;
+using tprf::PixelTap;
+
+constexpr int kPatches = 7, kWidth = 9, kBins = 300, kBlock = 32;
+constexpr double kBin = 0.01;
+
+// A gather of kWidth x 1 pixels with taps of every kind: several samples per patch at legs a few bins
+// apart (short kernels), one pixel whose taps of a patch span 60 bins (a kernel longer than the
+// padding), earliest bins before, inside and after the light, and a tinted pixel.
+Gather made_up_gather() {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    Gather g;
+    g.width = kWidth;
+    g.height = 1;
+    g.tints = {tprf::Rgb::Ones(), tprf::Rgb(0.9, 0.5, 0.2)};
+    g.row.push_back(0);
+    for (int px = 0; px < kWidth; ++px) {
+        const double base = 0.3 + 1.5 * unit(rng);  // metres of leg
+        for (int s = 0; s < 12; ++s) {
+            PixelTap t;
+            t.patch = std::uint32_t(rng() % kPatches);
+            t.weight = float(0.05 + unit(rng));
+            const double spread = px == 4 ? 0.6 : 0.03;  // pixel 4: 60 bins of legs
+            t.leg = float(base + spread * unit(rng));
+            t.earliest = float(t.leg + (px % 3 == 0 ? 0.4 : px % 3 == 1 ? 1.2 : -0.5) + 0.2 * unit(rng));
+            t.tint = std::uint16_t(px == 6 ? 1 : 0);
+            g.taps.push_back(t);
+        }
+        g.row.push_back(g.taps.size());
+    }
+    return g;
+}
+
+// The cube by definition, in double.
+std::vector<double> by_definition(const Gather& g, const std::vector<float>& profile, int first_bin, int bins,
+                                  const tprf::TimeAxis& time, DelayMode delay) {
+    std::vector<double> cube(std::size_t(kWidth) * kBins * 3, 0.0);
+    for (int px = 0; px < kWidth; ++px) {
+        // The earliest bin of a patch (and tint) is the least over the pixel's samples that read it.
+        std::map<std::pair<std::uint32_t, std::uint16_t>, std::int64_t> earliest;
+        for (std::uint64_t k = g.row[std::size_t(px)]; k < g.row[std::size_t(px) + 1]; ++k) {
+            const PixelTap& t = g.taps[k];
+            const auto e = std::int64_t(std::floor((double(t.earliest) - time.start_m()) / time.bin_width_m()));
+            auto [it, fresh] = earliest.try_emplace({t.patch, t.tint}, e);
+            if (!fresh) it->second = std::min(it->second, e);
+        }
+        for (std::uint64_t k = g.row[std::size_t(px)]; k < g.row[std::size_t(px) + 1]; ++k) {
+            const PixelTap& t = g.taps[k];
+            const std::int64_t first = earliest.at({t.patch, t.tint});
+            const double lag = double(t.leg) / time.bin_width_m();
+            std::vector<std::pair<std::int64_t, double>> split;
+            if (delay == DelayMode::Nearest) {
+                split = {{std::int64_t(std::floor(lag + 0.5)), 1.0}};
+            } else {
+                const auto whole = std::int64_t(std::floor(lag));
+                split = {{whole, 1.0 - (lag - double(whole))}, {whole + 1, lag - double(whole)}};
+            }
+            for (int b = 0; b < bins; ++b)
+                for (const auto& [shift, share] : split) {
+                    std::int64_t u = first_bin + b + shift;
+                    if (u < first) u = first;
+                    if (u < 0 || u >= kBins) continue;
+                    for (int c = 0; c < 3; ++c)
+                        cube[(std::size_t(px) * kBins + std::size_t(u)) * 3 + std::size_t(c)] +=
+                            double(t.weight) * share * g.tints[t.tint][c] *
+                            double(profile[(std::size_t(t.patch) * std::size_t(bins) + std::size_t(b)) * 3 +
+                                           std::size_t(c)]);
+                }
+        }
+    }
+    return cube;
+}
+
+void check_film(DelayMode delay) {
+    const Gather g = made_up_gather();
+    tprf::TimeAxis time;
+    time.bins = kBins;
+    time.bin_width = kBin;
+    const tprf::FilmTaps taps = tprf::film_taps(g, time, delay, 1);
+    EXPECT_GT(taps.longest, tprf::kFilmPadBins + 1);  // pixel 4 takes the general path
+    ASSERT_LT(taps.taps.size(), g.taps.size());       // merged
+    // Profiles from 240 bins before the window (the longest leg) to its end, random, in blocks of 32.
+    const int first_bin = -240, bins = kBins - first_bin;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<float> profile(std::size_t(kPatches) * std::size_t(bins) * 3);
+    for (float& v : profile) v = unit(rng);
+    tprf::Illumination none;
+    none.row.assign(kPatches + 1, 0);
+    std::vector<float> cube(std::size_t(kWidth) * kBins * 3, 0.0f);
+    tprf::TransientFilm film(g, none, time, delay, cube.data(), -1, false, 2);
+    std::vector<float> block;
+    for (int b0 = 0; b0 < bins; b0 += kBlock) {
+        const int n = std::min(kBlock, bins - b0);
+        block.assign(std::size_t(kPatches) * std::size_t(n) * 3, 0.0f);
+        for (int i = 0; i < kPatches; ++i)
+            std::copy_n(profile.begin() + std::ptrdiff_t((std::size_t(i) * std::size_t(bins) + std::size_t(b0)) * 3),
+                        n * 3, block.begin() + std::ptrdiff_t(std::size_t(i) * std::size_t(n) * 3));
+        tprf::SolveBlock sb;
+        sb.first_bin = first_bin + b0;
+        sb.bins = n;
+        sb.patches = kPatches;
+        sb.radiosity = block.data();
+        film.add_block(sb);
+    }
+    film.finish();
+    const std::vector<double> expected = by_definition(g, profile, first_bin, bins, time, delay);
+    double peak = 0.0, worst = 0.0;
+    for (double v : expected) peak = std::max(peak, v);
+    for (std::size_t k = 0; k < cube.size(); ++k) worst = std::max(worst, std::abs(double(cube[k]) - expected[k]));
+    ASSERT_GT(peak, 1.0);
+    MEASURED("film (%s): worst bin %.2e of the peak, %zu gather taps as %zu kernels\n",
+             delay == DelayMode::Linear ? "linear" : "nearest", worst / peak, g.taps.size(), taps.taps.size());
+    EXPECT_LT(worst, 2e-6 * peak) << "worst difference " << worst << " of a peak " << peak;
+    // Light moved to a pixel's earliest bin: none before it.
+    for (int px = 0; px < kWidth; ++px) {
+        std::int64_t first = kBins;
+        for (std::uint64_t k = g.row[std::size_t(px)]; k < g.row[std::size_t(px) + 1]; ++k)
+            first = std::min(first, std::int64_t(std::floor(double(g.taps[k].earliest) / kBin)));
+        for (std::int64_t u = 0; u < std::min<std::int64_t>(first, kBins); ++u)
+            EXPECT_EQ(cube[(std::size_t(px) * kBins + std::size_t(u)) * 3], 0.0f) << px << " " << u;
+    }
+}
+
+TEST(Film, KernelsApplyEachSamplesLegSplitBetweenTwoBins) { check_film(DelayMode::Linear); }
+
+TEST(Film, KernelsApplyEachSamplesLegInTheNearestBin) { check_film(DelayMode::Nearest); }
+
+}  // namespace
