@@ -99,40 +99,56 @@ std::vector<double> by_definition(const Gather& g, const std::vector<float>& pro
     return cube;
 }
 
-void check_film(DelayMode delay) {
-    const Gather g = made_up_gather();
-    tprf::TimeAxis time;
-    time.bins = kBins;
-    time.bin_width = kBin;
-    const tprf::FilmTaps taps = tprf::film_taps(g, time, delay, 1);
-    EXPECT_GT(taps.longest, tprf::kFilmPadBins + 1);  // pixel 4 takes the general path
-    ASSERT_LT(taps.taps.size(), g.taps.size());       // merged
-    // Profiles from 240 bins before the window (the longest leg) to its end, random, in blocks of 32.
-    const int first_bin = -240, bins = kBins - first_bin;
+// Films `g` over made-up profiles (from 240 bins before the window to its end, in solver blocks of 32).
+struct Filmed {
+    std::vector<float> profile, cube;
+    int first_bin = -240, bins = kBins + 240;
+};
+
+Filmed film_of(const Gather& g, const tprf::TimeAxis& time, DelayMode delay) {
+    Filmed f;
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-    std::vector<float> profile(std::size_t(kPatches) * std::size_t(bins) * 3);
-    for (float& v : profile) v = unit(rng);
+    f.profile.resize(std::size_t(kPatches) * std::size_t(f.bins) * 3);
+    for (float& v : f.profile) v = unit(rng);
     tprf::Illumination none;
     none.row.assign(kPatches + 1, 0);
-    std::vector<float> cube(std::size_t(kWidth) * kBins * 3, 0.0f);
-    tprf::TransientFilm film(g, none, time, delay, cube.data(), -1, false, 2);
+    f.cube.assign(std::size_t(kWidth) * kBins * 3, 0.0f);
+    tprf::TransientFilm film(g, none, time, delay, f.cube.data(), -1, false, 2);
     std::vector<float> block;
-    for (int b0 = 0; b0 < bins; b0 += kBlock) {
-        const int n = std::min(kBlock, bins - b0);
+    for (int b0 = 0; b0 < f.bins; b0 += kBlock) {
+        const int n = std::min(kBlock, f.bins - b0);
         block.assign(std::size_t(kPatches) * std::size_t(n) * 3, 0.0f);
         for (int i = 0; i < kPatches; ++i)
-            std::copy_n(profile.begin() + std::ptrdiff_t((std::size_t(i) * std::size_t(bins) + std::size_t(b0)) * 3),
+            std::copy_n(f.profile.begin() + std::ptrdiff_t((std::size_t(i) * std::size_t(f.bins) + std::size_t(b0)) * 3),
                         n * 3, block.begin() + std::ptrdiff_t(std::size_t(i) * std::size_t(n) * 3));
         tprf::SolveBlock sb;
-        sb.first_bin = first_bin + b0;
+        sb.first_bin = f.first_bin + b0;
         sb.bins = n;
         sb.patches = kPatches;
         sb.radiosity = block.data();
         film.add_block(sb);
     }
     film.finish();
-    const std::vector<double> expected = by_definition(g, profile, first_bin, bins, time, delay);
+    return f;
+}
+
+tprf::TimeAxis window() {
+    tprf::TimeAxis time;
+    time.bins = kBins;
+    time.bin_width = kBin;
+    return time;
+}
+
+void check_film(DelayMode delay) {
+    const Gather g = made_up_gather();
+    const tprf::TimeAxis time = window();
+    const tprf::FilmTaps taps = tprf::film_taps(g, time, delay, 1);
+    EXPECT_GT(taps.longest, tprf::kFilmPadBins + 1);  // pixel 4 takes the general path
+    ASSERT_LT(taps.taps.size(), g.taps.size());       // merged
+    const Filmed f = film_of(g, time, delay);
+    const std::vector<float>& cube = f.cube;
+    const std::vector<double> expected = by_definition(g, f.profile, f.first_bin, f.bins, time, delay);
     double peak = 0.0, worst = 0.0;
     for (double v : expected) peak = std::max(peak, v);
     for (std::size_t k = 0; k < cube.size(); ++k) worst = std::max(worst, std::abs(double(cube[k]) - expected[k]));
@@ -153,5 +169,56 @@ void check_film(DelayMode delay) {
 TEST(Film, KernelsApplyEachSamplesLegSplitBetweenTwoBins) { check_film(DelayMode::Linear); }
 
 TEST(Film, KernelsApplyEachSamplesLegInTheNearestBin) { check_film(DelayMode::Nearest); }
+
+// gather_points merges a pixel's taps that the film cannot tell apart (merge_taps): the cube must not
+// change beyond a float leg's precision (a leg of 2 m is a float to 1.2e-7 m, 1.2e-5 of a 1 cm bin).
+TEST(Film, MergedTapsFilmTheSameCube) {
+    const Gather g = made_up_gather();
+    const tprf::TimeAxis time = window();
+    Gather merged = g;
+    merged.taps.clear();
+    merged.row = {0};
+    for (int px = 0; px < kWidth; ++px) {
+        std::vector<PixelTap> taps(g.taps.begin() + std::ptrdiff_t(g.row[std::size_t(px)]),
+                                   g.taps.begin() + std::ptrdiff_t(g.row[std::size_t(px) + 1]));
+        // Each sample twice more, at legs a hundredth and a third of a bin on: the first merges with
+        // it (same half bin, unless it crosses into the next), the second mostly not.
+        for (std::size_t k = 0, n = taps.size(); k < n; ++k)
+            for (const double step : {0.01, 0.33}) {
+                PixelTap t = taps[k];
+                t.leg = float(double(t.leg) + step * kBin);
+                t.weight *= 0.5f;
+                taps.push_back(t);
+            }
+        merged.taps.insert(merged.taps.end(), taps.begin(), taps.end());
+        merged.row.push_back(merged.taps.size());
+    }
+    Gather by_one = merged;  // the same taps, not merged
+    std::size_t before = merged.taps.size();
+    std::vector<PixelTap> all;
+    std::vector<std::uint64_t> row = {0};
+    for (int px = 0; px < kWidth; ++px) {
+        std::vector<PixelTap> taps(merged.taps.begin() + std::ptrdiff_t(merged.row[std::size_t(px)]),
+                                   merged.taps.begin() + std::ptrdiff_t(merged.row[std::size_t(px) + 1]));
+        tprf::merge_taps(taps, time);
+        all.insert(all.end(), taps.begin(), taps.end());
+        row.push_back(all.size());
+    }
+    merged.taps = all;
+    merged.row = row;
+    MEASURED("merge_taps: %zu taps -> %zu\n", before, merged.taps.size());
+    EXPECT_LT(merged.taps.size(), before * 3 / 4);
+    for (const DelayMode delay : {DelayMode::Linear, DelayMode::Nearest}) {
+        const Filmed a = film_of(by_one, time, delay), b = film_of(merged, time, delay);
+        double peak = 0.0, worst = 0.0;
+        for (std::size_t k = 0; k < a.cube.size(); ++k) {
+            peak = std::max(peak, double(a.cube[k]));
+            worst = std::max(worst, std::abs(double(a.cube[k]) - double(b.cube[k])));
+        }
+        MEASURED("merged taps (%s): worst bin %.2e of the peak\n", delay == DelayMode::Linear ? "linear" : "nearest",
+                 worst / peak);
+        EXPECT_LT(worst, 1e-5 * peak);
+    }
+}
 
 }  // namespace

@@ -517,11 +517,57 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
         }
         order_arrivals(direct, options.time);
         direct.shrink_to_fit();
+        if (options.time) merge_taps(run_taps[k], *options.time);
     });
     Gather g = assemble(points.outputs, width, height, run_output, run_taps, run_direct);
     g.tints = points.tints;
     if (options.progress) options.progress("camera", 1.0);
     return g;
+}
+
+void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time) {
+    if (taps.size() < 2) return;
+    const double inv_bin = 1.0 / time.bin_width_m();
+    const auto half = [&](const PixelTap& t) {  // the half bin of the leg
+        const double lag = double(t.leg) * inv_bin, whole = std::floor(lag);
+        return std::int64_t(2.0 * whole) + (lag - whole >= 0.5 ? 1 : 0);
+    };
+    // Open addressing over at least twice the taps (a power of two): slot -> merged index + 1.
+    thread_local std::vector<std::uint32_t> slot;
+    thread_local std::vector<std::int64_t> halves;
+    thread_local std::vector<double> moment;  // sum of weight x leg per merged tap
+    std::size_t size = 16;
+    while (size < 2 * taps.size()) size *= 2;
+    slot.assign(size, 0);
+    halves.clear();
+    moment.clear();
+    std::size_t merged = 0;
+    for (std::size_t k = 0; k < taps.size(); ++k) {
+        const PixelTap t = taps[k];
+        const std::int64_t hb = half(t);
+        const std::uint64_t h = (std::uint64_t(t.patch) * 0x9E3779B97F4A7C15ull) ^
+                                (std::uint64_t(hb) * 0xC2B2AE3D27D4EB4Full) ^ (std::uint64_t(t.tint) * 0x165667B19E3779F9ull);
+        std::size_t s = std::size_t(h >> 40) & (size - 1);
+        const auto same = [&](std::uint32_t m) {
+            return taps[m].patch == t.patch && taps[m].tint == t.tint && halves[m] == hb;
+        };
+        while (slot[s] != 0 && !same(slot[s] - 1)) s = (s + 1) & (size - 1);
+        if (slot[s] == 0) {
+            slot[s] = std::uint32_t(merged + 1);
+            halves.push_back(hb);
+            moment.push_back(double(t.weight) * double(t.leg));
+            taps[merged++] = t;
+            continue;
+        }
+        PixelTap& m = taps[slot[s] - 1];
+        moment[slot[s] - 1] += double(t.weight) * double(t.leg);
+        m.weight += t.weight;
+        m.earliest = std::min(m.earliest, t.earliest);
+    }
+    taps.resize(merged);
+    for (std::size_t k = 0; k < merged; ++k)
+        if (taps[k].weight > 0.0f) taps[k].leg = float(moment[k] / double(taps[k].weight));
+    taps.shrink_to_fit();
 }
 
 }  // namespace tprf
