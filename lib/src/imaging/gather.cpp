@@ -244,6 +244,7 @@ Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n,
             if (passed != 1.0 && passed != 0.0) return Shadow::dimmed;
             (passed == 1.0 ? open : blocked) = true;
         }
+        if (open && blocked) break;  // a penumbra (glass further on is the penumbra rays' affair)
     }
     return open && blocked ? Shadow::penumbra : blocked ? Shadow::hidden : Shadow::open;
 }

@@ -119,10 +119,12 @@ double expected_counts(double photons, double signal, double dark);
 
 /// Point k of the R2 low-discrepancy sequence in the unit square (Roberts, "The unreasonable
 /// effectiveness of quasirandom sequences", 2018): ((0.5 + k / phi2) mod 1, (0.5 + k / phi2^2) mod 1),
-/// phi2 the plastic number. Any prefix of it is well spread: it stratifies any count of samples.
+/// phi2 the plastic number. Any prefix of it is well spread: it stratifies any count of samples. For
+/// k >= 0, x - floor(x) is exactly fmod(x, 1) (the fraction's bits), at a fraction of its cost.
 inline void r2_point(double k, double& u, double& v) {
-    u = std::fmod(0.5 + 0.7548776662466927 * k, 1.0);
-    v = std::fmod(0.5 + 0.5698402909980532 * k, 1.0);
+    const double x = 0.5 + 0.7548776662466927 * k, y = 0.5 + 0.5698402909980532 * k;
+    u = k >= 0.0 ? x - std::floor(x) : std::fmod(x, 1.0);
+    v = k >= 0.0 ? y - std::floor(y) : std::fmod(y, 1.0);
 }
 
 }  // namespace tprf
