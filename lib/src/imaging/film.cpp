@@ -16,7 +16,6 @@ namespace tprf {
 namespace {
 
 // kSlack floats past the last row let the fused loop read a full lane group.
-constexpr std::int64_t kMaxFusedPad = std::int64_t(kFilmPadBins);
 constexpr std::size_t kSlack = 8;
 
 // One gather tap's share of a bin: out[t + lag] += weight B[t].
@@ -105,7 +104,7 @@ TransientFilm::TransientFilm(const Gather& gather, const Illumination& illuminat
     : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(order),
       m_last_is_tail(last_is_tail), m_threads(thread_count(threads)),
       m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))),
-      m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, kMaxFusedPad)) {}
+      m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, std::int64_t(kFilmPadBins))) {}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -134,12 +133,12 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         source = block.per_order + std::size_t(m_order) * n * bins * 3;
     }
     const std::size_t pad = std::size_t(m_pad);
-    if (m_capacity == 0) m_capacity = film_buffer_bins(n, bins);
-    const std::size_t stride = (m_capacity + 2 * pad) * 3;
-    if (m_kept == 0) {
-        m_indirect.assign(n * stride + kSlack, 0.0f);
-        m_first_bin = block.first_bin;
+    if (m_capacity == 0) {  // the rows, zero: the padding is never written, the kept bins always are
+        m_capacity = film_buffer_bins(n, bins);
+        m_indirect.assign(n * (m_capacity + 2 * pad) * 3 + kSlack, 0.0f);
     }
+    const std::size_t stride = (m_capacity + 2 * pad) * 3;
+    if (m_kept == 0) m_first_bin = block.first_bin;
     TPRF_CHECK_EQ(block.first_bin, m_first_bin + int(m_kept));
     TPRF_CHECK_LE(m_kept + bins, m_capacity);
     for (std::size_t i = 0; i < n; ++i)
@@ -264,7 +263,12 @@ void TransientFilm::add_block(const SolveBlock& block) {
 
 void TransientFilm::finish() {
     if (m_kept == 0) return;
-    const std::size_t pixels = m_gather.row.size() - 1, stride = (m_capacity + 2 * std::size_t(m_pad)) * 3;
+    const std::size_t pad = std::size_t(m_pad), pixels = m_gather.row.size() - 1, stride = (m_capacity + 2 * pad) * 3;
+    // A last, partial fill: the bins after it that a kernel reads still hold the previous fill's light.
+    const std::size_t stale = std::min(pad, m_capacity - m_kept);
+    const std::size_t rows = (m_indirect.size() - kSlack) / stride;
+    for (std::size_t i = 0; i < rows && stale > 0; ++i)
+        std::fill_n(m_indirect.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
     parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) { add_taps(px, m_first_bin, m_kept, stride); });
     m_kept = 0;
 }

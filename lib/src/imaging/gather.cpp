@@ -143,11 +143,10 @@ void add_over_cell(std::uint32_t output, double path, double a, double b, double
 // A pixel's samples in groups that can share the timing of an area source's light: each group the
 // samples (each with its cell) in the open (no mirror or glass on the way) on one flat surface (one
 // object, one plane). A pixel on one wall is one group; one across a crease or a silhouette, one per
-// surface. Point samples, and samples behind mirrors or glass, are in no group (group -1).
-void flat_groups(const SensingPoint* pts, std::size_t count, const PatchSet& patches, std::vector<int>& group,
-                 int& groups) {
+// surface. Point samples, and samples behind mirrors or glass, are in no group (group -1). Returns
+// the number of groups.
+int flat_groups(const SensingPoint* pts, std::size_t count, const PatchSet& patches, std::vector<int>& group) {
     group.assign(count, -1);
-    groups = 0;
     thread_local std::vector<std::size_t> first;  // each group's first sample
     first.clear();
     for (std::size_t h = 0; h < count; ++h) {
@@ -166,7 +165,7 @@ void flat_groups(const SensingPoint* pts, std::size_t count, const PatchSet& pat
             first.push_back(h);
         }
     }
-    groups = int(first.size());
+    return int(first.size());
 }
 
 // A group of a pixel's samples as one: their centre, mean leg and footprint, and its four outermost
@@ -233,14 +232,13 @@ Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n,
     int count = 0;
     for (int c = 0; c < g * g; ++c) probes[std::size_t(count++)] = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
     count += rim_probes(a, probes.data() + count);
-    const double lift = vis.epsilon();
     bool open = false, blocked = false;
     for (const std::size_t h : p.outer) {
         const Vec3& x = pts[h].point;
         for (int c = 0; c < count; ++c) {
             const Vec3& y = probes[std::size_t(c)];
-            if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
-            const double passed = vis.passes(a.chain, x + lift * n, y + lift * a.normal);
+            if (!faces_source(a, x, n, y)) continue;
+            const double passed = passes_from_source(a, vis, x, n, y);
             if (passed != 1.0 && passed != 0.0) return Shadow::dimmed;
             (passed == 1.0 ? open : blocked) = true;
         }
@@ -259,7 +257,7 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
     const int r = std::max(1, int(std::ceil(std::sqrt(double(std::max(rays, 1))) / m)));
     const int f = m * r;
     std::vector<double> passed(std::size_t(m * m), 0.0), facing(std::size_t(m * m), 0.0);
-    const double lift = vis.epsilon(), golden = 0.5 * (std::sqrt(5.0) - 1.0);
+    const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
     for (int i = 0; i < f * f; ++i) {
         const int fu = i % f, fv = i / f;
         double ju, jv, turn;
@@ -267,24 +265,23 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
         turn = double(i) * golden;
         const Vec3& x = pts[std::size_t((turn - std::floor(turn)) * double(count))].point;
         const Vec3 y = a.point((fu + ju) / f, (fv + jv) / f);
-        if (!(n.dot(y - x) > 0.0) || !(a.normal.dot(x - y) > 0.0)) continue;
+        if (!faces_source(a, x, n, y)) continue;
         const std::size_t cell = std::size_t((fv / r) * m + fu / r);
         facing[cell] += 1.0;
-        passed[cell] += vis.passes(a.chain, x + lift * n, y + lift * a.normal);
+        passed[cell] += passes_from_source(a, vis, x, n, y);
     }
     for (std::size_t c = 0; c < passed.size(); ++c) passed[c] = facing[c] > 0.0 ? passed[c] / facing[c] : 1.0;
     return passed;
 }
 
-// The light of area source a at a group of samples (or a quarter of one), timed once: as its centre sees
-// the source's cells, spread over the paths of the group's footprint (pixel_frame). Each sample's
+// The light of area source a at a group of samples (or a quarter of one) whose frame is p, timed once:
+// as its centre sees the source's cells, spread over the paths of the group's footprint. Each sample's
 // radiance is albedo L_e F(x) with its own exact F, times the open share of the source: all of it, or,
-// in a penumbra, each timing cell's open share from `rays` rays of the samples (penumbra_open). False
+// in a penumbra, each timing cell's open share from penumbra_rays rays of the samples (penumbra_open). False
 // (nothing added) when no cell centre faces a penumbra group's centre.
-bool group_light(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
-                 const AreaSource& a, const Visibility& vis, const GatherOptions& options, int rays, bool penumbra,
-                 std::vector<DirectArrival>& out) {
-    const PixelFrame p = pixel_frame(pts, count);
+bool group_light(const SensingPoint* pts, std::size_t count, const PixelFrame& p, double weight,
+                 const PatchSet& patches, const AreaSource& a, const Visibility& vis, const GatherOptions& options,
+                 bool penumbra, std::vector<DirectArrival>& out) {
     const Vec3& n = patches.normal[pts[0].patch];
     Rgb radiance = Rgb::Zero();
     for (std::size_t h = 0; h < count; ++h) {
@@ -300,9 +297,8 @@ bool group_light(const SensingPoint* pts, std::size_t count, double weight, cons
     if (!penumbra) {
         total = arrive_area_open(a, p.centre, n, sampling, pairs);  // the shared rays found it open
     } else {
-        const std::vector<double> open = penumbra_open(pts, count, n, a, sampling, vis, rays);
-        total = arrive_area_shaded(a, p.centre, n, sampling,
-                                   [&](int u, int v) { return open[std::size_t(v * sampling.timing + u)]; }, pairs);
+        total = arrive_area_shaded(a, p.centre, n, sampling, penumbra_open(pts, count, n, a, sampling, vis, options.penumbra_rays),
+                                   pairs);
     }
     if (!(total > 0.0)) {
         if (penumbra) return false;  // no cell centre faces the group's centre: sample by sample
@@ -328,8 +324,7 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
     if (shadow == Shadow::dimmed) return false;
     if (shadow == Shadow::hidden) return true;
     if (shadow == Shadow::open || count < 8)
-        return group_light(pts, count, weight, patches, a, vis, options, options.penumbra_rays,
-                           shadow == Shadow::penumbra, out);
+        return group_light(pts, count, p, weight, patches, a, vis, options, shadow == Shadow::penumbra, out);
     // A penumbra: its light comes from part of the pixel more than from the rest, so each quarter of the
     // samples (by side of the centre along the footprint's axes) is timed over its own footprint.
     thread_local std::vector<SensingPoint> quarter[4];
@@ -341,8 +336,8 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
     }
     const std::size_t first = out.size();
     for (const auto& q : quarter)
-        if (!q.empty() && !group_light(q.data(), q.size(), weight, patches, a, vis, options, options.penumbra_rays,
-                                       true, out)) {
+        if (!q.empty() && !group_light(q.data(), q.size(), pixel_frame(q.data(), q.size()), weight, patches, a, vis,
+                                       options, true, out)) {
             out.resize(first);
             return false;
         }
@@ -356,16 +351,20 @@ void shared_area_arrivals(const SensingPoint* pts, std::size_t count, double wei
                           std::vector<char>& done, std::vector<DirectArrival>& out) {
     thread_local std::vector<int> group;
     thread_local std::vector<SensingPoint> members;
-    int groups = 0;
-    flat_groups(pts, count, patches, group, groups);
+    const int groups = flat_groups(pts, count, patches, group);
     const std::size_t areas = sources.areas.size();
     for (int g = 0; g < groups; ++g) {
-        members.clear();
-        for (std::size_t h = 0; h < count; ++h)
-            if (group[h] == g) members.push_back(pts[h]);
-        if (members.size() < 2) continue;
+        const std::size_t size = std::size_t(std::count(group.begin(), group.end(), g));
+        if (size < 2) continue;
+        const SensingPoint* at = pts;  // the whole pixel (most pixels): its own points, uncopied
+        if (size < count) {
+            members.clear();
+            for (std::size_t h = 0; h < count; ++h)
+                if (group[h] == g) members.push_back(pts[h]);
+            at = members.data();
+        }
         for (std::size_t a = 0; a < areas; ++a)
-            if (area_pixel_arrivals(members.data(), members.size(), weight, patches, sources.areas[a], vis, options, out))
+            if (area_pixel_arrivals(at, size, weight, patches, sources.areas[a], vis, options, out))
                 for (std::size_t h = 0; h < count; ++h)
                     if (group[h] == g) done[h * areas + a] = 1;
     }

@@ -301,6 +301,10 @@ double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const Are
 
 }  // namespace
 
+double passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3& x, const Vec3& n, const Vec3& y) {
+    return vis.passes(a.chain, x + vis.epsilon() * n, y + vis.epsilon() * a.normal);
+}
+
 int rim_probes(const AreaSource& a, Vec3* out) {
     const auto inset = [&](const Vec3& p) { return Vec3(a.centroid + (1.0 - 1e-3) * (p - a.centroid)); };
     int k = 0;
@@ -315,16 +319,9 @@ int rim_probes(const AreaSource& a, Vec3* out) {
 
 double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis, const AreaSampling& s,
                    std::vector<AreaPair>& out) {
-    const double lift = vis.epsilon();
     const int coarse = s.shadow;
     // The share of light that passes between x and the centre of cell (u, v) of an m x m grid (0: blocked).
-    const auto open_to = [&](int u, int v, int m) {
-        return vis.passes(a.chain, x + lift * n, cell_point(a, s, u, v, m) + lift * a.normal);
-    };
-    const auto faces = [&](int u, int v, int m) {
-        const Vec3 d = cell_point(a, s, u, v, m) - x;
-        return n.dot(d) > 0.0 && a.normal.dot(d) < 0.0;
-    };
+    const auto open_to = [&](int u, int v, int m) { return passes_from_source(a, vis, x, n, cell_point(a, s, u, v, m)); };
     // Shadow rays to the coarse cells that face x. Where they disagree (a penumbra), the pairs take a
     // finer grid and a ray each; elsewhere each pair takes its coarse cell's ray.
     thread_local std::vector<double> coarse_open;
@@ -332,7 +329,7 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     bool any_open = false, any_blocked = false;
     for (int c = 0; c < coarse * coarse; ++c) {
         const int u = c % coarse, v = c / coarse;
-        if (!faces(u, v, coarse)) continue;
+        if (!faces_source(a, x, n, cell_point(a, s, u, v, coarse))) continue;
         const double o = open_to(u, v, coarse);
         coarse_open[std::size_t(c)] = o;
         (o > 0.0 ? any_open : any_blocked) = true;
@@ -340,11 +337,8 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
     if (any_open != any_blocked) {  // the grid agrees: so must the rim
         Vec3 rim[8];
         const int count = rim_probes(a, rim);
-        for (int k = 0; k < count && !(any_open && any_blocked); ++k) {
-            const Vec3 d = rim[k] - x;
-            if (!(n.dot(d) > 0.0) || !(a.normal.dot(d) < 0.0)) continue;
-            (vis.passes(a.chain, x + lift * n, rim[k] + lift * a.normal) > 0.0 ? any_open : any_blocked) = true;
-        }
+        for (int k = 0; k < count && !(any_open && any_blocked); ++k)
+            if (faces_source(a, x, n, rim[k])) (passes_from_source(a, vis, x, n, rim[k]) > 0.0 ? any_open : any_blocked) = true;
     }
     if (any_open && any_blocked)  // a penumbra
         return timing_cells(a, x, n, s, std::max(s.timing, s.penumbra), open_to, out);
@@ -362,13 +356,14 @@ double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const
 }
 
 double arrive_area_shaded(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
-                          const std::function<double(int, int)>& open, std::vector<AreaPair>& out) {
-    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int) { return open(u, v); }, out);
+                          const std::vector<double>& open, std::vector<AreaPair>& out) {
+    TPRF_CHECK_EQ(open.size(), std::size_t(s.timing * s.timing));
+    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int) { return open[std::size_t(v * s.timing + u)]; }, out);
 }
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,
                             std::vector<AreaPair>& out) {
-    const double passed = vis.passes(a.chain, x + vis.epsilon() * n, a.centroid + vis.epsilon() * a.normal);
+    const double passed = passes_from_source(a, vis, x, n, a.centroid);
     if (!(passed > 0.0)) return 0.0;
     out.push_back({(x - a.centroid).norm(), passed});
     return 1.0;

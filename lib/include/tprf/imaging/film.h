@@ -94,6 +94,8 @@ private:
     bool takes_order(int order) const;
     void copy_indirect(const SolveBlock& block);
     void add_taps(std::size_t pixel, int first_bin, std::size_t bins, std::size_t stride);
+    void add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
+    void add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
 
     const Gather& m_gather;
     const Illumination& m_illumination;
@@ -102,9 +104,6 @@ private:
     int m_order;
     bool m_last_is_tail;
     int m_threads;
-    void add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
-    void add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
-
     /// The kept blocks' profiles: N rows of `m_pad` zero bins, `m_capacity` bins (the kept ones, then
     /// zeros) and `m_pad` zero bins (x 3), so that a kernel of up to m_pad + 1 bins reads every bin it
     /// needs without a test.

@@ -16,7 +16,6 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <functional>
 #include <vector>
 
 namespace tprf {
@@ -194,6 +193,16 @@ inline constexpr double kAreaBinsPerTimingCell = 4.0;
 AreaSampling area_sampling(const AreaSource& a, const Vec3& x, double bin_m, double origin, int shadow_rays,
                            int penumbra_rays);
 
+/// Whether surface point x (unit normal n) and point y of area source a face each other.
+inline bool faces_source(const AreaSource& a, const Vec3& x, const Vec3& n, const Vec3& y) {
+    return n.dot(y - x) > 0.0 && a.normal.dot(y - x) < 0.0;
+}
+
+/// The share of light that passes between surface point x (unit normal n) and point y of area source
+/// a (0: blocked), each lifted off its surface by the visibility's epsilon.
+double passes_from_source(const AreaSource& a, const Visibility& visibility, const Vec3& x, const Vec3& n,
+                          const Vec3& y);
+
 /// Points on the rim of area source a that the shadow test probes besides its grid's cell centres: its
 /// corners and the middles of its sides, each moved a thousandth of the way to the centroid. A shadow
 /// edge that hides a sliver along a side (narrower than half a cell) misses every cell centre but
@@ -215,10 +224,10 @@ double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const
                         std::vector<AreaPair>& out);
 
 /// arrive_area_open with each timing cell's pairs weighted by the open share the caller found for it,
-/// `open(u, v)` in [0, 1] for cell (u, v) of the sampling's timing grid: for a pixel whose samples
-/// shared shadow rays of their own.
+/// `open[v * sampling.timing + u]` in [0, 1] for cell (u, v) of the timing grid: for a pixel whose
+/// samples shared shadow rays of their own.
 double arrive_area_shaded(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& sampling,
-                          const std::function<double(int, int)>& open, std::vector<AreaPair>& out);
+                          const std::vector<double>& open, std::vector<AreaPair>& out);
 
 /// When no cell centre of `a` faces x, yet F > 0 (a sliver near x's horizon): one pair along the path
 /// from x to a's centroid, of weight 1, if that ray is unblocked. Returns the weight added (1 or 0).
