@@ -867,5 +867,159 @@ TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
     }
 }
 
+// Distance from x to the convex planar polygon of patch j (its plane's foot when inside, else the
+// nearest edge).
+double distance_to_patch(const PatchSet& patches, std::size_t j, const Vec3& x) {
+    const Vec3* poly = patches.polygon(j);
+    const std::size_t count = patches.corners(j);
+    const Vec3& n = patches.normal[j];
+    const Vec3 foot = x - n.dot(x - poly[0]) * n;
+    bool inside = true;
+    double nearest = INFINITY;
+    for (std::size_t k = 0; k < count; ++k) {
+        const Vec3& a = poly[k];
+        const Vec3& b = poly[(k + 1) % count];
+        if ((b - a).cross(foot - a).dot(n) < 0.0) inside = false;
+        const double t = std::clamp((x - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+        nearest = std::min(nearest, (x - (a + t * (b - a))).norm());
+    }
+    return inside ? (x - foot).norm() : nearest;
+}
+
+TEST(LinkSpread, PiecesKeepEveryLinksFormFactorAndLieOnItsPaths) {
+    // links.spread_pieces: a patch link becomes pieces along the paths from its receiver's centroid to
+    // the sender's points. Their form factors sum to the link's (so the steady state and every energy
+    // balance are the unspread set's), each piece's path lies between the nearest and the farthest
+    // point of the sender from the receiver's centroid (no light earlier than a real path), cluster
+    // links are untouched, rows keep the order the solver expects, and threads do not change them.
+    const Prepared p = prepare(cornell_box());
+    const std::size_t n = p.patches.size();
+    const double w = 0.005;
+    for (const bool clustered : {false, true}) {
+        const LinkSet plain = clustered ? hierarchical(p, 0.003, 0, w) : flat_link_set(p.patches, *p.vis);
+        LinkSet spread = plain, spread1 = plain;
+        const std::uint64_t added = spread_patch_links(spread, p.patches, w, 4, 2);
+        spread_patch_links(spread1, p.patches, w, 4, 1);
+        EXPECT_EQ(spread.links.source, spread1.links.source);
+        EXPECT_EQ(spread.links.ff, spread1.links.ff);
+        EXPECT_EQ(spread.links.distance, spread1.links.distance);
+        EXPECT_EQ(spread.links.size(), plain.links.size() + added);
+        EXPECT_GT(added, plain.links.size());  // most Cornell links span more than 4 bins of 5 mm
+        const std::vector<NodePair> a = node_pairs(plain), b = node_pairs(spread);
+        ASSERT_EQ(a.size(), b.size());
+        double worst_ff = 0.0, worst_early = 0.0, worst_late = 0.0;
+        int most = 0;
+        for (std::size_t q = 0; q < a.size(); ++q) {
+            ASSERT_EQ(a[q].receiver, b[q].receiver);
+            ASSERT_EQ(a[q].source, b[q].source);
+            worst_ff = std::max(worst_ff, std::abs(b[q].ff / a[q].ff - 1.0));
+            const std::uint32_t i = b[q].receiver, j = b[q].source;
+            if (i >= n || j >= n) {
+                EXPECT_EQ(a[q].pieces, b[q].pieces);
+                EXPECT_EQ(a[q].d_min, b[q].d_min);
+                continue;
+            }
+            most = std::max(most, b[q].pieces);
+            const Vec3& c = p.patches.centroid[i];
+            double farthest = 0.0;
+            for (std::size_t k = 0; k < p.patches.corners(j); ++k)
+                farthest = std::max(farthest, (p.patches.polygon(j)[k] - c).norm());
+            worst_early = std::max(worst_early, distance_to_patch(p.patches, j, c) - b[q].d_min);
+            worst_late = std::max(worst_late, b[q].d_max - farthest);
+        }
+        MEASURED("%s: %zu -> %zu links; form factor %.2g; pieces up to %d; earliest piece %.2g m before the "
+                 "nearest path, latest %.2g m after the farthest\n", clustered ? "hierarchical" : "flat",
+                 plain.links.size(), spread.links.size(), worst_ff, most, worst_early, worst_late);
+        EXPECT_LT(worst_ff, 1e-6);
+        EXPECT_EQ(most, 4);
+        EXPECT_LE(worst_early, 1e-6);
+        EXPECT_LE(worst_late, 1e-6);
+        // Rows as the solver reads them: sources non-decreasing (flat), or octaves, then sources (hierarchical).
+        const float inv_bin = float(1.0 / w);
+        for (std::size_t m = 0; m < spread.nodes(); ++m)
+            for (std::uint64_t k = spread.links.row[m] + 1; k < spread.links.row[m + 1]; ++k) {
+                const int o0 = delay_octave(spread.links.distance[k - 1], inv_bin),
+                          o1 = delay_octave(spread.links.distance[k], inv_bin);
+                if (clustered && o0 != o1) {
+                    ASSERT_LT(o0, o1) << "row " << m;
+                    continue;
+                }
+                ASSERT_LE(spread.links.source[k - 1], spread.links.source[k]) << "row " << m;
+            }
+        // The steady state is the unspread set's.
+        const Illumination e = lit(p);
+        const std::vector<Rgb> s0 = solve_steady(p.patches, plain, e), s1 = solve_steady(p.patches, spread, e);
+        double worst_steady = 0.0, brightest = 0.0;
+        for (std::size_t i = 0; i < n; ++i) brightest = std::max(brightest, double(s0[i][0]));
+        for (std::size_t i = 0; i < n; ++i) worst_steady = std::max(worst_steady, std::abs(double(s1[i][0] - s0[i][0])));
+        EXPECT_LT(worst_steady, 1e-5 * brightest);
+    }
+}
+
+TEST(LinkSpread, ALinksPiecesPlaceItsLightAsItsPathsDo) {
+    // A 1 m square sender 0.3 m above and 0.4 m beside a small receiver that faces it. The light that
+    // reaches the receiver's centroid from the sender is spread over its paths r = |c - y|, y on the
+    // sender, with density cos_c cos_y / r^2 (a 400 x 400 midpoint rule gives it here). One delay at
+    // the centroids' distance misplaces that light by the mean |r - d| (the Wasserstein distance of
+    // the two delay distributions); the pieces must misplace less than a quarter of that, and keep
+    // the mean path within a quarter of a 5 mm bin. (A sender this wide for its distance gets 144
+    // points; with the 16 of farther senders the mean was 65 mm short.)
+    PatchSet patches;
+    const Vec3 r[4] = {Vec3(-0.01, -0.01, 0), Vec3(0.01, -0.01, 0), Vec3(0.01, 0.01, 0), Vec3(-0.01, 0.01, 0)};
+    const Vec3 s[4] = {Vec3(0.4, 0, 0.3), Vec3(0.4, 1, 0.3), Vec3(1.4, 1, 0.3), Vec3(1.4, 0, 0.3)};
+    add_patch(patches, r, 4, Rgb::Constant(0.5), Rgb::Zero(), 0);
+    add_patch(patches, s, 4, Rgb::Constant(0.5), Rgb::Zero(), 1);
+    ASSERT_GT(patches.normal[0].z(), 0.0);
+    ASSERT_LT(patches.normal[1].z(), 0.0);
+    const Visibility vis(patches);
+    LinkSet set = flat_link_set(patches, vis);
+    ASSERT_EQ(set.links.size(), 2u);
+    const double centroids = set.links.distance[0];
+    spread_patch_links(set, patches, 0.005, 8);
+    std::vector<std::pair<double, double>> pieces;  // (path, weight) into patch 0
+    for (std::uint64_t k = set.links.row[0]; k < set.links.row[1]; ++k)
+        pieces.push_back({set.links.distance[k], set.links.ff[k]});
+    ASSERT_GE(pieces.size(), 4u);  // 16 points of unequal weight fill some of the 8 groups twice
+    const int grid = 400;
+    std::vector<std::pair<double, double>> exact;
+    for (int a = 0; a < grid; ++a)
+        for (int b = 0; b < grid; ++b) {
+            const Vec3 y = s[0] + (a + 0.5) / grid * (s[3] - s[0]) + (b + 0.5) / grid * (s[1] - s[0]);
+            const Vec3 d = y - patches.centroid[0];
+            const double r2 = d.squaredNorm();
+            exact.push_back({std::sqrt(r2), d.z() * d.z() / (r2 * r2)});
+        }
+    // W1 between two weighted point sets on a line: the integral of |F - G| over the path.
+    auto wasserstein = [](std::vector<std::pair<double, double>> p, std::vector<std::pair<double, double>> q) {
+        for (auto* v : {&p, &q}) {
+            double total = 0.0;
+            for (const auto& e : *v) total += e.second;
+            for (auto& e : *v) e.second /= total;
+            std::sort(v->begin(), v->end());
+        }
+        std::size_t i = 0, j = 0;
+        double fp = 0.0, fq = 0.0, x = std::min(p[0].first, q[0].first), sum = 0.0;
+        while (i < p.size() || j < q.size()) {
+            const double next = j == q.size() || (i < p.size() && p[i].first < q[j].first) ? p[i].first : q[j].first;
+            sum += std::abs(fp - fq) * (next - x);
+            x = next;
+            if (i < p.size() && p[i].first == next) fp += p[i++].second;
+            else fq += q[j++].second;
+        }
+        return sum;
+    };
+    double mean_exact = 0.0, mean_pieces = 0.0, total = 0.0;
+    for (const auto& [path, weight] : exact) mean_exact += path * weight, total += weight;
+    mean_exact /= total;
+    total = 0.0;
+    for (const auto& [path, weight] : pieces) mean_pieces += path * weight, total += weight;
+    mean_pieces /= total;
+    const double w_pieces = wasserstein(pieces, exact), w_one = wasserstein({{centroids, 1.0}}, exact);
+    MEASURED("mean path %.5f m (exact %.5f, centroids %.5f); misplaced path: pieces %.2f mm, one delay %.2f mm\n",
+             mean_pieces, mean_exact, centroids, 1e3 * w_pieces, 1e3 * w_one);
+    EXPECT_NEAR(mean_pieces, mean_exact, 0.25 * 0.005);
+    EXPECT_LT(w_pieces, 0.25 * w_one);
+}
+
 }  // namespace
 }  // namespace tprf

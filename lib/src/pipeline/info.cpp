@@ -61,12 +61,10 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     link_options.threads = options.threads;
     link_options.progress = options.progress;
     LinkStats link_stats;
-    LinkSet links;
-    if (scene.links.method == LinkMethod::Flat) {
-        links = flat_link_set(patches, visibility, link_options, &link_stats);
-    } else {
-        HierarchyStats stats;
-        links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options, &stats);
+    HierarchyStats stats;
+    LinkSet links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options, &stats,
+                                  &link_stats);
+    if (scene.links.method != LinkMethod::Flat) {
         s.clusters = links.tree.clusters();
         s.cluster_links = stats.cluster_links;
         s.patch_links = stats.leaf_links;
@@ -155,6 +153,8 @@ constexpr double kHierarchicalPatchBinSeconds = 5e-7;
 constexpr double kNearLinkSeconds = 5.5e-7;
 constexpr double kWriteSeconds = 0.2;                // the images and render.json
 constexpr double kCubeBytesPerSecond = 0.7e9;        // writing back the memory-mapped cubes
+constexpr double kSpreadBuildBytes = 16;          // link_spread.cpp: each piece in its row's list while the CSR is made
+constexpr double kSpreadSecondsPerLink = 2e-7;     // link_spread.cpp: 0.6 s for the Cornell box's 2.9M flat links
 constexpr double kSteadySecondsPerLink = 3e-8;       // the steady state (BiCGSTAB on the links, 3 channels)
 constexpr int kTapsPerSample = 8;                    // neighbouring patches a camera sample interpolates between
 constexpr int kTapsPerPixel = 32;                    // at most, once the samples of a pixel are merged
@@ -292,6 +292,19 @@ double lit_share(const Scene& scene, const PatchCensus& census) {
     return double(lit) / double(gx * gy);
 }
 
+// The pieces a patch link becomes under links.spread_pieces (0 when off): one per two bins of the
+// median sampled patch's extent (about twice its size), at most spread_pieces. The Cornell box at
+// 2,520 patches and 5 mm bins: 4 estimated, 2.9 made (bench/RESULTS.md).
+double spread_pieces(const Scene& scene, const PatchCensus& census) {
+    const double bin_m = scene.time.bin_width_m();
+    if (scene.links.spread_pieces <= 0 || census.samples.empty() || !(bin_m > 0.0)) return 0.0;
+    std::vector<double> areas;
+    for (const PatchSample& s : census.samples) areas.push_back(s.area);
+    std::nth_element(areas.begin(), areas.begin() + std::ptrdiff_t(areas.size() / 2), areas.end());
+    const double extent = 2.0 * patch_size(areas[areas.size() / 2]);
+    return std::clamp(std::floor(extent / (2.0 * bin_m)), 1.0, double(scene.links.spread_pieces));
+}
+
 // Links and the cluster tree, their bytes and the builder's seconds, for the scene's method.
 void estimate_links(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
     const double n = double(census.patches), others = std::max(n - 1.0, 0.0);
@@ -315,9 +328,18 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
         seconds = std::max(near * kNearLinkSeconds, kHierarchicalLinkSecondsScale *
                                                         std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor);
     }
+    double build = build_bytes * links + (tree > 0.0 ? kOracleBytesPerNode * rows : 0.0);
+    // links.spread_pieces (transport/link_spread.cpp): each patch link becomes up to that many pieces.
+    const double pieces = spread_pieces(scene, census);
+    if (pieces > 0.0) {
+        const double patch_links = scene.links.method == LinkMethod::Hierarchical ? std::min(links, shares.near * flat) : links;
+        links += patch_links * (pieces - 1.0);
+        build = std::max(build, (kSpreadBuildBytes + kLinkBytes) * patch_links * pieces);
+        seconds += patch_links * kSpreadSecondsPerLink;
+    }
     e.links = to_size(links);
     e.link_bytes = to_size(kLinkBytes * links + kRowBytes * (rows + n) + tree);
-    e.link_build_bytes = to_size(build_bytes * links + (tree > 0.0 ? kOracleBytesPerNode * rows : 0.0));
+    e.link_build_bytes = to_size(build);
     e.seconds.links = kEmbreeSeconds * n + seconds;
 }
 

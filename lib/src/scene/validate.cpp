@@ -400,6 +400,9 @@ void check_settings(const Scene& scene, const At& root) {
     const At time_bins = root.key("links").key("time_bins");
     finite(scene.links.time_bins, time_bins);
     if (scene.links.time_bins < 0.0) time_bins.fail("must be >= 0 (0 turns the timing criterion off)");
+    if (scene.links.spread_pieces < 0 || scene.links.spread_pieces > kMaxSpreadPieces)
+        root.key("links").key("spread_pieces").fail("must be an integer in [0, " + std::to_string(kMaxSpreadPieces) +
+                                                    "] (0: each patch link at its centroid delay)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
     if (scene.solver.max_specular < 0 || scene.solver.max_specular > 16)
         root.key("solver").key("max_specular").fail("must be in [0, 16]");

@@ -378,22 +378,7 @@ Links assemble(std::size_t nodes, std::vector<std::vector<LinkRecord>>& parts, f
         }
         std::vector<LinkRecord>().swap(part);
     }
-    parallel_for(nodes, {threads, 256, true}, [&](std::size_t m) {
-        const std::uint64_t a = links.row[m], b = links.row[m + 1];
-        std::vector<LinkRecord> row;
-        row.reserve(b - a);
-        for (std::uint64_t k = a; k < b; ++k) row.push_back({std::uint32_t(m), links.source[k], links.ff[k], links.distance[k]});
-        std::sort(row.begin(), row.end(), [inv_bin](const LinkRecord& p, const LinkRecord& q) {
-            const int op = delay_octave(p.distance, inv_bin), oq = delay_octave(q.distance, inv_bin);
-            if (op != oq) return op < oq;
-            return p.source != q.source ? p.source < q.source : p.distance < q.distance;
-        });
-        for (std::uint64_t k = a; k < b; ++k) {
-            links.source[k] = row[k - a].source;
-            links.ff[k] = row[k - a].ff;
-            links.distance[k] = row[k - a].distance;
-        }
-    });
+    sort_rows_by_octave(links, inv_bin, threads);
     return links;
 }
 
@@ -436,6 +421,34 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
 }
 
 }  // namespace
+
+void sort_rows_by_octave(Links& links, float inv_bin, int threads) {
+    struct Entry {
+        std::uint32_t source;
+        float ff, distance;
+        std::uint16_t tint;
+    };
+    const bool tinted = links.tinted();
+    parallel_for(links.receivers(), {threads, 256, true}, [&](std::size_t m) {
+        const std::uint64_t a = links.row[m], b = links.row[m + 1];
+        std::vector<Entry> row;
+        row.reserve(b - a);
+        for (std::uint64_t k = a; k < b; ++k)
+            row.push_back({links.source[k], links.ff[k], links.distance[k], tinted ? links.tint[k] : std::uint16_t(0)});
+        std::stable_sort(row.begin(), row.end(), [inv_bin](const Entry& p, const Entry& q) {
+            const int op = delay_octave(p.distance, inv_bin), oq = delay_octave(q.distance, inv_bin);
+            if (op != oq) return op < oq;
+            return p.source != q.source ? p.source < q.source : p.distance < q.distance;
+        });
+        for (std::uint64_t k = a; k < b; ++k) {
+            const Entry& e = row[k - a];
+            links.source[k] = e.source;
+            links.ff[k] = e.ff;
+            links.distance[k] = e.distance;
+            if (tinted) links.tint[k] = e.tint;
+        }
+    });
+}
 
 // The shortest cluster link, in bins: hierarchy.min_lag_bins, or when 0, four median patch sizes
 // (twice the median circumradius) in bins, between 1 and 8.

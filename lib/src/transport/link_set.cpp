@@ -13,13 +13,20 @@ LinkSet flat_link_set(const PatchSet& patches, const Visibility& visibility, con
 }
 
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options, HierarchyStats* stats) {
-    if (settings.method == LinkMethod::Flat) return flat_link_set(patches, visibility, options);
-    HierarchyOptions hierarchy;
-    hierarchy.tolerance = settings.tolerance;
-    hierarchy.bin_width_m = bin_width_m;
-    hierarchy.time_bins = settings.time_bins;
-    return hierarchical_link_set(patches, visibility, options, hierarchy, stats);
+                      double bin_width_m, const LinkOptions& options, HierarchyStats* stats, LinkStats* flat_stats) {
+    LinkSet set;
+    if (settings.method == LinkMethod::Flat) {
+        set = flat_link_set(patches, visibility, options, flat_stats);
+    } else {
+        HierarchyOptions hierarchy;
+        hierarchy.tolerance = settings.tolerance;
+        hierarchy.bin_width_m = bin_width_m;
+        hierarchy.time_bins = settings.time_bins;
+        set = hierarchical_link_set(patches, visibility, options, hierarchy, stats);
+    }
+    if (settings.spread_pieces > 0 && bin_width_m > 0.0)
+        spread_patch_links(set, patches, bin_width_m, settings.spread_pieces, options.threads);
+    return set;
 }
 
 }  // namespace tprf

@@ -112,6 +112,9 @@ enum class LinkMethod {
     Hierarchical,  ///< links between clusters of patches wherever the error stays under `tolerance`
 };
 
+/// Most pieces links.spread_pieces may ask for one patch link.
+inline constexpr int kMaxSpreadPieces = 8;
+
 /// The optional `links` block.
 struct LinkSettings {
     LinkMethod method = LinkMethod::Flat;  ///< flat until the hierarchical method is measured (docs/links.md)
@@ -119,6 +122,10 @@ struct LinkSettings {
     /// >= 0: refine a cluster link whose form factor times its members' timing offset in bins exceeds
     /// time_bins x tolerance (HierarchyOptions::time_bins); 0: off. Beyond SPEC (docs/links.md).
     double time_bins = 4.0;
+    /// 0: every patch-to-patch link at its centroid delay; n in 1..8: spread over the paths from the
+    /// receiver to the points of the sender, in at most n pieces (spread_patch_links). Beyond SPEC
+    /// (docs/links.md).
+    int spread_pieces = 0;
 };
 
 /// A grid of points on a relay surface (SPEC.md v2, "Capture"): point (a, b) is

@@ -50,6 +50,18 @@ struct LinkSet {
     std::size_t bytes() const { return tree.bytes() + links.bytes(); }
 };
 
+/// Spreads every patch-to-patch link of `set` over the paths between its two patches: a link whose
+/// kernel-weighted paths span more than two bins of `bin_width_m` becomes pieces of equal weight
+/// (at most max_pieces, one per two bins of span), each at its weighted mean path; their form factors
+/// sum to the link's. Keeps each row's order (sorted again by delay octave when the set has clusters).
+/// Returns the number of links added.
+std::uint64_t spread_patch_links(LinkSet& set, const PatchSet& patches, double bin_width_m, int max_pieces,
+                                 int threads = 0);
+
+/// Sorts every row of `links` by delay octave (for bins of 1 / inv_bin), then source, then distance: the
+/// order of a hierarchical set's rows.
+void sort_rows_by_octave(Links& links, float inv_bin, int threads = 0);
+
 /// The flat method: every facing, visible pair of patches (compute_links), no clusters.
 LinkSet flat_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options = {},
                       LinkStats* stats = nullptr);
@@ -95,9 +107,11 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
                                const LinkOptions& options, double bin_width_m);
 
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
-/// `bin_width_m` (and then its counts in `stats`, when given). Links through mirrors are the caller's
-/// next step (add_mirror_links), so that it can report them.
+/// `bin_width_m` (and then its counts in `stats`, when given; a flat build's in `flat_stats`), its
+/// patch links spread when settings.spread_pieces > 0 (spread_patch_links). Links through mirrors are
+/// the caller's next step (add_mirror_links), so that it can report them.
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr);
+                      double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr,
+                      LinkStats* flat_stats = nullptr);
 
 }  // namespace tprf
