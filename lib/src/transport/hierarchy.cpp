@@ -322,38 +322,13 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     return true;
 }
 
-// The link's delay kernel from the sampled paths, weighted by their kernel values: one piece per two
-// bins that the paths span, at most m_pieces, of about equal weight, each at its weighted
-// mean path (so that the total and the mean delay are the samples' exactly).
+// The link's delay kernel from the sampled paths, weighted by their kernel values (delay_pieces: each
+// piece at its weighted mean path, so that the total and the mean delay are the samples' exactly).
 void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path,
                           const double* weight, int count, std::vector<LinkRecord>& out) const {
-    int order[kMaxSamples];
-    int used = 0;
-    double total = 0.0, lo = INFINITY, hi = 0.0;
-    for (int q = 0; q < count; ++q)
-        if (weight[q] > 0.0) {
-            order[used++] = q;
-            total += weight[q];
-            lo = std::min(lo, path[q]);
-            hi = std::max(hi, path[q]);
-        }
-    // A piece's linear split already spreads it over two bins: one piece per two bins of spread.
-    const int wanted = m_h.bin_width_m > 0.0 ? int((hi - lo) / (2.0 * m_h.bin_width_m)) : 0;
-    const int pieces = std::clamp(wanted, 1, std::min(m_pieces, used));
-    std::sort(order, order + used, [&](int a, int b) { return path[a] < path[b]; });
-    double piece_w[kMaxPieces] = {}, piece_p[kMaxPieces] = {}, before = 0.0;
-    for (int u = 0; u < used; ++u) {
-        const int q = order[u];
-        const int g = std::min(pieces - 1, int((before + 0.5 * weight[q]) / total * pieces));
-        piece_w[g] += weight[q];
-        piece_p[g] += weight[q] * path[q];
-        before += weight[q];
-    }
-    for (int g = 0; g < pieces; ++g) {
-        if (!(piece_w[g] > 0.0)) continue;
-        const double share = piece_w[g] / total;
-        emit(r, s, f_rs * share, f_sr * share, float(piece_p[g] / piece_w[g]), out);
-    }
+    double share[kMaxPieces], mean[kMaxPieces];
+    const int pieces = delay_pieces(path, weight, count, m_h.bin_width_m, m_pieces, share, mean);
+    for (int g = 0; g < pieces; ++g) emit(r, s, f_rs * share[g], f_sr * share[g], float(mean[g]), out);
 }
 
 // The CSR by receiver, within a row by delay octave (for bins of 1 / inv_bin; all one octave when

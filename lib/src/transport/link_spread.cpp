@@ -35,6 +35,7 @@ constexpr int kPoints = kSide * kSide;
 constexpr double kNearRatio = 0.25;
 constexpr int kNearSide = 12;
 constexpr int kMaxPoints = kNearSide * kNearSide;
+static_assert(kMaxPoints <= kMaxPiecePaths);
 
 struct PieceSet {
     int count = 0;
@@ -65,7 +66,6 @@ PieceSet link_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int
     const Eigen::Vector3f x = patches.centroid[i].cast<float>();
     const Eigen::Vector3f ni = patches.normal[i].cast<float>(), nj = patches.normal[j].cast<float>();
     std::array<float, kMaxPoints> path, weight;
-    float lo = INFINITY, hi = 0.0f, total = 0.0f;
     int used = 0;
     for (int s = 0; s < count; ++s) {
         const Eigen::Vector3f d = points[s] - x;
@@ -76,32 +76,13 @@ PieceSet link_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int
         path[std::size_t(used)] = r;
         weight[std::size_t(used)] = k;
         ++used;
-        total += k;
-        lo = std::min(lo, r);
-        hi = std::max(hi, r);
     }
     PieceSet out;
-    if (used == 0 || !(total > 0.0f)) return out;  // no point of j faces i's centroid: the link stays as it is
-    // A piece's linear split already spreads it over two bins: one piece per two bins of span.
-    const int pieces = std::clamp(int(double(hi - lo) / (2.0 * bin_width)), 1, max_pieces);
-    std::array<int, kMaxPoints> order;
-    for (int u = 0; u < used; ++u) order[std::size_t(u)] = u;
-    if (pieces > 1)
-        std::sort(order.begin(), order.begin() + used, [&](int a, int b) { return path[std::size_t(a)] < path[std::size_t(b)]; });
-    std::array<double, kMaxSpreadPieces> w{}, wp{};
-    double before = 0.0;
-    for (int u = 0; u < used; ++u) {
-        const std::size_t q = std::size_t(order[std::size_t(u)]);
-        const int g = std::min(pieces - 1, int((before + 0.5 * weight[q]) / total * pieces));
-        w[std::size_t(g)] += weight[q];
-        wp[std::size_t(g)] += double(weight[q]) * path[q];
-        before += weight[q];
-    }
-    for (int g = 0; g < pieces; ++g) {
-        if (!(w[std::size_t(g)] > 0.0)) continue;
-        out.share[std::size_t(out.count)] = float(w[std::size_t(g)] / before);
-        out.distance[std::size_t(out.count)] = float(wp[std::size_t(g)] / w[std::size_t(g)]);
-        ++out.count;
+    double share[kMaxSpreadPieces], mean[kMaxSpreadPieces];
+    out.count = delay_pieces(path.data(), weight.data(), used, bin_width, max_pieces, share, mean);
+    for (int g = 0; g < out.count; ++g) {
+        out.share[std::size_t(g)] = float(share[g]);
+        out.distance[std::size_t(g)] = float(mean[g]);
     }
     return out;
 }

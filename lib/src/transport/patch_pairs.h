@@ -5,6 +5,8 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/transport/links.h"
 
+#include <algorithm>
+#include <cmath>
 #include <vector>
 
 namespace tprf {
@@ -41,6 +43,53 @@ bool near_pair(const PatchSet& patches, const std::vector<double>& radius, doubl
 /// diffuse light: links to or from it would carry nothing.
 inline bool inert(const PatchSet& patches, std::size_t i) {
     return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
+}
+
+/// Most weighted paths delay_pieces takes.
+constexpr int kMaxPiecePaths = 256;
+
+/// A delay kernel from `count` weighted paths (those of weight <= 0 left out): one piece per two
+/// bins of `bin_width` that they span (one when bin_width is 0), at most max_pieces and at most one
+/// per path, cut from the paths sorted by length into groups of about equal weight. Writes each
+/// non-empty group's share of the total weight and its weighted mean path; returns how many (0: no
+/// path has weight). The shares sum to 1 and the mean of the pieces is the paths' weighted mean.
+/// (The kernels of cluster links, hierarchy.cpp, and of spread patch links, link_spread.cpp.)
+template <typename T>
+int delay_pieces(const T* path, const T* weight, int count, double bin_width, int max_pieces, double* share,
+                 double* mean_path) {
+    count = std::min(count, kMaxPiecePaths);
+    int order[kMaxPiecePaths];
+    int used = 0;
+    double total = 0.0, lo = INFINITY, hi = 0.0;
+    for (int q = 0; q < count; ++q)
+        if (weight[q] > 0) {
+            order[used++] = q;
+            total += double(weight[q]);
+            lo = std::min(lo, double(path[q]));
+            hi = std::max(hi, double(path[q]));
+        }
+    if (used == 0 || !(total > 0.0)) return 0;
+    // A piece's linear split already spreads it over two bins: one piece per two bins of span.
+    const int wanted = bin_width > 0.0 ? int((hi - lo) / (2.0 * bin_width)) : 0;
+    const int pieces = std::clamp(wanted, 1, std::max(1, std::min(max_pieces, used)));
+    if (pieces > 1) std::sort(order, order + used, [&](int a, int b) { return path[a] < path[b]; });
+    for (int g = 0; g < pieces; ++g) share[g] = mean_path[g] = 0.0;
+    double before = 0.0;
+    for (int u = 0; u < used; ++u) {
+        const int q = order[u];
+        const int g = std::min(pieces - 1, int((before + 0.5 * double(weight[q])) / total * pieces));
+        share[g] += double(weight[q]);
+        mean_path[g] += double(weight[q]) * double(path[q]);
+        before += double(weight[q]);
+    }
+    int kept = 0;
+    for (int g = 0; g < pieces; ++g) {
+        if (!(share[g] > 0.0)) continue;
+        mean_path[kept] = mean_path[g] / share[g];
+        share[kept] = share[g] / total;
+        ++kept;
+    }
+    return kept;
 }
 
 /// Circumradius of every patch.
