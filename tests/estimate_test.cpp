@@ -4,6 +4,8 @@
 #include "test_scenes.h"
 #include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/scene/parse_json.h"
 
@@ -141,6 +143,28 @@ TEST(ResourceEstimate, CountsTheNearFieldOfHierarchicalLinks) {
     EXPECT_LT(double(e.links), 2.0 * near);
     // 2.2e9 links: far over any machine's memory, so a render is refused before it starts.
     EXPECT_GT(e.peak_bytes, std::size_t(20e9));
+}
+
+TEST(ResourceEstimate, CountsThePiecesOfSpreadPatchLinks) {
+    // links.spread_pieces turns each patch link into up to that many pieces, one per two bins of the
+    // sender's extent (transport/link_spread.cpp). The Cornell box at 10 cm patches and 5 mm bins: the
+    // estimate against the links a build makes, both without and with 4 pieces, within the factor of 2
+    // the estimate aims at.
+    tprf::Scene scene = tprf::load_scene(sample_scene("cornell-box.json"));
+    scene.max_edge = 0.1;
+    scene.time.bin_width = 0.005;
+    scene.time.unit = tprf::TimeUnit::Metres;
+    const tprf::PatchSet patches = tprf::build_patches(scene);
+    const tprf::Visibility visibility(patches);
+    for (const int pieces : {0, 4}) {
+        scene.links.spread_pieces = pieces;
+        const tprf::ResourceEstimate e = tprf::estimate_resources(scene, {});
+        const tprf::LinkSet made =
+            tprf::make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), tprf::LinkOptions{});
+        MEASURED("spread_pieces %d: %zu links estimated, %zu made\n", pieces, e.links, made.links.size());
+        EXPECT_GT(double(e.links), 0.5 * double(made.links.size())) << pieces << " pieces";
+        EXPECT_LT(double(e.links), 2.0 * double(made.links.size())) << pieces << " pieces";
+    }
 }
 
 // A capture without a camera that marches solves its laser points in batches: 12 x 12 = 144 points make
