@@ -867,25 +867,6 @@ TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
     }
 }
 
-// Distance from x to the convex planar polygon of patch j (its plane's foot when inside, else the
-// nearest edge).
-double distance_to_patch(const PatchSet& patches, std::size_t j, const Vec3& x) {
-    const Vec3* poly = patches.polygon(j);
-    const std::size_t count = patches.corners(j);
-    const Vec3& n = patches.normal[j];
-    const Vec3 foot = x - n.dot(x - poly[0]) * n;
-    bool inside = true;
-    double nearest = INFINITY;
-    for (std::size_t k = 0; k < count; ++k) {
-        const Vec3& a = poly[k];
-        const Vec3& b = poly[(k + 1) % count];
-        if ((b - a).cross(foot - a).dot(n) < 0.0) inside = false;
-        const double t = std::clamp((x - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
-        nearest = std::min(nearest, (x - (a + t * (b - a))).norm());
-    }
-    return inside ? (x - foot).norm() : nearest;
-}
-
 TEST(LinkSpread, PiecesKeepEveryLinksFormFactorAndLieOnItsPaths) {
     // links.spread_pieces: a patch link becomes pieces along the paths from its receiver's centroid to
     // the sender's points. Their form factors sum to the link's (so the steady state and every energy
@@ -924,7 +905,8 @@ TEST(LinkSpread, PiecesKeepEveryLinksFormFactorAndLieOnItsPaths) {
             double farthest = 0.0;
             for (std::size_t k = 0; k < p.patches.corners(j); ++k)
                 farthest = std::max(farthest, (p.patches.polygon(j)[k] - c).norm());
-            worst_early = std::max(worst_early, distance_to_patch(p.patches, j, c) - b[q].d_min);
+            worst_early = std::max(worst_early, distance_to_polygon(c, p.patches.polygon(j), p.patches.corners(j),
+                                                                        p.patches.normal[j]) - b[q].d_min);
             worst_late = std::max(worst_late, b[q].d_max - farthest);
         }
         MEASURED("%s: %zu -> %zu links; form factor %.2g; pieces up to %d; earliest piece %.2g m before the "

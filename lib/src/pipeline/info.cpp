@@ -227,17 +227,21 @@ PairShares pair_shares(const Scene& scene, const PatchCensus& census, double blo
     return s;
 }
 
+// Twice the size of the median sampled patch (census.samples, not empty): the extent of a typical patch.
+double median_extent(const PatchCensus& census) {
+    std::vector<double> areas;
+    for (const PatchSample& s : census.samples) areas.push_back(s.area);
+    std::nth_element(areas.begin(), areas.begin() + std::ptrdiff_t(areas.size() / 2), areas.end());
+    return 2.0 * patch_size(areas[areas.size() / 2]);
+}
+
 // The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
 // cluster link (hierarchy.cpp min_lag: four median patch sizes in bins, 1 to 8 bins) are refined, so
 // every facing pair of patches whose gap is shorter is a link of its own. The sampled patches' median
 // size stands for the set's.
 double near_gap_m(const PatchCensus& census, double bin_m) {
     if (census.samples.empty() || !(bin_m > 0.0)) return 0.0;
-    std::vector<double> areas;
-    for (const PatchSample& s : census.samples) areas.push_back(s.area);
-    std::nth_element(areas.begin(), areas.begin() + std::ptrdiff_t(areas.size() / 2), areas.end());
-    const double size = 2.0 * patch_size(areas[areas.size() / 2]);
-    return std::clamp(std::floor(4.0 * size / bin_m), 1.0, 8.0) * bin_m;
+    return std::clamp(std::floor(4.0 * median_extent(census) / bin_m), 1.0, 8.0) * bin_m;
 }
 
 // Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver_plan.cpp
@@ -293,16 +297,12 @@ double lit_share(const Scene& scene, const PatchCensus& census) {
 }
 
 // The pieces a patch link becomes under links.spread_pieces (0 when off): one per two bins of the
-// median sampled patch's extent (about twice its size), at most spread_pieces. The Cornell box at
+// median sampled patch's extent (median_extent), at most spread_pieces. The Cornell box at
 // 2,520 patches and 5 mm bins: 4 estimated, 2.9 made (bench/RESULTS.md).
 double spread_pieces(const Scene& scene, const PatchCensus& census) {
     const double bin_m = scene.time.bin_width_m();
     if (scene.links.spread_pieces <= 0 || census.samples.empty() || !(bin_m > 0.0)) return 0.0;
-    std::vector<double> areas;
-    for (const PatchSample& s : census.samples) areas.push_back(s.area);
-    std::nth_element(areas.begin(), areas.begin() + std::ptrdiff_t(areas.size() / 2), areas.end());
-    const double extent = 2.0 * patch_size(areas[areas.size() / 2]);
-    return std::clamp(std::floor(extent / (2.0 * bin_m)), 1.0, double(scene.links.spread_pieces));
+    return std::clamp(std::floor(median_extent(census) / (2.0 * bin_m)), 1.0, double(scene.links.spread_pieces));
 }
 
 // Links and the cluster tree, their bytes and the builder's seconds, for the scene's method.

@@ -398,25 +398,20 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
 }  // namespace
 
 void sort_rows_by_octave(Links& links, float inv_bin, int threads) {
-    struct Entry {
-        std::uint32_t source;
-        float ff, distance;
-        std::uint16_t tint;
-    };
     const bool tinted = links.tinted();
     parallel_for(links.receivers(), {threads, 256, true}, [&](std::size_t m) {
         const std::uint64_t a = links.row[m], b = links.row[m + 1];
-        std::vector<Entry> row;
+        std::vector<RowLink> row;
         row.reserve(b - a);
         for (std::uint64_t k = a; k < b; ++k)
             row.push_back({links.source[k], links.ff[k], links.distance[k], tinted ? links.tint[k] : std::uint16_t(0)});
-        std::stable_sort(row.begin(), row.end(), [inv_bin](const Entry& p, const Entry& q) {
+        std::stable_sort(row.begin(), row.end(), [inv_bin](const RowLink& p, const RowLink& q) {
             const int op = delay_octave(p.distance, inv_bin), oq = delay_octave(q.distance, inv_bin);
             if (op != oq) return op < oq;
             return p.source != q.source ? p.source < q.source : p.distance < q.distance;
         });
         for (std::uint64_t k = a; k < b; ++k) {
-            const Entry& e = row[k - a];
+            const RowLink& e = row[k - a];
             links.source[k] = e.source;
             links.ff[k] = e.ff;
             links.distance[k] = e.distance;

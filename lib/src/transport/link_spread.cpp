@@ -37,11 +37,6 @@ constexpr int kNearSide = 12;
 constexpr int kMaxPoints = kNearSide * kNearSide;
 static_assert(kMaxPoints <= kMaxPiecePaths);
 
-struct PieceSet {
-    int count = 0;
-    std::array<float, kMaxSpreadPieces> share{}, distance{};
-};
-
 // side x side points of patch j, one jittered in each stratum of its unit square, uniform in area.
 void strata_points(const PatchSet& patches, std::size_t j, int side, Eigen::Vector3f* out) {
     for (int s = 0; s < side * side; ++s) {
@@ -59,10 +54,11 @@ std::vector<Eigen::Vector3f> source_points(const PatchSet& patches, int threads)
     return points;
 }
 
-// The pieces of the link into patch i from patch j: its paths from i's centroid to j's points, weighted
-// by the kernel cos_i cos_j / r^2; at most max_pieces, one per two bins that the paths span.
-PieceSet link_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int count, std::size_t i,
-                     std::size_t j, double bin_width, int max_pieces) {
+// Appends to `row` the pieces of `link`, into patch i from patch j: its paths from i's centroid to j's
+// points, weighted by the kernel cos_i cos_j / r^2; at most max_pieces, one per two bins that the
+// paths span. The link itself when no point of j faces i's centroid.
+void append_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int count, std::size_t i,
+                   std::size_t j, double bin_width, int max_pieces, const RowLink& link, std::vector<RowLink>& row) {
     const Eigen::Vector3f x = patches.centroid[i].cast<float>();
     const Eigen::Vector3f ni = patches.normal[i].cast<float>(), nj = patches.normal[j].cast<float>();
     std::array<float, kMaxPoints> path, weight;
@@ -72,19 +68,14 @@ PieceSet link_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int
         const float r2 = d.squaredNorm();
         const float k = std::max(0.0f, ni.dot(d)) * std::max(0.0f, -nj.dot(d)) / (r2 * r2);
         if (!(k > 0.0f) || !std::isfinite(k)) continue;
-        const float r = std::sqrt(r2);
-        path[std::size_t(used)] = r;
+        path[std::size_t(used)] = std::sqrt(r2);
         weight[std::size_t(used)] = k;
         ++used;
     }
-    PieceSet out;
     double share[kMaxSpreadPieces], mean[kMaxSpreadPieces];
-    out.count = delay_pieces(path.data(), weight.data(), used, bin_width, max_pieces, share, mean);
-    for (int g = 0; g < out.count; ++g) {
-        out.share[std::size_t(g)] = float(share[g]);
-        out.distance[std::size_t(g)] = float(mean[g]);
-    }
-    return out;
+    const int pieces = delay_pieces(path.data(), weight.data(), used, bin_width, max_pieces, share, mean);
+    if (pieces == 0) row.push_back(link);
+    for (int g = 0; g < pieces; ++g) row.push_back({link.source, link.ff * float(share[g]), float(mean[g]), link.tint});
 }
 
 }  // namespace
@@ -97,31 +88,24 @@ std::uint64_t spread_patch_links(LinkSet& set, const PatchSet& patches, double b
     const std::size_t nodes = in.receivers(), leaves = set.patches();
     const bool tinted = in.tinted();
     // Each row's links with their pieces, then the rows' lengths, then the CSR.
-    struct Piece {
-        std::uint32_t source;
-        float ff, distance;
-        std::uint16_t tint;
-    };
     const std::vector<Eigen::Vector3f> points = source_points(patches, threads);
     const std::vector<double> radius = circumradii(patches);
-    const auto pieces_of = [&](std::size_t i, std::size_t j) {
-        if (i >= leaves || j >= leaves || i == j) return PieceSet{};
-        if (radius[j] <= kNearRatio * (patches.centroid[i] - patches.centroid[j]).norm())
-            return link_pieces(patches, points.data() + j * kPoints, kPoints, i, j, bin_width_m, max_pieces);
-        std::array<Eigen::Vector3f, kMaxPoints> near;
-        strata_points(patches, j, kNearSide, near.data());
-        return link_pieces(patches, near.data(), kMaxPoints, i, j, bin_width_m, max_pieces);
-    };
-    std::vector<std::vector<Piece>> rows(nodes);
+    std::vector<std::vector<RowLink>> rows(nodes);
     parallel_for(nodes, {threads, 64, true}, [&](std::size_t m) {
-        std::vector<Piece>& row = rows[m];
+        std::vector<RowLink>& row = rows[m];
         row.reserve(in.row[m + 1] - in.row[m]);
+        std::array<Eigen::Vector3f, kMaxPoints> near;
         for (std::uint64_t k = in.row[m]; k < in.row[m + 1]; ++k) {
-            const std::uint16_t tint = tinted ? in.tint[k] : std::uint16_t(0);
-            const PieceSet p = pieces_of(m, in.source[k]);
-            if (p.count == 0) row.push_back({in.source[k], in.ff[k], in.distance[k], tint});
-            for (int g = 0; g < p.count; ++g)
-                row.push_back({in.source[k], in.ff[k] * p.share[std::size_t(g)], p.distance[std::size_t(g)], tint});
+            const std::size_t j = in.source[k];
+            const RowLink link{in.source[k], in.ff[k], in.distance[k], tinted ? in.tint[k] : std::uint16_t(0)};
+            if (m >= leaves || j >= leaves || m == j) {
+                row.push_back(link);
+            } else if (radius[j] <= kNearRatio * (patches.centroid[m] - patches.centroid[j]).norm()) {
+                append_pieces(patches, points.data() + j * kPoints, kPoints, m, j, bin_width_m, max_pieces, link, row);
+            } else {
+                strata_points(patches, j, kNearSide, near.data());
+                append_pieces(patches, near.data(), kMaxPoints, m, j, bin_width_m, max_pieces, link, row);
+            }
         }
     });
     const std::uint64_t before = in.size();
@@ -137,14 +121,14 @@ std::uint64_t spread_patch_links(LinkSet& set, const PatchSet& patches, double b
     if (tinted) out.tint.resize(total);
     parallel_for(nodes, {threads, 256, true}, [&](std::size_t m) {
         std::uint64_t at = out.row[m];
-        for (const Piece& p : rows[m]) {
+        for (const RowLink& p : rows[m]) {
             out.source[at] = p.source;
             out.ff[at] = p.ff;
             out.distance[at] = p.distance;
             if (tinted) out.tint[at] = p.tint;
             ++at;
         }
-        std::vector<Piece>().swap(rows[m]);
+        std::vector<RowLink>().swap(rows[m]);
     });
     if (nodes > leaves) sort_rows_by_octave(out, float(1.0 / bin_width_m), threads);
     in = std::move(out);

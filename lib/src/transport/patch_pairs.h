@@ -2,6 +2,7 @@
 // Private to the transport stage: the patch-to-patch form factor that flat links use for every pair
 // and hierarchical links for the pairs they refine down to single patches.
 
+#include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/transport/links.h"
 
@@ -57,7 +58,7 @@ constexpr int kMaxPiecePaths = 256;
 template <typename T>
 int delay_pieces(const T* path, const T* weight, int count, double bin_width, int max_pieces, double* share,
                  double* mean_path) {
-    count = std::min(count, kMaxPiecePaths);
+    TPRF_CHECK_LE(count, kMaxPiecePaths);
     int order[kMaxPiecePaths];
     int used = 0;
     double total = 0.0, lo = INFINITY, hi = 0.0;
@@ -91,6 +92,13 @@ int delay_pieces(const T* path, const T* weight, int count, double bin_width, in
     }
     return kept;
 }
+
+/// One link of a row while the row is rebuilt or reordered (spread_patch_links, sort_rows_by_octave).
+struct RowLink {
+    std::uint32_t source;
+    float ff, distance;
+    std::uint16_t tint;
+};
 
 /// Circumradius of every patch.
 std::vector<double> circumradii(const PatchSet& patches);
