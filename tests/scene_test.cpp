@@ -160,8 +160,13 @@ TEST(Scene, CameraDefaultsToOneSampleAndNoUnwarp) {
     const tprf::Scene s = tprf::parse_scene(j.dump(), dir.path / "scene.json");
     EXPECT_EQ(s.camera->spp, 1);
     EXPECT_FALSE(s.camera->unwarp);
+    EXPECT_TRUE(s.camera->footprint);
+    EXPECT_TRUE(s.camera->shift_second_bounce);
     j["camera"]["unwarp"] = true;
-    EXPECT_TRUE(tprf::parse_scene(j.dump(), dir.path / "scene.json").camera->unwarp);
+    j["camera"]["shift_second_bounce"] = false;
+    const tprf::Scene t = tprf::parse_scene(j.dump(), dir.path / "scene.json");
+    EXPECT_TRUE(t.camera->unwarp);
+    EXPECT_FALSE(t.camera->shift_second_bounce);
 }
 
 TEST(Scene, PicosecondsAreOpticalPathLength) {
@@ -338,6 +343,8 @@ std::vector<BadCase> bad_cases() {
         edit("bool as number", [](json& s) { s["objects"][0]["two_sided"] = 1; },
              {"objects[0].two_sided: expected true or false"}),
         edit("unwarp as string", [](json& s) { s["camera"]["unwarp"] = "yes"; }, {"camera.unwarp: expected true"}),
+        edit("shift as number", [](json& s) { s["camera"]["shift_second_bounce"] = 1; },
+             {"camera.shift_second_bounce: expected true"}),
         edit("unit not a string", [](json& s) { s["time"]["unit"] = 1; }, {"time.unit: expected a string"}),
         edit("time not an object", [](json& s) { s["time"] = 5; }, {"time: expected an object"}),
         edit("lights not an array", [](json& s) { s["lights"] = json::object(); }, {"lights: expected an array"}),

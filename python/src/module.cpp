@@ -313,6 +313,7 @@ py::object scene_camera(const PyScene& s) {
     d["fov"] = c.fov_deg;
     d["unwarp"] = c.unwarp;
     d["footprint"] = c.footprint;
+    d["shift_second_bounce"] = c.shift_second_bounce;
     return d;
 }
 

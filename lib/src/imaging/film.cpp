@@ -4,6 +4,7 @@
 #include "tprf/imaging/gather.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
+#include "tprf/transport/first_link.h"
 #include "tprf/transport/solver.h"
 
 #include <algorithm>
@@ -51,7 +52,7 @@ void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& tap
 
 }  // namespace
 
-FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads) {
+FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads, bool shifted) {
     const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
     const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
     std::vector<std::vector<FilmTaps::Tap>> per_pixel(pixels);
@@ -62,7 +63,7 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         shares.clear();
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
             const PixelTap& tap = gather.taps[k];
-            const double lag = double(tap.leg) * inv_bin;
+            const double lag = (double(tap.leg) + (shifted ? double(tap.shift) : 0.0)) * inv_bin;
             const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
             if (delay == DelayMode::Nearest) {
                 shares.push_back({tap.patch, tap.tint, std::int32_t(std::floor(lag + 0.5)), first, tap.weight});
@@ -102,9 +103,19 @@ TransientFilm::TransientFilm(const Gather& gather, const Illumination& illuminat
                              DelayMode delay, float* cube, int order, bool last_is_tail, int threads,
                              std::shared_ptr<const FilmTaps> taps)
     : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(order),
-      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)),
+      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)), m_delay(delay),
       m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))),
       m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, std::int64_t(kFilmPadBins))) {}
+
+void TransientFilm::read_first_link_apart(const FirstLinkLight* light, std::shared_ptr<const FilmTaps> shifted) {
+    TPRF_CHECK(m_capacity == 0);  // before the first block
+    if (!light) return;
+    m_first_link = light;
+    m_shifted = shifted ? std::move(shifted)
+                        : std::make_shared<const FilmTaps>(film_taps(m_gather, m_time, m_delay, m_threads, true));
+    const std::int64_t longest = std::max(m_taps->longest, m_shifted->longest);
+    m_pad = std::min<std::int64_t>(longest - 1, std::int64_t(kFilmPadBins));
+}
 
 bool TransientFilm::takes_order(int order) const {
     return m_order < 0 || order == m_order || (m_last_is_tail && order > m_order);
@@ -136,6 +147,7 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
     if (m_capacity == 0) {  // the rows, zero: the padding is never written, the kept bins always are
         m_capacity = film_buffer_bins(n, bins);
         m_indirect.assign(n * (m_capacity + 2 * pad) * 3 + kSlack, 0.0f);
+        if (m_first_link) m_first.assign(m_indirect.size(), 0.0f);
     }
     const std::size_t stride = (m_capacity + 2 * pad) * 3;
     if (m_kept == 0) m_first_bin = block.first_bin;
@@ -161,11 +173,11 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
 // One tap over the block, a bin of its kernel at a time: out[base + t + j] += kernel[j] B[t], where
 // `profile` is the patch's row at the block's bin 0 and `out` the pixel's profile. Light the patch
 // average puts ahead of the earliest possible arrival goes to that bin.
-void TransientFilm::add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t n,
-                               float* out) const {
+void TransientFilm::add_kernel(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,
+                               std::int64_t n, float* out) const {
     const std::int64_t T = m_time.bins;
-    const float* kernel = m_taps->weights.data() + tap.offset;
-    const float* tint = tap.tint != 0 ? m_taps->tints[tap.tint].data() : nullptr;
+    const float* kernel = taps.weights.data() + tap.offset;
+    const float* tint = tap.tint != 0 ? taps.tints[tap.tint].data() : nullptr;
     const bool carry = tap.first >= 0 && tap.first < T;
     float carried[3] = {0, 0, 0};
     for (std::uint32_t j = 0; j < tap.length; ++j) {
@@ -198,10 +210,10 @@ void TransientFilm::add_kernel(const FilmTaps::Tap& tap, const float* profile, s
 // reach [base, base + n + length - 1) takes sum_j kernel[j] B[u - base - j] in one pass (the padding
 // holds the zeros beyond the block), so each output is read and written once, not once per bin of the
 // kernel. The same sums as add_kernel but for float rounding.
-void TransientFilm::add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t n,
-                              float* out) const {
+void TransientFilm::add_fused(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,
+                              std::int64_t n, float* out) const {
     const std::int64_t T = m_time.bins, length = std::int64_t(tap.length);
-    const float* kernel = m_taps->weights.data() + tap.offset;
+    const float* kernel = taps.weights.data() + tap.offset;
     // profile[e - 3 base - 3j] = B[u - base - j] for e = 3u + c (zero outside the block, in the padding).
     const std::int64_t shift = 3 * base;
     const auto sum = [&](std::int64_t e) {
@@ -243,16 +255,27 @@ void TransientFilm::add_fused(const FilmTaps::Tap& tap, const float* profile, st
 
 // One pixel's taps over the block: each reads its patch's profile and spreads it over its kernel
 // (the pixel's legs to that patch, split between bins).
-void TransientFilm::add_taps(std::size_t px, int first_bin, std::size_t bins, std::size_t stride) {
+void TransientFilm::add_taps(const FilmTaps& taps, const std::vector<float>& rows, const std::vector<char>* lit,
+                             std::size_t px, int first_bin, std::size_t bins, std::size_t stride) {
     float* out = m_cube + px * std::size_t(m_time.bins) * 3;
-    for (std::uint64_t k = m_taps->row[px]; k < m_taps->row[px + 1]; ++k) {
-        const FilmTaps::Tap& tap = m_taps->taps[k];
-        const float* profile = m_indirect.data() + std::size_t(tap.patch) * stride + std::size_t(m_pad) * 3;
-        const std::int64_t base = first_bin + tap.lag;  // output bin of the block's bin 0 (kernel bin 0)
+    for (std::uint64_t k = taps.row[px]; k < taps.row[px + 1]; ++k) {
+        const FilmTaps::Tap& tap = taps.taps[k];
+        const float* profile = rows.data() + std::size_t(tap.patch) * stride + std::size_t(m_pad) * 3;
+        std::int64_t base = first_bin + tap.lag;  // output bin of the block's bin 0 (kernel bin 0)
+        std::int64_t n = std::int64_t(bins);
+        if (lit) {  // first-link light: only the bins its links can reach hold any (zeros around them)
+            if (!(*lit)[tap.patch]) continue;
+            const auto [lo, hi] = m_first_link->bins_of(tap.patch);
+            const std::int64_t skip = std::max<std::int64_t>(0, lo - first_bin);
+            n = std::min<std::int64_t>(n, hi - first_bin) - skip;
+            if (n <= 0) continue;
+            profile += skip * 3;
+            base += skip;
+        }
         if (tap.tint == 0 && std::int64_t(tap.length) <= m_pad + 1)
-            add_fused(tap, profile, base, std::int64_t(bins), out);
+            add_fused(taps, tap, profile, base, n, out);
         else
-            add_kernel(tap, profile, base, std::int64_t(bins), out);
+            add_kernel(taps, tap, profile, base, n, out);
     }
 }
 
@@ -267,9 +290,24 @@ void TransientFilm::finish() {
     // A last, partial fill: the bins after it that a kernel reads still hold the previous fill's light.
     const std::size_t stale = std::min(pad, m_capacity - m_kept);
     const std::size_t rows = (m_indirect.size() - kSlack) / stride;
-    for (std::size_t i = 0; i < rows && stale > 0; ++i)
+    for (std::size_t i = 0; i < rows && stale > 0; ++i) {
         std::fill_n(m_indirect.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
-    parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) { add_taps(px, m_first_bin, m_kept, stride); });
+        if (m_first_link) std::fill_n(m_first.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
+    }
+    if (m_first_link) {  // the light one link after its pulse, apart from the rest, for all the kept bins
+        m_first_link->fill(m_first_bin, m_kept, [this](int order) { return takes_order(order); },
+                           m_first.data() + pad * 3, stride, m_first_lit);
+        parallel_for(rows, {m_threads, 64, true}, [&](std::size_t i) {
+            float* rest = m_indirect.data() + i * stride + pad * 3;
+            const float* first = m_first.data() + i * stride + pad * 3;
+            // The rest is light of later orders: float cancellation must not make it negative.
+            for (std::size_t e = 0; e < m_kept * 3; ++e) rest[e] = std::max(0.0f, rest[e] - first[e]);
+        });
+    }
+    parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) {
+        add_taps(*m_taps, m_indirect, nullptr, px, m_first_bin, m_kept, stride);
+        if (m_first_link) add_taps(*m_shifted, m_first, &m_first_lit, px, m_first_bin, m_kept, stride);
+    });
     m_kept = 0;
 }
 

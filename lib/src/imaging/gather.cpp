@@ -8,10 +8,11 @@
 #include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/transport/first_link.h"
 #include "tprf/transport/light_sources.h"
 
-
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -508,7 +509,10 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
             const double share = weight * double(sp.throughput);
             thread_local std::vector<std::pair<std::uint32_t, double>> weights;
             kernel_weights(patches, sp.patch, sp.point, radius[sp.patch], candidates, weights);
-            for (const auto& [q, w] : weights) run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint});
+            for (const auto& [q, w] : weights) {
+                const float shift = options.first_link ? float(options.first_link->shift(q, sp.point)) : 0.0f;
+                run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
+            }
             const std::size_t first = direct.size();
             direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options,
                             done.data() + (h - run_start[k]) * areas, direct);
@@ -528,14 +532,14 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
 void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time) {
     if (taps.size() < 2) return;
     const double inv_bin = 1.0 / time.bin_width_m();
-    const auto half = [&](const PixelTap& t) {  // the half bin of the leg
-        const double lag = double(t.leg) * inv_bin, whole = std::floor(lag);
+    const auto half = [&](double leg) {  // the half bin of a leg
+        const double lag = leg * inv_bin, whole = std::floor(lag);
         return std::int64_t(2.0 * whole) + (lag - whole >= 0.5 ? 1 : 0);
     };
     // Open addressing over at least twice the taps (a power of two): slot -> merged index + 1.
     thread_local std::vector<std::uint32_t> slot;
-    thread_local std::vector<std::int64_t> halves;
-    thread_local std::vector<double> moment;  // sum of weight x leg per merged tap
+    thread_local std::vector<std::array<std::int64_t, 2>> halves;  // of the leg, of the leg plus the shift
+    thread_local std::vector<std::array<double, 2>> moment;        // sums of weight x leg, weight x shift
     std::size_t size = 16;
     while (size < 2 * taps.size()) size *= 2;
     slot.assign(size, 0);
@@ -544,29 +548,36 @@ void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time) {
     std::size_t merged = 0;
     for (std::size_t k = 0; k < taps.size(); ++k) {
         const PixelTap t = taps[k];
-        const std::int64_t hb = half(t);
+        const std::array<std::int64_t, 2> hb = {half(double(t.leg)), half(double(t.leg) + double(t.shift))};
         const std::uint64_t h = (std::uint64_t(t.patch) * 0x9E3779B97F4A7C15ull) ^
-                                (std::uint64_t(hb) * 0xC2B2AE3D27D4EB4Full) ^ (std::uint64_t(t.tint) * 0x165667B19E3779F9ull);
+                                (std::uint64_t(hb[0]) * 0xC2B2AE3D27D4EB4Full) ^
+                                (std::uint64_t(hb[1] - hb[0]) * 0x27D4EB2F165667C5ull) ^
+                                (std::uint64_t(t.tint) * 0x165667B19E3779F9ull);
         std::size_t s = std::size_t(h >> 40) & (size - 1);
         const auto same = [&](std::uint32_t m) {
             return taps[m].patch == t.patch && taps[m].tint == t.tint && halves[m] == hb;
         };
         while (slot[s] != 0 && !same(slot[s] - 1)) s = (s + 1) & (size - 1);
+        const std::array<double, 2> moments = {double(t.weight) * double(t.leg), double(t.weight) * double(t.shift)};
         if (slot[s] == 0) {
             slot[s] = std::uint32_t(merged + 1);
             halves.push_back(hb);
-            moment.push_back(double(t.weight) * double(t.leg));
+            moment.push_back(moments);
             taps[merged++] = t;
             continue;
         }
         PixelTap& m = taps[slot[s] - 1];
-        moment[slot[s] - 1] += double(t.weight) * double(t.leg);
+        moment[slot[s] - 1][0] += moments[0];
+        moment[slot[s] - 1][1] += moments[1];
         m.weight += t.weight;
         m.earliest = std::min(m.earliest, t.earliest);
     }
     taps.resize(merged);
     for (std::size_t k = 0; k < merged; ++k)
-        if (taps[k].weight > 0.0f) taps[k].leg = float(moment[k] / double(taps[k].weight));
+        if (taps[k].weight > 0.0f) {
+            taps[k].leg = float(moment[k][0] / double(taps[k].weight));
+            taps[k].shift = float(moment[k][1] / double(taps[k].weight));
+        }
     taps.shrink_to_fit();
 }
 

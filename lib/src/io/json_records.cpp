@@ -67,7 +67,7 @@ std::string render_json_text(const RenderRecord& r) {
                  {"unit", unit_name(r.time.unit)}};
     if (r.camera)
         j["camera"] = {{"width", r.camera->width}, {"height", r.camera->height}, {"spp", r.camera->spp},
-                       {"unwarp", r.camera->unwarp}};
+                       {"unwarp", r.camera->unwarp}, {"second_bounce_shifted", r.second_bounce_shifted}};
     if (const auto& c = r.capture)
         j["capture"] = {{"type", c->type},
                         {"laser_points", c->laser_points},

@@ -143,6 +143,9 @@ constexpr double kAreaSourceSeconds = 4e-5;          // per patch and area sourc
                                                      // bins, 4.4e-5 at 1M patches and 1 cm)
 constexpr double kSampleSeconds = 2e-6;              // per camera sample (0.35-1.0 M samples/s)
 constexpr double kTapBinSeconds = 1.0 / 1.5e9;       // the film: one tap applied to one bin
+// camera.shift_second_bounce: the second bounce from the links, its shift and its own taps, per link
+// (measured on the Cornell box: 0.15 s for 2.9M links, 2.1 s for 46M).
+constexpr double kFirstLinkSecondsPerLink = 5e-8;
 constexpr double kLinkBinSeconds[2] = {1.0 / 8e9, 1.0 / 4e9};  // the solve: link-bin updates, grey / colour
 constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin by bin
 /// The hierarchical solve per patch and bin: 2.6e-7 to 1.4e-6 s on the Cornell box from 4k to 1M patches
@@ -165,6 +168,13 @@ std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ?
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
 // Whether some mirror or glass reflects the channels unalike: its links are tinted (Links::tint).
+// Whether the camera reads the second bounce at its samples' times (render.cpp, make_first_link_light):
+// flat links and no mirror or glass.
+bool shifts_second_bounce(const Scene& scene) {
+    return scene.camera && scene.camera->shift_second_bounce && scene.links.method == LinkMethod::Flat &&
+           std::none_of(scene.objects.begin(), scene.objects.end(), [](const Object& o) { return o.material.specular(); });
+}
+
 bool tinted_mirrors(const Scene& scene) {
     return std::any_of(scene.objects.begin(), scene.objects.end(),
                        [](const Object& o) { return !grey(o.material.reflectance); });
@@ -412,6 +422,7 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
         e.gather_bytes = to_size(kGatherBytesPerSample * double(e.samples) + kGatherBytesPerPatch * n);
         const int films = 1 + bounce_layout(scene.solver)[2];
         seconds += kSampleSeconds * double(e.samples) + kTapBinSeconds * taps * scene.time.bins * films;
+        if (shifts_second_bounce(scene)) seconds += kFirstLinkSecondsPerLink * double(e.links);
     }
     e.seconds.gather = seconds;
 }
@@ -431,7 +442,10 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     const double rings = L * nodes * (share * e.ring_bins + kBlockBins + 1) * C * 4;
     const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
     // The solver's blocks and the films' kept profiles (film_buffer_bytes).
-    const double outputs = (1.0 + terms) * n * kBlockBins * 3 * 4 + (1.0 + cubes) * film_buffer_bytes(census.patches, kBlockBins);
+    // A film that reads the second bounce apart keeps it in rows of its own.
+    const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
+    const double outputs = (1.0 + terms) * n * kBlockBins * 3 * 4 +
+                           (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kBlockBins);
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
     // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).

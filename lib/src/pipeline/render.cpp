@@ -18,6 +18,7 @@
 #include "tprf/pipeline/ranks.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
+#include "tprf/transport/first_link.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
 #include "tprf/transport/link_set.h"
@@ -66,6 +67,8 @@ struct Transport {
     LinkSet links;
     LightSources sources;
     Illumination illumination;
+    /// The second bounce, read at each sample's own time (camera.shift_second_bounce), or null.
+    std::unique_ptr<FirstLinkLight> first_link;
     Gather gather;
 };
 
@@ -106,6 +109,12 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     gather_options.threads = options.threads;
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
+    if (scene.camera->shift_second_bounce) {
+        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time, scene.solver.delay,
+                                             scene.solver.max_bounces, !t.visibility->chains().empty(), options.threads);
+        gather_options.first_link = t.first_link.get();
+    }
+    report.second_bounce_shifted = t.first_link != nullptr;
     t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, gather_options);
     report.seconds.gather = seconds_since(start);
 }
@@ -130,6 +139,7 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
     c.cube = arrays.open("transient", {H, W, T, 3});
     c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube, -1,
                                              false, options.threads);
+    c.film->read_first_link_apart(t.first_link.get());
     if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
     const int terms = bounce_terms(scene.solver);
     for (int k = 0; k < terms; ++k) {
@@ -137,6 +147,7 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
         const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
         c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
                                                                term, k, tail, options.threads, c.film->taps()));
+        c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
     }
 }
 
@@ -248,6 +259,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     r.measurements = report.measurements;
     r.peak_rss_mb = report.peak_rss_mb;
     r.meshes = report.meshes;
+    r.second_bounce_shifted = report.second_bounce_shifted;
     return r;
 }
 

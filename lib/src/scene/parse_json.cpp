@@ -41,7 +41,7 @@ E parse_choice(const Node& n, std::string_view what, std::initializer_list<std::
 }
 
 Camera parse_camera(const Node& n) {
-    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp", "footprint"});
+    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp", "footprint", "shift_second_bounce"});
     Camera c;
     c.position = n.child("position").vec3();
     c.look_at = n.child("look_at").vec3();
@@ -52,6 +52,7 @@ Camera parse_camera(const Node& n) {
     if (const auto spp = n.find("spp")) c.spp = spp->integer();
     if (const auto unwarp = n.find("unwarp")) c.unwarp = unwarp->boolean();
     if (const auto footprint = n.find("footprint")) c.footprint = footprint->boolean();
+    if (const auto shift = n.find("shift_second_bounce")) c.shift_second_bounce = shift->boolean();
     return c;
 }
 

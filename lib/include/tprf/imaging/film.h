@@ -17,6 +17,7 @@ namespace tprf {
 struct Gather;
 struct Illumination;
 struct SolveBlock;
+class FirstLinkLight;
 
 /// A gather's taps as the films apply them: one short delay kernel per patch (and tint) a pixel
 /// reads. Each gather tap is split between two bins as the delay mode says (or put in the nearest),
@@ -42,8 +43,10 @@ struct FilmTaps {
     std::vector<std::array<float, 3>> tints;  ///< Gather::tints
 };
 
-/// The film taps of `gather` on `time` (in an order that does not depend on `threads`).
-FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads = 0);
+/// The film taps of `gather` on `time` (in an order that does not depend on `threads`): at each
+/// tap's leg, or (`shifted`) at its leg plus its shift (PixelTap::shift).
+FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads = 0,
+                   bool shifted = false);
 
 /// How much of the solve's output a film keeps before filming it (TransientFilm::add_block).
 inline constexpr std::size_t kFilmBufferBytes = std::size_t(16) << 20;
@@ -80,6 +83,14 @@ public:
     /// The taps this film applies (to share with the other films of the same gather).
     const std::shared_ptr<const FilmTaps>& taps() const { return m_taps; }
 
+    /// Reads the light one link after its pulse (`light`: FirstLinkLight::fill of the orders this film
+    /// takes) apart from the rest of each profile, at each tap's leg plus its shift: `shifted` is
+    /// film_taps(..., true) of the same gather, when another film has them (made here when null).
+    /// Call before the first block. The light filmed is the same; only its timing at each sample moves.
+    void read_first_link_apart(const FirstLinkLight* light, std::shared_ptr<const FilmTaps> shifted = nullptr);
+    /// The shifted taps (null unless read_first_link_apart was called).
+    const std::shared_ptr<const FilmTaps>& shifted_taps() const { return m_shifted; }
+
     /// Adds the exact direct-light arrivals (once).
     void add_direct();
     /// Adds one solved block's light of later bounces: each tap reads its patch's profile (less the
@@ -93,9 +104,12 @@ public:
 private:
     bool takes_order(int order) const;
     void copy_indirect(const SolveBlock& block);
-    void add_taps(std::size_t pixel, int first_bin, std::size_t bins, std::size_t stride);
-    void add_kernel(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
-    void add_fused(const FilmTaps::Tap& tap, const float* profile, std::int64_t base, std::int64_t bins, float* out) const;
+    void add_taps(const FilmTaps& taps, const std::vector<float>& rows, const std::vector<char>* lit,
+                  std::size_t pixel, int first_bin, std::size_t bins, std::size_t stride);
+    void add_kernel(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,
+                    std::int64_t bins, float* out) const;
+    void add_fused(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,
+                   std::int64_t bins, float* out) const;
 
     const Gather& m_gather;
     const Illumination& m_illumination;
@@ -104,6 +118,7 @@ private:
     int m_order;
     bool m_last_is_tail;
     int m_threads;
+    DelayMode m_delay;
     /// The kept blocks' profiles: N rows of `m_pad` zero bins, `m_capacity` bins (the kept ones, then
     /// zeros) and `m_pad` zero bins (x 3), so that a kernel of up to m_pad + 1 bins reads every bin it
     /// needs without a test.
@@ -113,6 +128,12 @@ private:
     std::size_t m_capacity = 0;   ///< bins a row holds (0 until the first block)
     std::shared_ptr<const FilmTaps> m_taps;
     std::int64_t m_pad = 0;
+    /// read_first_link_apart: the light one link after its pulse, in rows laid out as m_indirect's
+    /// (which then hold the rest), and the taps that read it.
+    const FirstLinkLight* m_first_link = nullptr;
+    std::shared_ptr<const FilmTaps> m_shifted;
+    std::vector<float> m_first;
+    std::vector<char> m_first_lit;  // per patch: whether its row of m_first holds any light
 };
 
 /// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same

@@ -23,6 +23,7 @@ namespace tprf {
 struct PatchSet;
 struct LightSources;
 class Visibility;
+class FirstLinkLight;
 
 /// One patch's share of one output: radiance = weight * B_patch (t - leg), weight including 1/pi,
 /// the interpolation weight and the point's weight.
@@ -37,6 +38,9 @@ struct PixelTap {
     /// could have arrived.
     float earliest = 0.0f;
     std::uint16_t tint = 0;   ///< index into Gather::tints: the weight per channel is weight * tints[tint]
+    /// Metres of path added to the light one link after its pulse (FirstLinkLight::shift at the
+    /// point): the film reads that part of the profile at leg + shift, the rest at leg.
+    float shift = 0.0f;
 };
 
 /// An exact direct-light arrival at one output: radiance times one second, at an exact path.
@@ -66,11 +70,13 @@ struct GatherOptions {
     const TimeAxis* time = nullptr;
     int emitter_rays = kAreaShadowRays;     ///< shadow rays from a sensing point to an area source
     int penumbra_rays = kAreaPenumbraRays;  ///< where those disagree
+    /// When given, each tap's shift is first_link->shift(patch, point) (camera.shift_second_bounce).
+    const FirstLinkLight* first_link = nullptr;
 };
 
 /// One output's taps merged where a film on `time` cannot tell them apart: one patch and tint, legs in
-/// the same half of one bin. The merged tap has the sum of the weights, the weighted mean leg and the
-/// least earliest path. The film splits a leg linearly between its bin and the next (or puts it in the
+/// the same half of one bin (and legs plus shifts in the same half bin). The merged tap has the sum of
+/// the weights, the weighted mean leg and shift and the least earliest path. The film splits a leg linearly between its bin and the next (or puts it in the
 /// nearer), so the two bins get the same light as from the taps one by one (up to a float leg's
 /// precision, 5e-5 of a 5 mm bin at 2 m), and its earliest bin is the least over a pixel's taps of a
 /// patch anyway. In the order of first occurrence. gather_points does this for every output when it

@@ -46,6 +46,7 @@ struct RenderReport {
     std::uint64_t link_bin_updates = 0;
     int measurements = 0;           ///< sensor measurements per pixel and channel (0: no sensor block)
     std::size_t capture_pairs = 0;  ///< (laser point, sensor point) pairs of the capture (0: none)
+    bool second_bounce_shifted = false;  ///< whether the camera read the second bounce at its samples' times
     std::vector<std::string> written;  ///< files and folders written, relative to the output directory
     std::vector<std::string> warnings; ///< lines for the user (a figure not drawn, and how to draw it)
 };

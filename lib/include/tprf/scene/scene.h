@@ -30,6 +30,10 @@ struct Camera {
     /// dv): a pixel integrates its footprint in time, not spp instants. False: point samples, each
     /// sample's light at its own exact path (beyond SPEC; docs/scene.md).
     bool footprint = true;
+    /// Read the second bounce (the light one link after its pulse) at each sample's own time rather
+    /// than its patch centroid's (FirstLinkLight; beyond SPEC, docs/scene.md). Flat links without
+    /// mirrors only; ignored otherwise.
+    bool shift_second_bounce = true;
 };
 
 /// Isotropic point light: irradiance at x is intensity * cos(theta) / r^2.
