@@ -113,6 +113,8 @@ void TransientFilm::read_first_link_apart(const FirstLinkLight* light, std::shar
     m_first_link = light;
     m_shifted = shifted ? std::move(shifted)
                         : std::make_shared<const FilmTaps>(film_taps(m_gather, m_time, m_delay, m_threads, true));
+    m_first_read.assign(m_illumination.row.size() - 1, 0);
+    for (const FilmTaps::Tap& tap : m_shifted->taps) m_first_read[tap.patch] = 1;
     const std::int64_t longest = std::max(m_taps->longest, m_shifted->longest);
     m_pad = std::min<std::int64_t>(longest - 1, std::int64_t(kFilmPadBins));
 }
@@ -296,8 +298,9 @@ void TransientFilm::finish() {
     }
     if (m_first_link) {  // the light one link after its pulse, apart from the rest, for all the kept bins
         m_first_link->fill(m_first_bin, m_kept, [this](int order) { return takes_order(order); },
-                           m_first.data() + pad * 3, stride, m_first_lit);
+                           m_first.data() + pad * 3, stride, m_first_lit, &m_first_read);
         parallel_for(rows, {m_threads, 64, true}, [&](std::size_t i) {
+            if (!m_first_lit[i]) return;  // no second bounce read here: the rest is the whole profile
             float* rest = m_indirect.data() + i * stride + pad * 3;
             const float* first = m_first.data() + i * stride + pad * 3;
             // The rest is light of later orders: float cancellation must not make it negative.

@@ -105,7 +105,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
 }
 
 void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
-                         std::size_t stride, std::vector<char>& lit) const {
+                         std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted) const {
     const std::size_t n = m_patches.size();
     const std::int64_t end = first_bin + std::int64_t(bins);
     lit.assign(n, 0);
@@ -117,7 +117,7 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {
         float* row = rows + i * stride;
         std::fill_n(row, bins * 3, 0.0f);
-        if (m_hi[i] <= first_bin || m_lo[i] >= end) return;
+        if (m_hi[i] <= first_bin || m_lo[i] >= end || (wanted && !(*wanted)[i])) return;
         bool touched = false;
         // Sums in the row first (the solver's G), then times the albedo.
         for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {

@@ -134,6 +134,7 @@ private:
     std::shared_ptr<const FilmTaps> m_shifted;
     std::vector<float> m_first;
     std::vector<char> m_first_lit;  // per patch: whether its row of m_first holds any light
+    std::vector<char> m_first_read; // per patch: whether a shifted tap reads it
 };
 
 /// The steady image, H x W x 3 (radiance, W/(m^2 sr)), from steady patch radiosities: the same

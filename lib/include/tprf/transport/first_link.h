@@ -52,9 +52,10 @@ public:
     /// through one link from a propagating pulse whose onward order `takes(order)` accepts, times the
     /// receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
     /// bins as the solver splits it. Patch i's bin b (from first_bin) is rows[i * stride + b * 3 + c].
-    /// lit[i] (resized to N) is 0 where patch i's row is all zero.
+    /// lit[i] (resized to N) is 0 where patch i's row is all zero. With `wanted`, only the rows of
+    /// patches i with wanted[i] != 0 are computed (the others are zero, and not lit).
     void fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
-              std::size_t stride, std::vector<char>& lit) const;
+              std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted = nullptr) const;
 
     /// Extra path, metres, at which point x of patch k receives the light that add() gives k (its
     /// senders' weighted mean of |x - c_j| - |c_k - c_j|, to second order). 0 for a patch that
