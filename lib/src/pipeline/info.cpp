@@ -167,7 +167,6 @@ std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ?
 
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
-// Whether some mirror or glass reflects the channels unalike: its links are tinted (Links::tint).
 // Whether the camera reads the second bounce at its samples' times (render.cpp, make_first_link_light):
 // flat links and no mirror or glass.
 bool shifts_second_bounce(const Scene& scene) {
@@ -175,6 +174,7 @@ bool shifts_second_bounce(const Scene& scene) {
            std::none_of(scene.objects.begin(), scene.objects.end(), [](const Object& o) { return o.material.specular(); });
 }
 
+// Whether some mirror or glass reflects the channels unalike: its links are tinted (Links::tint).
 bool tinted_mirrors(const Scene& scene) {
     return std::any_of(scene.objects.begin(), scene.objects.end(),
                        [](const Object& o) { return !grey(o.material.reflectance); });

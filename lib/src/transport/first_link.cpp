@@ -122,10 +122,11 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
         // Sums in the row first (the solver's G), then times the albedo.
         for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
             const std::uint32_t j = l.source[k];
+            if (m_row[j] == m_row[j + 1]) continue;  // sends nothing
+            const solver_detail::Taps t = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
             for (std::uint64_t r = m_row[j]; r < m_row[j + 1]; ++r) {
                 const Run& run = m_runs[r];
                 if (!taken[run.order]) continue;
-                const solver_detail::Taps t = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
                 const float* e = m_energy.data() + run.offset;
                 const std::int64_t at = run.first + t.lag;  // row bin of the w0 tap of e[0]; w1's is one later
                 const std::int64_t length = std::int64_t(run.length);
@@ -161,11 +162,6 @@ double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
     const double quadratic = double(h[0]) * d.x() * d.x() + double(h[1]) * d.y() * d.y() + double(h[2]) * d.z() * d.z() +
                              2.0 * (double(h[3]) * d.x() * d.y() + double(h[4]) * d.x() * d.z() + double(h[5]) * d.y() * d.z());
     return linear + 0.5 * quadratic;
-}
-
-std::size_t FirstLinkLight::bytes() const {
-    return m_row.size() * sizeof(std::uint64_t) + m_runs.size() * sizeof(Run) + m_energy.size() * sizeof(float) + 2 * m_lo.size() * sizeof(std::int64_t) +
-           m_gradient.size() * sizeof(m_gradient[0]) + m_hessian.size() * sizeof(m_hessian[0]);
 }
 
 std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,

@@ -7,7 +7,7 @@
 /// |c_k - c_j| after leaving j. A point x = c_k + d of patch k gets it |x - c_j| after, so the light
 /// that the camera reads at x through patch k's profile is early or late by up to the patch's size in
 /// path. For light that left its sender as a pulse (the first bounce: sharp in time), that error is
-/// the streak bands at patch size (docs/method.md, "Bounced light at points"). The film takes this
+/// the streak bands at patch size (docs/method.md, "The second bounce at the sample's own time"). The film takes this
 /// part out of the profiles and reads it at the sample's own shift: the mean over k's senders,
 /// weighted by what each sends, of |x - c_j| - |c_k - c_j|, to second order in d:
 ///     shift_k(x) = D_k . d + d^T H_k d / 2,   D_k = mean u_j,   H_k = mean (I - u_j u_j^T) / r_j,
@@ -35,16 +35,6 @@ struct Illumination;
 
 class FirstLinkLight {
 public:
-    /// A sender's pulses of one order, as bins [first, first + length) on the time axis (placed as the
-    /// solver places them): their exitance times one second, 3 floats per bin at `offset` of the
-    /// energies. The light it sends through a link is of order `order` + 1.
-    struct Run {
-        std::int64_t first;
-        std::uint32_t length;
-        std::size_t offset;
-        std::uint8_t order;
-    };
-
     FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
                    const TimeAxis& time, DelayMode delay, int max_bounces, int threads = 0);
 
@@ -57,7 +47,7 @@ public:
     void fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
               std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted = nullptr) const;
 
-    /// Extra path, metres, at which point x of patch k receives the light that add() gives k (its
+    /// Extra path, metres, at which point x of patch k receives the light that fill() gives k (its
     /// senders' weighted mean of |x - c_j| - |c_k - c_j|, to second order). 0 for a patch that
     /// receives none.
     double shift(std::uint32_t k, const Vec3& x) const;
@@ -68,10 +58,16 @@ public:
     /// Whether any patch receives such light.
     bool empty() const { return m_any == false; }
 
-    /// Bytes held (pulses, ranges and shift coefficients).
-    std::size_t bytes() const;
-
 private:
+    // A sender's pulses of one order, as bins [first, first + length) on the time axis (placed as the
+    // solver places them): their exitance times one second, 3 floats per bin at `offset` of m_energy.
+    // The light it sends through a link is of order `order` + 1.
+    struct Run {
+        std::int64_t first;
+        std::uint32_t length;
+        std::size_t offset;
+        std::uint8_t order;
+    };
     // Per sender: what it sends in all (the mean over channels, its weight in the shift) and the bins
     // of its first and last pulse.
     struct Senders {
