@@ -47,6 +47,8 @@ constexpr double kNegligible = 1e-3;
 // node, or a shadow edge crosses it: its error then falls on those patches in one direction.
 constexpr double kFacingShare = 0.1;
 constexpr int kMaxPieces = 8;
+// Largest product of two nodes' patch counts that is linked patch by patch without being judged.
+constexpr std::size_t kPatchPairsOnly = 2;
 // Largest product of two nodes' patch counts whose facing is decided patch by patch (Builder::all_behind).
 constexpr std::size_t kExactFacing = 4096;
 
@@ -253,9 +255,13 @@ void Builder::pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int 
 bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out,
                     Counts& counts) const {
     const double dist = (m_tree.centre[r] - m_tree.centre[s]).norm();
-    const double gap = dist - m_tree.radius[r] - m_tree.radius[s];
+    const double reach = m_tree.radius[r] + m_tree.radius[s];
+    const double gap = dist - reach;
     if (!(gap > 0.0)) return false;  // overlapping bounds: the kernel is unbounded there
     if (m_h.bin_width_m > 0.0 && gap < m_h.min_lag_bins * m_h.bin_width_m) return false;
+    // A patch and a pair of patches: a cluster link would save at most one link (a piece of its delay
+    // kernel is a link too) and need the oracle's samples; their patch links are exact.
+    if (leaves_below(r) * leaves_below(s) <= kPatchPairsOnly) return false;
     const double a_r = m_tree.area[r], a_s = m_tree.area[s], a_big = std::max(a_r, a_s);
     const std::uint64_t salt = std::uint64_t(std::min(r, s)) << 32 | std::max(r, s);
     PairSamples judged;
@@ -284,7 +290,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     // are cast: more for links that carry more (each patch in such a shadow would get all of it).
     const double carried = a_big * judged.k_sum / m_samples;
     if (m_h.time_bins > 0.0 && m_h.bin_width_m > 0.0 &&
-        carried * (m_tree.radius[r] + m_tree.radius[s]) / m_h.bin_width_m > m_h.time_bins * m_h.tolerance)
+        carried * reach / m_h.bin_width_m > m_h.time_bins * m_h.tolerance)
         return false;
     const int count = std::clamp(int(std::ceil(m_samples * std::sqrt(carried / (kFacingShare * m_h.tolerance)))),
                                  m_samples, kMaxSamples);
@@ -421,13 +427,16 @@ void sort_rows_by_octave(Links& links, float inv_bin, int threads) {
 }
 
 // The shortest cluster link, in bins: hierarchy.min_lag_bins, or when 0, four median patch sizes
-// (twice the median circumradius) in bins, between 1 and 8.
+// (twice the median circumradius) in bins, between 1 and 32. The solver's blocks are this short (a
+// power of two at most): patches a few bins wide or more keep blocks of 32 bins, its longest window
+// (measured: 8-bin blocks made the Cornell box's solve 20% slower), at the price of patch links
+// between the nodes nearer than that, a few dozen per patch (four patch sizes).
 int min_lag(const PatchSet& patches, const HierarchyOptions& hierarchy) {
     if (hierarchy.min_lag_bins > 0 || !(hierarchy.bin_width_m > 0.0) || patches.size() == 0) return hierarchy.min_lag_bins;
     std::vector<double> radius = circumradii(patches);
     std::nth_element(radius.begin(), radius.begin() + std::ptrdiff_t(radius.size() / 2), radius.end());
     const double size = 2.0 * radius[radius.size() / 2];
-    return int(std::clamp(std::floor(4.0 * size / hierarchy.bin_width_m), 1.0, 8.0));
+    return int(std::clamp(std::floor(4.0 * size / hierarchy.bin_width_m), 1.0, 32.0));
 }
 
 LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,

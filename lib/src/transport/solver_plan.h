@@ -5,6 +5,7 @@
 
 #include "tprf/core/time_axis.h"
 #include "tprf/transport/illumination.h"
+#include "tprf/transport/link_set.h"
 #include "tprf/transport/links.h"
 #include "tprf/transport/solver.h"
 
@@ -136,6 +137,7 @@ constexpr int kMaxSweeps = 200;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;
+static_assert(1 << (kDelayOctaves - 2) == kLongestWindow, "a hierarchical row's last octave is the longest window");
 constexpr int kMaxWindows = 16;
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and

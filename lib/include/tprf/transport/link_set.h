@@ -24,9 +24,11 @@ class Visibility;
 
 /// Delay octaves: a link of delay d bins (floor of distance * inv_bin, in float, as the solver
 /// computes it) is in octave 0 when d < 1, else 1 + floor(log2 d), at most kDelayOctaves - 1. The
-/// solver applies the links of octave k >= 1 in blocks of 2^(k-1) bins (and longer ones in its
-/// longest block), so a row sorted by octave splits into one range per block length.
-constexpr int kDelayOctaves = 16;
+/// solver applies the links of octave k >= 1 in windows of 2^(k-1) bins, and every link of 32 bins
+/// or more (the last octave) in its longest window, so a row sorted by octave splits into one range
+/// per window, each sorted by source: the order its source tiles walk (solver_plan.h checks that the
+/// last octave starts at the longest window).
+constexpr int kDelayOctaves = 7;
 inline int delay_octave(float distance, float inv_bin) {
     const float d = distance * inv_bin;
     if (!(d >= 1.0f)) return 0;
@@ -78,8 +80,8 @@ struct HierarchyOptions {
     double time_bins = 0.0;
     /// Cluster links are kept only between nodes at least this many bins apart (when bin_width_m > 0);
     /// nearer pairs are refined, and the solver's blocks are this long. 0: four typical patch sizes
-    /// in bins, between 1 and 8 (coarse bins on fine meshes would otherwise leave every pair within
-    /// 8 bins as patch-to-patch links).
+    /// in bins, between 1 and 32 (a fixed length would leave every pair within it as patch-to-patch
+    /// links where bins are coarse against the patches).
     int min_lag_bins = 0;
 };
 
