@@ -22,6 +22,7 @@
 #include <atomic>
 #include <cmath>
 #include <mutex>
+#include <numeric>
 
 namespace tprf {
 namespace {
@@ -178,6 +179,7 @@ private:
     }
 
     void patch_link(std::uint32_t r, std::uint32_t s, std::vector<LinkRecord>& out, Counts& counts) const {
+        if (inert(m_patches, r) || inert(m_patches, s)) return;  // as the flat method: nothing to carry
         const std::uint32_t i = std::min(r, s), j = std::max(r, s);
         PairFormFactors f;
         const bool is_near = near_pair(m_patches, m_radius, m_options.near_factor, i, j);
@@ -190,9 +192,11 @@ private:
     // carrying less than the tolerance; false when it must be refined.
     bool judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out, Counts& counts) const;
     void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
-    // As draw, with each node's m_samples points drawn once (m_points), paired anew for each pair.
-    void look(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const;
-    void pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, bool fresh, PairSamples& out) const;
+    // The kernel's range and sum over m_samples point pairs of each node's stored points (m_points).
+    struct Look {
+        double k_min, k_max, k_sum;
+    };
+    Look look(std::uint32_t r, std::uint32_t s, std::uint64_t salt) const;
     void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
                      int count, std::vector<LinkRecord>& out) const;
 
@@ -212,16 +216,6 @@ private:
 
 // Point pairs of (r, s) and the kernel at each, unoccluded: drawn for this pair.
 void Builder::draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const {
-    pair_up(r, s, salt, count, true, out);
-}
-
-void Builder::look(std::uint32_t r, std::uint32_t s, std::uint64_t salt, PairSamples& out) const {
-    pair_up(r, s, salt, m_samples, false, out);
-}
-
-// Fresh: points drawn for this pair; else each node's stored points.
-void Builder::pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, bool fresh,
-                      PairSamples& out) const {
     // Stratum q of r meets a random stratum of s (a fresh permutation per pair): a fixed pairing would
     // weigh some pairs of strata in every estimate and none of the others, a bias that does not
     // average out over the links of a scene.
@@ -233,15 +227,8 @@ void Builder::pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int 
     out.k_max = 0.0;
     out.k_sum = 0.0;
     for (int q = 0; q < count; ++q) {
-        if (fresh) {
-            out.x[q] = sample(r, q, count, salt);
-            out.y[q] = sample(s, partner[q], count, salt ^ 0x5bd1e995u);
-        } else {
-            const StoredPoint& a = m_points[std::size_t(r) * std::size_t(count) + std::size_t(q)];
-            const StoredPoint& b = m_points[std::size_t(s) * std::size_t(count) + std::size_t(partner[q])];
-            out.x[q] = {a.x.cast<double>(), a.n.cast<double>()};
-            out.y[q] = {b.x.cast<double>(), b.n.cast<double>()};
-        }
+        out.x[q] = sample(r, q, count, salt);
+        out.y[q] = sample(s, partner[q], count, salt ^ 0x5bd1e995u);
         const Vec3 d = out.y[q].x - out.x[q].x;
         const double r2 = d.squaredNorm();
         out.path[q] = std::sqrt(r2);
@@ -250,6 +237,31 @@ void Builder::pair_up(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int 
         out.k_max = std::max(out.k_max, out.k[q]);
         out.k_sum += out.k[q];
     }
+}
+
+// The oracle's first look, tens of millions of times on a large mesh: in float, from the stored points,
+// stratum q of r against stratum (a + b q) mod count of s, with a and b (coprime to count) hashed from
+// the pair. Over the pairs every stratum of s is equally likely to meet each of r's, as with the fresh
+// permutation draw() makes, for one hash instead of count - 1.
+Builder::Look Builder::look(std::uint32_t r, std::uint32_t s, std::uint64_t salt) const {
+    const int count = m_samples;
+    const std::uint64_t h = hash64(salt, 0x2545F491u, 0);
+    const int offset = int(h % std::uint64_t(count));
+    int stride = 1 + int((h >> 32) % std::uint64_t(count - 1));
+    while (std::gcd(stride, count) != 1) stride = stride % (count - 1) + 1;
+    const StoredPoint* a = m_points.data() + std::size_t(r) * std::size_t(count);
+    const StoredPoint* b = m_points.data() + std::size_t(s) * std::size_t(count);
+    float k_min = INFINITY, k_max = 0.0f;
+    double k_sum = 0.0;
+    for (int q = 0, p = offset; q < count; ++q, p = p + stride < count ? p + stride : p + stride - count) {
+        const Eigen::Vector3f d = b[p].x - a[q].x;
+        const float r2 = d.squaredNorm();
+        const float k = std::max(0.0f, a[q].n.dot(d)) * std::max(0.0f, -b[p].n.dot(d)) / (float(M_PI) * r2 * r2);
+        k_min = std::min(k_min, k);
+        k_max = std::max(k_max, k);
+        k_sum += double(k);
+    }
+    return {double(k_min), double(k_max), k_sum};
 }
 
 bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out,
@@ -264,8 +276,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     if (leaves_below(r) * leaves_below(s) <= kPatchPairsOnly) return false;
     const double a_r = m_tree.area[r], a_s = m_tree.area[s], a_big = std::max(a_r, a_s);
     const std::uint64_t salt = std::uint64_t(std::min(r, s)) << 32 | std::max(r, s);
-    PairSamples judged;
-    look(r, s, salt, judged);
+    const Look judged = look(r, s, salt);
     if (judged.k_max == 0.0) {
         // No sample faces the other node, yet their cones and bounds allow it. Dropping the pair
         // would lose whatever part does face, always in the same direction (an enclosure would leak):

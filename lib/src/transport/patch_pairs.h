@@ -26,15 +26,16 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
 
 /// Deterministic jitter in [0, 1) from three integers (threads must not change the answer). Inline: the
 /// hierarchical oracle calls it for every sample of every pair it judges.
-inline double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+inline std::uint64_t hash64(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
     std::uint64_t h = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^ c;
     h ^= h >> 33;
     h *= 0xff51afd7ed558ccdull;
     h ^= h >> 33;
     h *= 0xc4ceb9fe1a85ec53ull;
     h ^= h >> 33;
-    return double(h >> 11) * 0x1.0p-53;
+    return h;
 }
+inline double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) { return double(hash64(a, b, c) >> 11) * 0x1.0p-53; }
 
 /// True when i and j are closer than near_factor (r_i + r_j), the pairs integrated adaptively.
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,
