@@ -47,51 +47,103 @@ Scene corner_scene(int bins, double bin_width, double max_edge, bool shift) {
     return parse_scene(corner(bins, bin_width, max_edge, shift).dump(), "corner.json");
 }
 
-TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
-    const Scene scene = corner_scene(700, 0.005, 0.1, true);
-    const PatchSet patches = build_patches(scene);
-    const std::unique_ptr<Visibility> vis = scene_visibility(scene, patches);
-    const LinkSet links = make_link_set(patches, *vis, scene.links, scene.time.bin_width_m());
-    const LightSources sources = light_sources(scene, patches, *vis);
-    const Illumination light = illuminate(sources, patches, *vis, {});
-    const std::size_t n = patches.size(), T = std::size_t(scene.time.bins);
-    for (const DelayMode delay : {DelayMode::Linear, DelayMode::Nearest}) {
-        SolverOptions options;
-        options.delay = delay;
-        options.bounce_terms = 4;
-        std::vector<float> second(n * T * 3, 0.0f);
-        solve_transient(patches, links, light, scene.time, options, [&](const SolveBlock& b) {
-            const float* term = b.per_order + 2 * n * std::size_t(b.bins) * 3;
-            for (std::size_t i = 0; i < n; ++i)
-                for (int t = 0; t < b.bins; ++t)
-                    if (b.first_bin + t >= 0 && b.first_bin + t < int(T))
-                        for (int c = 0; c < 3; ++c)
-                            second[(i * T + std::size_t(b.first_bin + t)) * 3 + std::size_t(c)] =
-                                term[(i * std::size_t(b.bins) + std::size_t(t)) * 3 + std::size_t(c)];
-        });
-        const FirstLinkLight first(patches, links, light, scene.time, delay, -1);
-        std::vector<float> rows(n * T * 3, 1.0f);  // fill overwrites every bin
-        std::vector<char> lit;
-        // In two pieces, as films ask for it: the first ends inside the second bounce's bins.
-        first.fill(0, 300, [](int order) { return order == 2; }, rows.data(), T * 3, lit);
-        std::vector<float> tail(n * (T - 300) * 3);
-        first.fill(300, T - 300, [](int order) { return order == 2; }, tail.data(), (T - 300) * 3, lit);
+// The solver's second bounce (its order-2 term) of every patch and bin, (N, T, 3).
+std::vector<float> solver_second_bounce(const PatchSet& patches, const LinkSet& links, const Illumination& light,
+                                        const TimeAxis& time, DelayMode delay) {
+    const std::size_t n = patches.size(), T = std::size_t(time.bins);
+    SolverOptions options;
+    options.delay = delay;
+    options.bounce_terms = 4;
+    std::vector<float> second(n * T * 3, 0.0f);
+    solve_transient(patches, links, light, time, options, [&](const SolveBlock& b) {
+        const float* term = b.per_order + 2 * n * std::size_t(b.bins) * 3;
         for (std::size_t i = 0; i < n; ++i)
-            std::copy_n(tail.data() + i * (T - 300) * 3, (T - 300) * 3, rows.data() + (i * T + 300) * 3);
-        double peak = 0.0, worst = 0.0, total = 0.0;
-        for (float v : second) peak = std::max(peak, double(v));
-        for (std::size_t k = 0; k < second.size(); ++k) {
-            worst = std::max(worst, std::abs(double(rows[k]) - double(second[k])));
-            total += second[k];
+            for (int t = 0; t < b.bins; ++t)
+                if (b.first_bin + t >= 0 && b.first_bin + t < int(T))
+                    for (int c = 0; c < 3; ++c)
+                        second[(i * T + std::size_t(b.first_bin + t)) * 3 + std::size_t(c)] =
+                            term[(i * std::size_t(b.bins) + std::size_t(t)) * 3 + std::size_t(c)];
+    });
+    return second;
+}
+
+// `set` with its patch-to-patch links only (the tree kept, clusters left without links).
+LinkSet patch_links_only(const LinkSet& set) {
+    LinkSet out;
+    out.tree = set.tree;
+    out.block_bins = set.block_bins;
+    const Links& l = set.links;
+    const std::size_t n = set.patches();
+    out.links.row.assign(set.nodes() + 1, 0);
+    for (std::size_t m = 0; m < set.nodes(); ++m) {
+        for (std::uint64_t k = l.row[m]; k < l.row[m + 1]; ++k)
+            if (m < n && l.source[k] < n) {
+                out.links.source.push_back(l.source[k]);
+                out.links.ff.push_back(l.ff[k]);
+                out.links.distance.push_back(l.distance[k]);
+            }
+        out.links.row[m + 1] = out.links.source.size();
+    }
+    return out;
+}
+
+TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
+    // Flat links: FirstLinkLight's light is the solver's whole second bounce. Hierarchical links: it
+    // is what their patch-to-patch links carry (the solver's second bounce on those links alone), and
+    // what cluster links bring stays in the profiles: nowhere more than the solver's whole second bounce.
+    for (const LinkMethod method : {LinkMethod::Flat, LinkMethod::Hierarchical}) {
+        const char* name = method == LinkMethod::Flat ? "flat" : "hierarchical";
+        Scene scene = corner_scene(700, 0.005, 0.1, true);
+        scene.links.method = method;
+        scene.links.tolerance = 0.01;
+        const PatchSet patches = build_patches(scene);
+        const std::unique_ptr<Visibility> vis = scene_visibility(scene, patches);
+        const LinkSet links = make_link_set(patches, *vis, scene.links, scene.time.bin_width_m());
+        const LinkSet own = patch_links_only(links);
+        if (method == LinkMethod::Hierarchical) {
+            ASSERT_GT(links.tree.clusters(), 0u);
+            ASSERT_LT(own.links.size(), links.links.size());  // cluster links exist
         }
-        ASSERT_GT(peak, 0.0);
-        EXPECT_GT(total, 0.0);
-        // The same sums in float, in another order: rounding only.
-        EXPECT_LT(worst, 1e-5 * peak) << (delay == DelayMode::Linear ? "linear" : "nearest");
-        // Other orders are not first-link light: order 1 (the pulses themselves) and order 3 give nothing.
-        first.fill(0, T, [](int order) { return order != 2; }, rows.data(), T * 3, lit);
-        EXPECT_EQ(*std::max_element(rows.begin(), rows.end()), 0.0f);
-        EXPECT_EQ(std::count(lit.begin(), lit.end(), 1), 0);
+        const LightSources sources = light_sources(scene, patches, *vis);
+        const Illumination light = illuminate(sources, patches, *vis, {});
+        const std::size_t n = patches.size(), T = std::size_t(scene.time.bins);
+        for (const DelayMode delay : {DelayMode::Linear, DelayMode::Nearest}) {
+            const char* mode = delay == DelayMode::Linear ? "linear" : "nearest";
+            const std::vector<float> second = solver_second_bounce(patches, own, light, scene.time, delay);
+            const std::vector<float> whole = solver_second_bounce(patches, links, light, scene.time, delay);
+            const FirstLinkLight first(patches, links, light, scene.time, delay, -1);
+            std::vector<float> rows(n * T * 3, 1.0f);  // fill overwrites every bin
+            std::vector<char> lit;
+            // In two pieces, as films ask for it: the first ends inside the second bounce's bins.
+            first.fill(0, 300, [](int order) { return order == 2; }, rows.data(), T * 3, lit);
+            std::vector<float> tail(n * (T - 300) * 3);
+            first.fill(300, T - 300, [](int order) { return order == 2; }, tail.data(), (T - 300) * 3, lit);
+            for (std::size_t i = 0; i < n; ++i)
+                std::copy_n(tail.data() + i * (T - 300) * 3, (T - 300) * 3, rows.data() + (i * T + 300) * 3);
+            double peak = 0.0, worst = 0.0, total = 0.0, above = 0.0, total_whole = 0.0;
+            for (float v : second) peak = std::max(peak, double(v));
+            for (std::size_t k = 0; k < second.size(); ++k) {
+                worst = std::max(worst, std::abs(double(rows[k]) - double(second[k])));
+                above = std::max(above, double(rows[k]) - double(whole[k]));
+                total += second[k];
+                total_whole += whole[k];
+            }
+            std::printf("%s, %s: patch links carry %.4f of the second bounce\n", name, mode, total / total_whole);
+            ASSERT_GT(peak, 0.0);
+            EXPECT_GT(total, 0.0);
+            // The same sums in float, in another order: rounding only.
+            EXPECT_LT(worst, 1e-5 * peak) << name << ", " << mode;
+            EXPECT_LT(above, 1e-5 * peak) << name << ", " << mode;
+            if (method == LinkMethod::Flat) {
+                EXPECT_NEAR(total, total_whole, 1e-5 * total_whole) << mode;
+            } else {
+                EXPECT_LT(total, (1.0 - 1e-3) * total_whole) << mode;  // the cluster links' share stays apart
+            }
+            // Other orders are not first-link light: order 1 (the pulses themselves) and order 3 give nothing.
+            first.fill(0, T, [](int order) { return order != 2; }, rows.data(), T * 3, lit);
+            EXPECT_EQ(*std::max_element(rows.begin(), rows.end()), 0.0f);
+            EXPECT_EQ(std::count(lit.begin(), lit.end(), 1), 0);
+        }
     }
 }
 

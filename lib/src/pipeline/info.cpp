@@ -168,9 +168,9 @@ std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ?
 bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
 // Whether the camera reads the second bounce at its samples' times (render.cpp, make_first_link_light):
-// flat links and no mirror or glass.
+// no mirror or glass.
 bool shifts_second_bounce(const Scene& scene) {
-    return scene.camera && scene.camera->shift_second_bounce && scene.links.method == LinkMethod::Flat &&
+    return scene.camera && scene.camera->shift_second_bounce &&
            std::none_of(scene.objects.begin(), scene.objects.end(), [](const Object& o) { return o.material.specular(); });
 }
 

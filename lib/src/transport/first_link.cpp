@@ -18,7 +18,7 @@ FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, co
                                const TimeAxis& time, DelayMode delay, int max_bounces, int threads)
     : m_patches(patches), m_links(links), m_time(time), m_delay(delay), m_threads(threads) {
     const std::size_t n = patches.size();
-    TPRF_CHECK_EQ(links.nodes(), n);  // patches only: a flat set
+    TPRF_CHECK_EQ(links.patches(), n);
     TPRF_CHECK_EQ(illumination.row.size(), n + 1);
     const Senders senders = take_pulses(illumination, max_bounces);
     m_lo.assign(n, 0);
@@ -79,7 +79,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     double total = 0.0;
     for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
         const std::uint32_t j = l.source[k];
-        if (m_row[j] == m_row[j + 1]) continue;  // sends nothing
+        if (j >= m_patches.size() || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
         const int lag = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, 1.0f).lag;
         lo = std::min(lo, senders.first[j] + lag);
         hi = std::max(hi, senders.last[j] + lag + 2);
@@ -122,7 +122,7 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
         // Sums in the row first (the solver's G), then times the albedo.
         for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
             const std::uint32_t j = l.source[k];
-            if (m_row[j] == m_row[j + 1]) continue;  // sends nothing
+            if (j >= n || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
             const solver_detail::Taps t = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
             for (std::uint64_t r = m_row[j]; r < m_row[j + 1]; ++r) {
                 const Run& run = m_runs[r];
@@ -167,7 +167,7 @@ double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
 std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
                                                       DelayMode delay, int max_bounces, bool mirrors, int threads) {
-    if (mirrors || links.tree.clusters() > 0 || links.links.tinted() || patches.size() == 0) return nullptr;
+    if (mirrors || links.links.tinted() || patches.size() == 0) return nullptr;
     auto light = std::make_unique<FirstLinkLight>(patches, links, illumination, time, delay, max_bounces, threads);
     if (light->empty()) return nullptr;
     return light;

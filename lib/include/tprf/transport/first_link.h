@@ -14,7 +14,9 @@
 /// with u_j = (c_k - c_j) / r_j, r_j = |c_k - c_j|. Later bounces come from senders whose light is
 /// spread over time already and keep the centroid's timing.
 ///
-/// Built for flat link sets without mirrors (make_first_link_light says when it applies).
+/// Only patch-to-patch links are taken apart: in a hierarchical set, what reaches a patch through a
+/// cluster link (its light shared by all the cluster's members, sent from a cluster's mean) stays in
+/// the profile with the centroid's timing. No mirrors (make_first_link_light says when it applies).
 
 #include "tprf/core/types.h"
 #include "tprf/core/time_axis.h"
@@ -39,7 +41,7 @@ public:
                    const TimeAxis& time, DelayMode delay, int max_bounces, int threads = 0);
 
     /// Writes into `rows` the light of bins [first_bin, first_bin + bins) that every patch receives
-    /// through one link from a propagating pulse whose onward order `takes(order)` accepts, times the
+    /// through one patch-to-patch link from a propagating pulse whose onward order `takes(order)` accepts, times the
     /// receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
     /// bins as the solver splits it. Patch i's bin b (from first_bin) is rows[i * stride + b * 3 + c].
     /// lit[i] (resized to N) is 0 where patch i's row is all zero. With `wanted`, only the rows of
@@ -93,9 +95,9 @@ private:
     bool m_any = false;
 };
 
-/// The first-link light of a camera render, or null when it does not apply: hierarchical links (a
-/// cluster's received light is an average over its members, not a patch's), mirrors (a link through
-/// one does not run from c_j), or light sent only as pulses that max_bounces stops.
+/// The first-link light of a camera render, or null when it does not apply: mirrors (a link through
+/// one does not run from c_j), tinted links, or no light sent through a patch-to-patch link as pulses
+/// that max_bounces lets on.
 std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
                                                       DelayMode delay, int max_bounces, bool mirrors,
