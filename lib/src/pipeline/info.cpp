@@ -100,8 +100,9 @@ constexpr double kEmbreeBytesPerPatch = 180;     // Embree's quads and BVH (RTC_
 constexpr double kLinkBytes = 12;                // a link: source u32, form factor f32, distance f32
 constexpr double kRowBytes = 8;                  // a CSR row offset per receiver
 constexpr double kLinkBuildBytes = 4;            // the link builder's pair lists, per link (8 bytes a pair)
-constexpr double kHierarchicalLinkBuildBytes = 16;  // the hierarchical builder's records (16 bytes a link;
-                                                    // a wavy sheet at 99k patches: 15 measured)
+constexpr double kHierarchicalLinkBuildBytes = 10;  // the hierarchical builder's records (20 bytes a pair
+                                                    // of links; 16 a link until 2026-11-26, when a wavy
+                                                    // sheet at 99k patches measured 15)
 constexpr double kOracleBytesPerNode = 16 * 24;  // the hierarchical builder's stored points, 16 a node
 constexpr double kTreeBytesPerNode = 100;        // a cluster tree node (bounds, cone, ranges, levels)
 constexpr double kPulseBytes = 64;               // a pulse (40 bytes) and the per-patch lists it was built in
@@ -246,12 +247,13 @@ double median_extent(const PatchCensus& census) {
 }
 
 // The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
-// cluster link (hierarchy.cpp min_lag: four median patch sizes in bins, 1 to 8 bins) are refined, so
+// cluster link (hierarchy.cpp min_lag: four median patch sizes in bins, 1 to 32 bins) are refined, so
 // every facing pair of patches whose gap is shorter is a link of its own. The sampled patches' median
 // size stands for the set's.
 double near_gap_m(const PatchCensus& census, double bin_m) {
     if (census.samples.empty() || !(bin_m > 0.0)) return 0.0;
-    return std::clamp(std::floor(4.0 * median_extent(census) / bin_m), 1.0, 8.0) * bin_m;
+    return std::clamp(std::floor(4.0 * median_extent(census) / bin_m), 1.0, double(HierarchyOptions::kLongestMinLag)) *
+           bin_m;
 }
 
 // Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver_plan.cpp

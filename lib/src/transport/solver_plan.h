@@ -138,6 +138,7 @@ constexpr int kMaxSweeps = 200;
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;
 static_assert(1 << (kDelayOctaves - 2) == kLongestWindow, "a hierarchical row's last octave is the longest window");
+static_assert(HierarchyOptions::kLongestMinLag <= kLongestWindow, "blocks no longer than the longest window");
 constexpr int kMaxWindows = 16;
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and

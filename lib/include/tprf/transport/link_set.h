@@ -80,9 +80,11 @@ struct HierarchyOptions {
     double time_bins = 0.0;
     /// Cluster links are kept only between nodes at least this many bins apart (when bin_width_m > 0);
     /// nearer pairs are refined, and the solver's blocks are this long. 0: four typical patch sizes
-    /// in bins, between 1 and 32 (a fixed length would leave every pair within it as patch-to-patch
-    /// links where bins are coarse against the patches).
+    /// in bins, between 1 and kLongestMinLag (a fixed length would leave every pair within it as
+    /// patch-to-patch links where bins are coarse against the patches).
     int min_lag_bins = 0;
+    /// The most bins min_lag_bins is set to by default: the solver's longest window.
+    static constexpr int kLongestMinLag = 32;
 };
 
 /// What the hierarchical build counted.
