@@ -16,7 +16,7 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 export OMP_TOOL_LIBRARIES="$archer" TSAN_OPTIONS="halt_on_error=0 exitcode=0 log_path=$out/tsan"
 build-tsan/tests/tprf_tests --gtest_filter='Solver.*:SolverBatch.*:Links.*:Hierarchy.*'
-# Whole renders: flat links, the camera gather, the sensor model, hierarchical links and a capture.
+# Whole renders: the corner (hierarchical links, the default) with the camera gather, the sensor model, and a capture.
 build-tsan/bin/tprf render meshes/corner.json -o "$out/flat" -q --threads 2
 build-tsan/bin/tprf sensor "$out/flat" meshes/sensor-spad.json -q --threads 2
 build-tsan/bin/tprf render examples/nlos/letter.json -o "$out/nlos" -q --threads 2 --max-edge 0.1

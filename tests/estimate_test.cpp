@@ -110,6 +110,7 @@ TEST(ResourceEstimate, FollowsTheScene) {
 
     // Hierarchical links grow like N log N: far fewer than the flat ones at a million patches.
     scene.max_edge = 0.002;
+    scene.links.method = tprf::LinkMethod::Flat;
     const tprf::ResourceEstimate flat = tprf::estimate_resources(scene, {});
     scene.links.method = tprf::LinkMethod::Hierarchical;
     const tprf::ResourceEstimate hierarchical = tprf::estimate_resources(scene, {});
@@ -151,6 +152,7 @@ TEST(ResourceEstimate, CountsThePiecesOfSpreadPatchLinks) {
     // estimate against the links a build makes, both without and with 4 pieces, within the factor of 2
     // the estimate aims at.
     tprf::Scene scene = tprf::load_scene(sample_scene("cornell-box.json"));
+    scene.links.method = tprf::LinkMethod::Flat;
     scene.max_edge = 0.1;
     scene.time.bin_width = 0.005;
     scene.time.unit = tprf::TimeUnit::Metres;
@@ -230,20 +232,28 @@ TEST_F(Estimate, IsWithinAFactorTwoOfTheMeasuredPeak) {
 }
 
 TEST_F(Estimate, TooLargeARenderExitsTwoBeforeAllocatingAndNamesTheKeys) {
-    // 0.2 mm patches: 5000 x 5000 per square, 50 million patches, about 1.25e15 flat links.
+    // 0.2 mm patches: 5000 x 5000 per square, 50 million patches: about 5e9 hierarchical links (the
+    // default), 1.25e15 flat ones. A flat scene is also told to switch its links.method.
+    std::string flat = corner_scene(0.0002);
+    flat.insert(flat.rfind('}'), R"(, "links": {"method": "flat"})");
     std::ofstream(m_dir / "huge.json") << corner_scene(0.0002);
-    const auto start = std::chrono::steady_clock::now();
-    const Outcome r = tprf::test::run_tprf("render " + (m_dir / "huge.json").string() + " -o " +
-                                           (m_dir / "out").string() + " --max-memory 1");
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    EXPECT_EQ(r.status, 2) << r.err;
-    EXPECT_LT(seconds, 10.0) << "the refusal must come before the work";
-    EXPECT_FALSE(fs::exists(m_dir / "out")) << "nothing is written for a refused render";
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    for (const char* key : {"huge.json", "estimated peak memory", "limit of 1 GB", "--max-memory", "patches.max_edge",
-                            "time.bins", "camera.width", "camera.height", "links.method", "\"hierarchical\"",
-                            "links.tolerance"})
-        EXPECT_NE(r.err.find(key), std::string::npos) << key << " not in: " << r.err;
+    std::ofstream(m_dir / "huge_flat.json") << flat;
+    for (const char* file : {"huge.json", "huge_flat.json"}) {
+        const bool is_flat = std::string(file) == "huge_flat.json";
+        const auto start = std::chrono::steady_clock::now();
+        const Outcome r = tprf::test::run_tprf("render " + (m_dir / file).string() + " -o " + (m_dir / "out").string() +
+                                               " --max-memory 1");
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        EXPECT_EQ(r.status, 2) << r.err;
+        EXPECT_LT(seconds, 10.0) << file << ": the refusal must come before the work";
+        EXPECT_FALSE(fs::exists(m_dir / "out")) << file << ": nothing is written for a refused render";
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        for (const char* key : {file, "estimated peak memory", "limit of 1 GB", "--max-memory", "patches.max_edge",
+                                "time.bins", "camera.width", "camera.height", "links.tolerance"})
+            EXPECT_NE(r.err.find(key), std::string::npos) << key << " not in: " << r.err;
+        for (const char* key : {"links.method", "\"hierarchical\""})
+            EXPECT_EQ(r.err.find(key) != std::string::npos, is_flat) << key << " in: " << r.err;
+    }
 }
 
 TEST_F(Estimate, InfoDoesNotBuildLinksOverTheLimit) {

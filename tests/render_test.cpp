@@ -297,9 +297,12 @@ void expect_png(const fs::path& file, int width, int height) {
 TEST(Render, EveryOutputHasTheSpecShape) {
     const fs::path dir = fresh_dir("outputs");
     // W x H = 24 x 20 pixels, T = 64 bins. Two 1 m squares cut at 0.1 m: N = 200 patches, and since
-    // every patch of the floor faces every patch of the wall with nothing between, 2 x 100 x 100 links.
+    // every patch of the floor faces every patch of the wall with nothing between, 2 x 100 x 100 flat
+    // links.
     const std::size_t W = 24, H = 20, T = 64, N = 200, L = 20000;
-    const fs::path file = write_scene(dir, corner_scene(int(T), 0.05));
+    nlohmann::json scene = corner_scene(int(T), 0.05);
+    scene["links"] = {{"method", "flat"}};
+    const fs::path file = write_scene(dir, scene);
     RenderOptions o = quiet_options(dir / "out");
     o.patch_profiles = o.frames = o.streaks = true;
     const RenderReport report = render_file(file, o);

@@ -198,6 +198,7 @@ def test_a_mirror_from_a_dict_scene_adds_links_and_light():
 SLOW = copy.deepcopy(CORNER)
 SLOW["patches"]["max_edge"] = 0.012
 SLOW["time"]["bins"] = 2000
+SLOW["links"] = {"method": "flat"}
 
 
 def test_an_exception_in_the_callback_cancels_the_render_and_the_next_render_runs():

@@ -121,7 +121,7 @@ inline constexpr int kMaxSpreadPieces = 8;
 
 /// The optional `links` block.
 struct LinkSettings {
-    LinkMethod method = LinkMethod::Flat;  ///< flat until the hierarchical method is measured (docs/links.md)
+    LinkMethod method = LinkMethod::Hierarchical;  ///< SPEC's default; flat is the reference (docs/links.md)
     double tolerance = 1e-3;               ///< > 0: largest accepted form-factor error of one cluster link
     /// >= 0: refine a cluster link whose form factor times its members' timing offset in bins exceeds
     /// time_bins x tolerance (HierarchyOptions::time_bins); 0: off. Beyond SPEC (docs/links.md).
