@@ -17,8 +17,8 @@ trap 'rm -rf "$out"' EXIT
 export OMP_TOOL_LIBRARIES="$archer" TSAN_OPTIONS="halt_on_error=0 exitcode=0 log_path=$out/tsan"
 build-tsan/tests/tprf_tests --gtest_filter='Solver.*:SolverBatch.*:Links.*:Hierarchy.*'
 # Whole renders: the corner (hierarchical links, the default) with the camera gather, the sensor model, and a capture.
-build-tsan/bin/tprf render meshes/corner.json -o "$out/flat" -q --threads 2
-build-tsan/bin/tprf sensor "$out/flat" meshes/sensor-spad.json -q --threads 2
+build-tsan/bin/tprf render meshes/corner.json -o "$out/corner" -q --threads 2
+build-tsan/bin/tprf sensor "$out/corner" meshes/sensor-spad.json -q --threads 2
 build-tsan/bin/tprf render examples/nlos/letter.json -o "$out/nlos" -q --threads 2 --max-edge 0.1
 shopt -s nullglob
 logs=("$out"/tsan.*)

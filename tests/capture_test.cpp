@@ -204,7 +204,8 @@ TEST(Capture, ThirdBounceOfASmallPatchMatchesTheClosedForm) {
 
 // A hidden corner (the tilted plane and a wall standing on it), every bounce marched.
 std::string corner_scene(const std::string& extra_capture = "",
-                         const std::string& time = R"({"bins": 150, "bin_width": 0.02})") {
+                         const std::string& time = R"({"bins": 150, "bin_width": 0.02})",
+                         const std::string& links = R"({"method": "flat"})") {
     const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
         "sensor": {"position": [0, -1.5, 0.3]},
         "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 3, "nv": 3})" +
@@ -213,15 +214,24 @@ std::string corner_scene(const std::string& extra_capture = "",
         R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
     const char* side =
         R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
-    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, time, 0.1);
+    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, time, 0.1, links);
 }
 
 // Helmholtz reciprocity: with the laser and the sensor at one position and one grid, H[l, s] = H[s, l] at
 // every bin. The exact bounces are sums of the same sample products; the marched ones exchange identical
-// pieces (flat links are reciprocal, A_i F_ij = A_j F_ji); what differs is float rounding and the same-bin
-// iteration's stopping point (1e-7 of the largest value): 1e-6 of the largest off-diagonal value.
-TEST(Capture, ExhaustiveCapturesAreReciprocal) {
-    const Built b(corner_scene());
+// pieces (flat links are reciprocal, A_i F_ij = A_j F_ji, and so are cluster links through push and pull,
+// A_R F_RS = A_S F_SR); what differs is float rounding and the same-bin iteration's stopping point (1e-7
+// of the largest value): 1e-6 of the largest off-diagonal value.
+void expect_reciprocal(const std::string& links) {
+    SCOPED_TRACE(links);
+    const Built b(corner_scene("", R"({"bins": 150, "bin_width": 0.02})", links));
+    if (b.scene.links.method == LinkMethod::Hierarchical) {
+        std::size_t cluster_links = 0;
+        for (std::size_t m = 0; m < b.links.nodes(); ++m)
+            for (std::uint64_t k = b.links.links.row[m]; k < b.links.links.row[m + 1]; ++k)
+                cluster_links += m >= b.patches.size() || b.links.links.source[k] >= b.patches.size();
+        ASSERT_GT(cluster_links, 0u);
+    }
     const CaptureResult r = b.capture();
     ASSERT_TRUE(r.solved);
     const std::size_t n = 9, T = std::size_t(r.bins);
@@ -237,8 +247,14 @@ TEST(Capture, ExhaustiveCapturesAreReciprocal) {
         for (std::size_t s = l + 1; s < n; ++s)
             for (std::size_t t = 0; t < T; ++t)
                 worst = std::max(worst, std::abs(double(r.H[(l * n + s) * T + t]) - double(r.H[(s * n + l) * T + t])));
-    MEASURED("reciprocity: worst %.3g of largest %.3g\n", worst, largest);
+    MEASURED("reciprocity (%s): worst %.3g of largest %.3g\n", links.c_str(), worst, largest);
     EXPECT_LE(worst, 1e-6 * largest);
+}
+
+// Flat links, then hierarchical ones (the default).
+TEST(Capture, ExhaustiveCapturesAreReciprocal) {
+    expect_reciprocal(R"({"method": "flat"})");
+    expect_reciprocal(R"({"method": "hierarchical", "tolerance": 0.01})");
 }
 
 // The later bounces matter (the hidden corner sends light between its faces) and a batch of

@@ -169,8 +169,12 @@ protected:
         return snapshot(out);
     }
 
-    // A scene whose flat link stage takes seconds (5,000 patches), so that a signal lands inside it.
-    fs::path slow_links() const { return write_scene("slow_links", corner(0.02, 64)); }
+    // A scene whose link stage takes seconds (5,000 patches, flat links), so that a signal lands inside it.
+    fs::path slow_links() const {
+        json scene = corner(0.02, 64);
+        scene["links"] = {{"method", "flat"}};
+        return write_scene("slow_links", scene);
+    }
 
     // Stops a run at the start of stage `stage` with `sig`; returns its exit status.
     int interrupt(Render& run, const std::string& stage, int sig) {

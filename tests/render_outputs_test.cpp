@@ -458,6 +458,7 @@ TEST_F(RenderOutputs, OneAndTwoThreadsWriteIdenticalFiles) {
     scene["sensor"] = {{"pulse", {{"shape", "gaussian"}, {"fwhm", 0.1}}},
                        {"exposure", {{"type", "gates"}, {"start", 0.5}, {"width", 0.2}, {"step", 0.2}, {"count", 8}}},
                        {"noise", {{"sigma", 0.001}, {"seed", 3}}}};
+    scene["links"] = {{"method", "flat"}};
     const std::string flags = "--frames --streaks --patch-profiles";
     const fs::path one = render("one", scene, flags, 1);
     const fs::path two = render("two", scene, flags, 2);

@@ -48,10 +48,8 @@ Corner corner(double max_edge, bool hierarchical = false) {
     c.patches = build_patches(scene);
     const Visibility vis(c.patches);
     LinkSettings settings;
-    if (hierarchical) {
-        settings.method = LinkMethod::Hierarchical;
-        settings.tolerance = 0.05;
-    }
+    settings.method = hierarchical ? LinkMethod::Hierarchical : LinkMethod::Flat;
+    if (hierarchical) settings.tolerance = 0.05;
     c.links = make_link_set(c.patches, vis, settings, 0.02);
     return c;
 }
