@@ -113,14 +113,6 @@ std::vector<double> row_sums(const LinkSet& set) {
     return out;
 }
 
-std::size_t cluster_link_count(const LinkSet& set) {
-    std::size_t count = 0;
-    const std::size_t n = set.patches();
-    for (std::size_t m = 0; m < set.nodes(); ++m)
-        for (std::uint64_t k = set.links.row[m]; k < set.links.row[m + 1]; ++k) count += m >= n || set.links.source[k] >= n;
-    return count;
-}
-
 // Transient profiles, N x T (channel 0) and, with bounce terms, the per-order terms K x N x T.
 struct Profiles {
     std::size_t n = 0;
@@ -452,7 +444,7 @@ TEST(Hierarchy, FurnaceTotalRadiosityIsEmissionOverOneMinusAlbedo) {
     const std::size_t n = p.patches.size();
     const double tolerance = LinkSettings{}.tolerance;
     const LinkSet h = hierarchical(p, tolerance, 0, 0.05), f = flat_link_set(p.patches, *p.vis);
-    ASSERT_GT(cluster_link_count(h), 0u);
+    ASSERT_GT(h.cluster_links(), 0u);
     for (double a : {0.5, 0.8}) {
         for (Rgb& albedo : p.patches.albedo) albedo = Rgb::Constant(a);
         const Illumination e = lit(p);

@@ -247,13 +247,12 @@ double median_extent(const PatchCensus& census) {
 }
 
 // The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
-// cluster link (hierarchy.cpp min_lag: four median patch sizes in bins, 1 to 32 bins) are refined, so
+// cluster link (default_min_lag_bins: four median patch sizes in bins, 1 to 32) are refined, so
 // every facing pair of patches whose gap is shorter is a link of its own. The sampled patches' median
 // size stands for the set's.
 double near_gap_m(const PatchCensus& census, double bin_m) {
     if (census.samples.empty() || !(bin_m > 0.0)) return 0.0;
-    return std::clamp(std::floor(4.0 * median_extent(census) / bin_m), 1.0, double(HierarchyOptions::kLongestMinLag)) *
-           bin_m;
+    return default_min_lag_bins(median_extent(census), bin_m) * bin_m;
 }
 
 // Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver_plan.cpp

@@ -445,17 +445,16 @@ void sort_rows_by_octave(Links& links, float inv_bin, int threads) {
     });
 }
 
-// The shortest cluster link, in bins: hierarchy.min_lag_bins, or when 0, four median patch sizes
-// (twice the median circumradius) in bins, between 1 and kLongestMinLag (32). The solver's blocks are this short (a
-// power of two at most): patches a few bins wide or more keep blocks of 32 bins, its longest window
-// (measured: 8-bin blocks made the Cornell box's solve 20% slower), at the price of patch links
-// between the nodes nearer than that, a few dozen per patch (four patch sizes).
+// The shortest cluster link, in bins: hierarchy.min_lag_bins, or when 0, default_min_lag_bins of the
+// median patch size (twice the median circumradius). The solver's blocks are this short (a power of
+// two at most): patches a few bins wide or more keep blocks of 32 bins, its longest window (measured:
+// 8-bin blocks made the Cornell box's solve 20% slower), at the price of patch links between the
+// nodes nearer than that, a few dozen per patch (four patch sizes).
 int min_lag(const PatchSet& patches, const HierarchyOptions& hierarchy) {
     if (hierarchy.min_lag_bins > 0 || !(hierarchy.bin_width_m > 0.0) || patches.size() == 0) return hierarchy.min_lag_bins;
     std::vector<double> radius = circumradii(patches);
     std::nth_element(radius.begin(), radius.begin() + std::ptrdiff_t(radius.size() / 2), radius.end());
-    const double size = 2.0 * radius[radius.size() / 2];
-    return int(std::clamp(std::floor(4.0 * size / hierarchy.bin_width_m), 1.0, double(HierarchyOptions::kLongestMinLag)));
+    return default_min_lag_bins(2.0 * radius[radius.size() / 2], hierarchy.bin_width_m);
 }
 
 LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,

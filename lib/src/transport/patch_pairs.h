@@ -35,7 +35,9 @@ inline std::uint64_t hash64(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
     h ^= h >> 33;
     return h;
 }
-inline double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) { return double(hash64(a, b, c) >> 11) * 0x1.0p-53; }
+inline double hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+    return double(hash64(a, b, c) >> 11) * 0x1.0p-53;
+}
 
 /// True when i and j are closer than near_factor (r_i + r_j), the pairs integrated adaptively.
 bool near_pair(const PatchSet& patches, const std::vector<double>& radius, double near_factor, std::size_t i,

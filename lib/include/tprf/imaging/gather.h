@@ -77,10 +77,11 @@ struct GatherOptions {
 /// One output's taps merged where a film on `time` cannot tell them apart: one patch and tint, legs in
 /// the same half of one bin (and legs plus shifts in the same half bin). The merged tap has the sum of
 /// the weights, the weighted mean leg and shift and the least earliest path. The film splits a leg
-/// linearly between its bin and the next (or puts it in the nearer), so the two bins get the same light as from the taps one by one (up to a float leg's
-/// precision, 5e-5 of a 5 mm bin at 2 m), and its earliest bin is the least over a pixel's taps of a
-/// patch anyway. In the order of first occurrence. gather_points does this for every output when it
-/// has a time axis: a pixel's samples at spp 64 leave about 8x fewer taps.
+/// linearly between its bin and the next (or puts it in the nearer), so the two bins get the same
+/// light as from the taps one by one (up to a float leg's precision, 5e-5 of a 5 mm bin at 2 m), and
+/// its earliest bin is the least over a pixel's taps of a patch anyway. In the order of first
+/// occurrence. gather_points does this for every output when it has a time axis: a pixel's samples at
+/// spp 64 leave about 8x fewer taps.
 void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time);
 
 /// Prepares the gather of `points` (outputs laid out as width x height). Outputs without points

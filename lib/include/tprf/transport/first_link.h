@@ -7,8 +7,8 @@
 /// |c_k - c_j| after leaving j. A point x = c_k + d of patch k gets it |x - c_j| after, so the light
 /// that the camera reads at x through patch k's profile is early or late by up to the patch's size in
 /// path. For light that left its sender as a pulse (the first bounce: sharp in time), that error is
-/// the streak bands at patch size (docs/method.md, "The second bounce at the sample's own time"). The film takes this
-/// part out of the profiles and reads it at the sample's own shift: the mean over k's senders,
+/// the streak bands at patch size (docs/method.md, "The second bounce at the sample's own time"). The
+/// film takes this part out of the profiles and reads it at the sample's own shift: the mean over k's senders,
 /// weighted by what each sends, of |x - c_j| - |c_k - c_j|, to second order in d:
 ///     shift_k(x) = D_k . d + d^T H_k d / 2,   D_k = mean u_j,   H_k = mean (I - u_j u_j^T) / r_j,
 /// with u_j = (c_k - c_j) / r_j, r_j = |c_k - c_j|. Later bounces come from senders whose light is
@@ -41,8 +41,8 @@ public:
                    const TimeAxis& time, DelayMode delay, int max_bounces, int threads = 0);
 
     /// Writes into `rows` the light of bins [first_bin, first_bin + bins) that every patch receives
-    /// through one patch-to-patch link from a propagating pulse whose onward order `takes(order)` accepts, times the
-    /// receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
+    /// through one patch-to-patch link from a propagating pulse whose onward order `takes(order)`
+    /// accepts, times the receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
     /// bins as the solver splits it. Patch i's bin b (from first_bin) is rows[i * stride + b * 3 + c].
     /// lit[i] (resized to N) is 0 where patch i's row is all zero. With `wanted`, only the rows of
     /// patches i with wanted[i] != 0 are computed (the others are zero, and not lit).

@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 
 namespace tprf {
 
@@ -50,6 +51,14 @@ struct LinkSet {
     std::size_t nodes() const { return tree.nodes(); }
     /// Bytes held by the tree and the links.
     std::size_t bytes() const { return tree.bytes() + links.bytes(); }
+    /// Links with a cluster at either end (kernel pieces counted one by one).
+    std::size_t cluster_links() const {
+        std::size_t count = 0;
+        for (std::size_t m = 0; m < nodes(); ++m)
+            for (std::uint64_t k = links.row[m]; k < links.row[m + 1]; ++k)
+                count += m >= patches() || links.source[k] >= patches();
+        return count;
+    }
 };
 
 /// Spreads every patch-to-patch link of `set` over the paths between its two patches: a link whose
@@ -86,6 +95,12 @@ struct HierarchyOptions {
     /// The most bins min_lag_bins is set to by default: the solver's longest window.
     static constexpr int kLongestMinLag = 32;
 };
+
+/// min_lag_bins when it is 0: four patch sizes (`patch_size_m`, a typical patch's diameter) in bins of
+/// `bin_width_m`, between 1 and HierarchyOptions::kLongestMinLag.
+inline int default_min_lag_bins(double patch_size_m, double bin_width_m) {
+    return int(std::clamp(std::floor(4.0 * patch_size_m / bin_width_m), 1.0, double(HierarchyOptions::kLongestMinLag)));
+}
 
 /// What the hierarchical build counted.
 struct HierarchyStats {
