@@ -2,6 +2,7 @@
 // (visibility hierarchy + compute_links) on the Cornell box at about 1k, 4k and 16k patches.
 #include "bench_util.h"
 
+#include "tprf/core/random.h"
 #include "tprf/geometry/form_factors.h"
 #include "tprf/transport/links.h"
 #include "tprf/geometry/patches.h"
@@ -11,6 +12,7 @@
 
 #include <array>
 #include <chrono>
+#include <vector>
 
 namespace {
 
@@ -29,6 +31,40 @@ void BM_PointPolygonFormFactor(benchmark::State& state) {
     }
 }
 BENCHMARK(BM_PointPolygonFormFactor);
+
+// Occlusion rays as the link stage casts them: 4 between random points of two patches of the Cornell
+// box (about 4k patches; most pairs see each other, some are hidden by the blocks), one at a time
+// (range 1) or in packets of 4 or 8 (Visibility::transmittances), one thread.
+void BM_OcclusionRays(benchmark::State& state) {
+    static const tprf::PatchSet patches = tprf::build_patches(tprf::bench::cornell_box(4000));
+    static const tprf::Visibility visibility(patches);
+    const int packet = int(state.range(0));
+    constexpr std::size_t kRays = 1 << 16;
+    std::vector<tprf::Vec3> a(kRays), b(kRays);
+    tprf::Random rng(11);
+    for (std::size_t k = 0; k < kRays; k += 4) {
+        const std::size_t i = rng.next_u64() % patches.size(), j = rng.next_u64() % patches.size();
+        for (std::size_t h = k; h < k + 4; ++h) {
+            a[h] = tprf::patch_point(patches, i, rng.uniform(), rng.uniform()) + 1e-4 * patches.normal[i];
+            b[h] = tprf::patch_point(patches, j, rng.uniform(), rng.uniform()) + 1e-4 * patches.normal[j];
+        }
+    }
+    double passed_sum = 0.0;
+    for (auto _ : state) {
+        double passed[tprf::Visibility::kBatch];
+        for (std::size_t k = 0; k < kRays; k += std::size_t(packet)) {
+            if (packet == 1) {
+                passed_sum += visibility.transmittance(a[k], b[k]);
+                continue;
+            }
+            visibility.transmittances(a.data() + k, b.data() + k, packet, passed);
+            for (int h = 0; h < packet; ++h) passed_sum += passed[h];
+        }
+    }
+    state.counters["rays_per_s"] = benchmark::Counter(double(kRays), benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["passed"] = passed_sum / double(kRays) / double(state.iterations());
+}
+BENCHMARK(BM_OcclusionRays)->Arg(1)->Arg(4)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Visibility + compute_links, timed together; patch building is left out. Registered smallest first,
 // and the peak RSS is reset before each case, so each case's peak is its own.

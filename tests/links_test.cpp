@@ -1,7 +1,10 @@
 #include "tprf/transport/links.h"
 
+#include "tprf/core/random.h"
+#include "tprf/geometry/mirror_images.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/scene/parse_json.h"
 
 #include "test_scenes.h"
 
@@ -179,6 +182,47 @@ TEST(Links, OneAndTwoThreadsGiveIdenticalLinks) {
     EXPECT_EQ(one.links.source, two.links.source);
     EXPECT_EQ(one.links.ff, two.links.ff);
     EXPECT_EQ(one.links.distance, two.links.distance);
+}
+
+// The packets of rays that links and the hierarchy's oracle cast answer as single rays do: between
+// two plates, an opaque plate and a glass sheet (transmittance 0.35) each cover part of the way.
+TEST(Visibility, PacketsOfRaysAnswerAsSingleRays) {
+    const Scene scene = parse_scene(R"({
+        "time": {"bins": 4, "bin_width": 0.1},
+        "objects": [
+            {"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0], "albedo": 0.5},
+            {"type": "rectangle", "origin": [0, 0, 1], "u": [0, 1, 0], "v": [1, 0, 0], "albedo": 0.5},
+            {"type": "rectangle", "origin": [0, 0, 0.5], "u": [0.5, 0, 0], "v": [0, 1, 0], "albedo": 0.5},
+            {"type": "rectangle", "origin": [0.5, 0, 0.3], "u": [0.5, 0, 0], "v": [0, 1, 0],
+             "material": {"type": "glass", "reflectance": 0.0, "transmittance": 0.35}}],
+        "patches": {"max_edge": 0.25}})",
+                                     "packets.json");
+    const PatchSet patches = build_patches(scene);
+    const Visibility vis(patches, specular_planes(scene, patches), 1);
+    // Segments from the lower plate to the upper one at random points (and a few of zero length).
+    std::vector<Vec3> a, b;
+    Random rng(7);
+    for (int k = 0; k < 200; ++k) {
+        a.emplace_back(rng.uniform(), rng.uniform(), 0.0);
+        b.emplace_back(rng.uniform(), rng.uniform(), 1.0);
+        if (k % 50 == 0) b.back() = a.back();
+    }
+    int hidden = 0, glass = 0;
+    std::size_t at = 0;
+    for (int count = 0; at + std::size_t(count) <= a.size(); count = (count + 1) % (Visibility::kBatch + 1)) {
+        double passed[Visibility::kBatch];
+        vis.transmittances(a.data() + at, b.data() + at, count, passed);
+        for (int k = 0; k < count; ++k) {
+            const double single = vis.transmittance(a[at + std::size_t(k)], b[at + std::size_t(k)]);
+            EXPECT_EQ(passed[k], single) << "segment " << at + std::size_t(k) << " of a packet of " << count;
+            hidden += single == 0.0;
+            glass += std::abs(single - 0.35) < 1e-6;  // the transmittance is kept in float
+        }
+        at += std::size_t(count);
+    }
+    EXPECT_GT(at, std::size_t(150));
+    EXPECT_GT(hidden, 20);  // the opaque plate blocks some, the glass dims others
+    EXPECT_GT(glass, 20);
 }
 
 }  // namespace

@@ -82,6 +82,7 @@ struct Visibility::Impl {
     std::vector<float> glass_transmittance;    // per glass primitive
     const PatchSet* patches = nullptr;
     std::vector<std::int64_t> twin;
+    bool packets = false;  // Embree traces packets of 8 rays natively (else one ray at a time)
 
     ~Impl() {
         if (opaque) rtcReleaseScene(opaque);
@@ -144,6 +145,7 @@ Visibility::Visibility(const PatchSet& patches, std::vector<SpecularPlane> plane
         throw InternalError("Embree: cannot create a device");
     }
     rtcSetDeviceErrorFunction(im.device, embree_error, &im.errors);
+    im.packets = rtcGetDeviceProperty(im.device, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED) != 0;
 
     Eigen::AlignedBox<double, 3> box;
     for (const Vec3& v : patches.vertices) box.extend(v);
@@ -238,6 +240,46 @@ double Visibility::transmittance(const Vec3& a, const Vec3& b) const {
         from = t + m_epsilon;
     }
     return passed;
+}
+
+void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double* passed) const {
+    TPRF_CHECK(count >= 0 && count <= kBatch);
+    if (!m_impl->packets) {
+        for (int k = 0; k < count; ++k) passed[k] = transmittance(a[k], b[k]);
+        return;
+    }
+    alignas(32) int valid[kBatch];
+    alignas(32) RTCRay8 rays{};
+    for (int k = 0; k < kBatch; ++k) {
+        valid[k] = 0;
+        if (k >= count) continue;
+        passed[k] = 1.0;
+        const Vec3 d = b[k] - a[k];
+        const double length = d.norm();
+        if (length <= 2 * m_epsilon) continue;  // as occluded(): too short to hold anything
+        const RTCRay ray = make_ray(a[k], d / length, m_epsilon, length - m_epsilon);
+        valid[k] = -1;
+        rays.org_x[k] = ray.org_x;
+        rays.org_y[k] = ray.org_y;
+        rays.org_z[k] = ray.org_z;
+        rays.dir_x[k] = ray.dir_x;
+        rays.dir_y[k] = ray.dir_y;
+        rays.dir_z[k] = ray.dir_z;
+        rays.tnear[k] = ray.tnear;
+        rays.tfar[k] = ray.tfar;
+        rays.mask[k] = ray.mask;
+    }
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    rtcOccluded8(valid, m_impl->opaque, &context, &rays);
+    for (int k = 0; k < count; ++k) {
+        if (!valid[k]) continue;
+        if (rays.tfar[k] == -std::numeric_limits<float>::infinity()) {
+            passed[k] = 0.0;
+        } else if (m_glass) {
+            passed[k] = transmittance(a[k], b[k]);
+        }
+    }
 }
 
 RayHit Visibility::intersect(const Vec3& origin, const Vec3& direction, double max_distance) const {

@@ -309,32 +309,45 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
                                  m_samples, kMaxSamples);
     PairSamples p;
     draw(r, s, salt ^ 0x9E3779B97F4A7C15ull, count, p);
-    // Visibility, by rays between the fresh pairs.
+    // Visibility, by rays between the fresh pairs. A blocked ray means a shadow edge crosses the pair:
+    // points of either node may see anything from none to all of the other, and the link would light
+    // the shadowed ones as much as the others (or, dropped when no ray passes, leave the lit ones
+    // dark). Such a pair is refined, at its first blocked ray (the others would change nothing), unless
+    // all it carries is a small share of the tolerance.
+    const bool shadow_refines = carried > kFacingShare * m_h.tolerance;
     const double lift = m_vis.epsilon();
     double visible_sum = 0.0;
     int blocked = 0, cast = 0;
-    for (int q = 0; q < count; ++q) {
-        if (p.k[q] <= 0.0) continue;
-        ++cast;
-        ++counts.pair_stats.rays;
-        // Glass between the nodes passes its transmittance; a partial pass is no shadow edge.
-        const double passed = m_vis.transmittance(p.x[q].x + lift * p.x[q].n, p.y[q].x + lift * p.y[q].n);
-        if (!(passed > 0.0)) {
-            ++blocked;
-            p.k[q] = 0.0;
-        } else {
-            p.k[q] *= passed;
-            visible_sum += p.k[q];
+    // The facing pairs' rays in packets (Visibility::transmittances), taken in order.
+    int ray_of[Visibility::kBatch];
+    Vec3 from[Visibility::kBatch], to[Visibility::kBatch];
+    double passed[Visibility::kBatch];
+    for (int q0 = 0; q0 < count;) {
+        int rays = 0;
+        for (; q0 < count && rays < Visibility::kBatch; ++q0) {
+            if (p.k[q0] <= 0.0) continue;
+            ray_of[rays] = q0;
+            from[rays] = p.x[q0].x + lift * p.x[q0].n;
+            to[rays] = p.y[q0].x + lift * p.y[q0].n;
+            ++rays;
+        }
+        m_vis.transmittances(from, to, rays, passed);
+        cast += rays;
+        counts.pair_stats.rays += std::uint64_t(rays);
+        for (int h = 0; h < rays; ++h) {
+            const int q = ray_of[h];
+            // Glass between the nodes passes its transmittance; a partial pass is no shadow edge.
+            if (!(passed[h] > 0.0)) {
+                if (shadow_refines) return false;
+                ++blocked;
+                p.k[q] = 0.0;
+            } else {
+                p.k[q] *= passed[h];
+                visible_sum += p.k[q];
+            }
         }
     }
-    if (blocked > 0) {
-        // A shadow edge crosses the pair: points of either node may see anything from none to all of
-        // the other, and the link would light the shadowed ones as much as the others (or, dropped
-        // when no ray passes, leave the lit ones dark). Refined unless all of it is a small share of
-        // the tolerance.
-        if (carried > kFacingShare * m_h.tolerance) return false;
-        if (blocked == cast) return true;
-    }
+    if (blocked > 0 && blocked == cast) return true;  // wholly hidden, and carrying little: dropped
     if (cast == 0) return true;
     emit_kernel(r, s, a_s * visible_sum / count, a_r * visible_sum / count, p.path, p.k, count, out);
     ++counts.cluster_links;

@@ -71,6 +71,7 @@ std::vector<std::vector<std::uint32_t>> near_pairs(const PatchSet& patches, cons
 }
 
 // Fraction of stratified rays between i and j that nothing blocks; the first rays decide when they agree.
+// The rays go in packets (Visibility::transmittances): the first ones, then the rest.
 double visible_fraction(const PatchSet& patches, const Visibility& vis, std::size_t i, std::size_t j,
                         const LinkOptions& options, std::uint64_t& rays) {
     const int total = std::clamp(options.visibility_rays, 1, 16);
@@ -78,14 +79,20 @@ double visible_fraction(const PatchSet& patches, const Visibility& vis, std::siz
     const double lift = vis.epsilon();
     double visible = 0.0;  // rays that pass, each weighed by the glass it crosses
     int cast = 0;
-    for (int k = 0; k < total; ++k) {
-        if (k == first && (visible == 0.0 || visible == double(cast))) break;
-        const Vec3 a = stratified_point(patches, i, kStrataA[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k)),
-                                        hash01(i, j, 4 * std::uint64_t(k) + 1), lift);
-        const Vec3 b = stratified_point(patches, j, kStrataB[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k) + 2),
-                                        hash01(i, j, 4 * std::uint64_t(k) + 3), lift);
-        ++cast;
-        visible += vis.transmittance(a, b);
+    Vec3 a[Visibility::kBatch], b[Visibility::kBatch];
+    double passed[Visibility::kBatch];
+    while (cast < total) {
+        if (cast == first && (visible == 0.0 || visible == double(cast))) break;
+        const int end = std::min(cast < first ? first : total, cast + Visibility::kBatch);
+        for (int k = cast; k < end; ++k) {
+            a[k - cast] = stratified_point(patches, i, kStrataA[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k)),
+                                           hash01(i, j, 4 * std::uint64_t(k) + 1), lift);
+            b[k - cast] = stratified_point(patches, j, kStrataB[std::size_t(k)], hash01(i, j, 4 * std::uint64_t(k) + 2),
+                                           hash01(i, j, 4 * std::uint64_t(k) + 3), lift);
+        }
+        vis.transmittances(a, b, end - cast, passed);
+        for (int k = 0; k < end - cast; ++k) visible += passed[k];
+        cast = end;
     }
     rays += std::uint64_t(cast);
     return visible / double(cast);
@@ -112,6 +119,11 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
                 LinkStats& counts) {
     if (!any_in_front(patches, i, j, 1e-9 * radius[i]) || !any_in_front(patches, j, i, 1e-9 * radius[j])) return false;
     ++counts.pairs_tested;
+    // Visibility first: on a scanned statue a fifth of the facing pairs are hidden, and their rays
+    // cost less than the form factor (a pair whose form factor is zero, which the rays would have
+    // spared, is one in a hundred there).
+    const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
+    if (v <= 0.0) return false;
     // Integrate over the smaller patch, with the exact inner integral over the larger one.
     const bool i_outer = patches.area[i] <= patches.area[j];
     const std::size_t s = i_outer ? i : j, t = i_outer ? j : i;
@@ -130,8 +142,6 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
     }
     if (!(f_st > 0.0)) return false;
     const double f_ts = f_st * patches.area[s] / patches.area[t];  // reciprocity
-    const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
-    if (v <= 0.0) return false;
     out.ij = (i_outer ? f_st : f_ts) * v;
     out.ji = (i_outer ? f_ts : f_st) * v;
     return true;

@@ -53,6 +53,13 @@ public:
     /// transmittances of the glass crossed (1 without glass).
     double transmittance(const Vec3& a, const Vec3& b) const;
 
+    /// Most segments transmittances() takes at once.
+    static constexpr int kBatch = 8;
+    /// transmittance() of `count` (at most kBatch) segments a[k] to b[k] at once, into passed[k]: the
+    /// same answers, the occlusion tests as one packet of rays (rays between two nearby patches or
+    /// clusters share most of their way through the hierarchy).
+    void transmittances(const Vec3* a, const Vec3* b, int count, double* passed) const;
+
     /// Light from the point y whose image through `chain` is `image`, seen from x: the chain's
     /// reflectance times the transmittance of every real leg, when the straight segment from x to
     /// `image` crosses each unfolded plane of the chain in turn, from its reflecting side and within
