@@ -19,7 +19,6 @@
 #include "tprf/geometry/visibility.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <mutex>
 #include <numeric>
@@ -194,6 +193,10 @@ private:
     // carrying less than the tolerance; false when it must be refined.
     bool judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out, Counts& counts) const;
     void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
+    // Visibility of the facing pairs of p, by rays (in packets): each blocked pair's kernel zeroed,
+    // the others' scaled by their glass. False, at its first blocked ray, when `shadow_refines`.
+    bool cast_rays(PairSamples& p, int count, bool shadow_refines, double& visible_sum, int& blocked, int& cast,
+                   Counts& counts) const;
     // The kernel's range and sum over m_samples point pairs of each node's stored points (m_points).
     struct Look {
         double k_min, k_max, k_sum;
@@ -315,10 +318,19 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     // dark). Such a pair is refined, at its first blocked ray (the others would change nothing), unless
     // all it carries is a small share of the tolerance.
     const bool shadow_refines = carried > kFacingShare * m_h.tolerance;
-    const double lift = m_vis.epsilon();
     double visible_sum = 0.0;
     int blocked = 0, cast = 0;
-    // The facing pairs' rays in packets (Visibility::transmittances), taken in order.
+    if (!cast_rays(p, count, shadow_refines, visible_sum, blocked, cast, counts)) return false;
+    if (blocked > 0 && blocked == cast) return true;  // wholly hidden, and carrying little: dropped
+    if (cast == 0) return true;
+    emit_kernel(r, s, a_s * visible_sum / count, a_r * visible_sum / count, p.path, p.k, count, out);
+    ++counts.cluster_links;
+    return true;
+}
+
+bool Builder::cast_rays(PairSamples& p, int count, bool shadow_refines, double& visible_sum, int& blocked, int& cast,
+                        Counts& counts) const {
+    const double lift = m_vis.epsilon();
     int ray_of[Visibility::kBatch];
     Vec3 from[Visibility::kBatch], to[Visibility::kBatch];
     double passed[Visibility::kBatch];
@@ -331,6 +343,7 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
             to[rays] = p.y[q0].x + lift * p.y[q0].n;
             ++rays;
         }
+        if (rays == 0) break;
         m_vis.transmittances(from, to, rays, passed);
         cast += rays;
         counts.pair_stats.rays += std::uint64_t(rays);
@@ -347,10 +360,6 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
             }
         }
     }
-    if (blocked > 0 && blocked == cast) return true;  // wholly hidden, and carrying little: dropped
-    if (cast == 0) return true;
-    emit_kernel(r, s, a_s * visible_sum / count, a_r * visible_sum / count, p.path, p.k, count, out);
-    ++counts.cluster_links;
     return true;
 }
 
@@ -485,7 +494,7 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
     const std::vector<Job> jobs = make_jobs(builder, set.tree, cut, parts[0], top_counts);
     parts.resize(jobs.size() + 1);
     std::vector<Counts> counts(jobs.size());
-    std::atomic<std::size_t> done{0};
+    std::size_t done = 0;  // jobs finished, counted under the mutex so that reports never go back
     std::mutex progress_mutex;
     parallel_for(jobs.size(), {threads, 1, true}, [&](std::size_t j) {
         if (jobs[j].b == kNoNode)
@@ -493,10 +502,9 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
         else
             builder.refine(jobs[j].a, jobs[j].b, parts[j + 1], counts[j]);
         parts[j + 1].shrink_to_fit();
-        const std::size_t finished = ++done;
         if (options.progress) {
             std::lock_guard<std::mutex> lock(progress_mutex);
-            options.progress("links", 0.9 * double(finished) / double(jobs.size()));
+            options.progress("links", 0.9 * double(++done) / double(jobs.size()));
         }
     });
     counts.push_back(top_counts);
