@@ -211,35 +211,51 @@ std::int64_t closest(RTCScene scene, const Vec3& origin, const Vec3& dir, double
     return rh.hit.primID;
 }
 
+// The ray an occlusion test casts along the segment a -> b, its ends lifted off their surfaces by
+// `epsilon`; false when the segment is too short to hold anything.
+bool segment_ray(const Vec3& a, const Vec3& b, double epsilon, RTCRay& ray) {
+    const Vec3 d = b - a;
+    const double length = d.norm();
+    if (length <= 2 * epsilon) return false;
+    ray = make_ray(a, d / length, epsilon, length - epsilon);
+    return true;
+}
+
+// The product of the transmittances of the glass sheets `ray` crosses, each in turn (a guard against a
+// ray stuck in a stack of coincident sheets).
+double glass_passed(RTCScene glass, const std::vector<float>& transmittance, const RTCRay& ray, double epsilon) {
+    const Vec3 origin(ray.org_x, ray.org_y, ray.org_z), dir(ray.dir_x, ray.dir_y, ray.dir_z);
+    double passed = 1.0, from = ray.tnear, t = 0.0;
+    for (int k = 0; k < 256; ++k) {
+        const std::int64_t prim = closest(glass, origin, dir, from, ray.tfar, t);
+        if (prim < 0) break;
+        passed *= transmittance[std::size_t(prim)];
+        from = t + epsilon;
+    }
+    return passed;
+}
+
 }  // namespace
 
 bool Visibility::occluded(const Vec3& a, const Vec3& b) const {
-    const Vec3 d = b - a;
-    const double length = d.norm();
-    if (length <= 2 * m_epsilon) return false;
+    RTCRay ray;
+    if (!segment_ray(a, b, m_epsilon, ray)) return false;
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    RTCRay ray = make_ray(a, d / length, m_epsilon, length - m_epsilon);
     rtcOccluded1(m_impl->opaque, &context, &ray);
     return ray.tfar == -std::numeric_limits<float>::infinity();
 }
 
 double Visibility::transmittance(const Vec3& a, const Vec3& b) const {
-    if (occluded(a, b)) return 0.0;
-    if (!m_glass) return 1.0;
-    const Vec3 d = b - a;
-    const double length = d.norm();
-    if (length <= 2 * m_epsilon) return 1.0;
-    const Vec3 dir = d / length;
-    double passed = 1.0, from = m_epsilon, t = 0.0;
-    // Each glass sheet crossed in turn (a guard against a ray stuck in a stack of coincident sheets).
-    for (int k = 0; k < 256; ++k) {
-        const std::int64_t prim = closest(m_impl->glass, a, dir, from, length - m_epsilon, t);
-        if (prim < 0) break;
-        passed *= m_impl->glass_transmittance[std::size_t(prim)];
-        from = t + m_epsilon;
-    }
-    return passed;
+    RTCRay ray;
+    if (!segment_ray(a, b, m_epsilon, ray)) return 1.0;
+    const float tfar = ray.tfar;
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    rtcOccluded1(m_impl->opaque, &context, &ray);
+    if (ray.tfar == -std::numeric_limits<float>::infinity()) return 0.0;
+    ray.tfar = tfar;
+    return m_glass ? glass_passed(m_impl->glass, m_impl->glass_transmittance, ray, m_epsilon) : 1.0;
 }
 
 void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double* passed) const {
@@ -248,17 +264,14 @@ void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double*
         for (int k = 0; k < count; ++k) passed[k] = transmittance(a[k], b[k]);
         return;
     }
-    alignas(32) int valid[kBatch];
+    alignas(32) int valid[kBatch] = {};
     alignas(32) RTCRay8 rays{};
-    for (int k = 0; k < kBatch; ++k) {
-        valid[k] = 0;
-        if (k >= count) continue;
+    RTCRay single[kBatch];
+    for (int k = 0; k < count; ++k) {
         passed[k] = 1.0;
-        const Vec3 d = b[k] - a[k];
-        const double length = d.norm();
-        if (length <= 2 * m_epsilon) continue;  // as occluded(): too short to hold anything
-        const RTCRay ray = make_ray(a[k], d / length, m_epsilon, length - m_epsilon);
+        if (!segment_ray(a[k], b[k], m_epsilon, single[k])) continue;
         valid[k] = -1;
+        const RTCRay& ray = single[k];
         rays.org_x[k] = ray.org_x;
         rays.org_y[k] = ray.org_y;
         rays.org_z[k] = ray.org_z;
@@ -274,11 +287,10 @@ void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double*
     rtcOccluded8(valid, m_impl->opaque, &context, &rays);
     for (int k = 0; k < count; ++k) {
         if (!valid[k]) continue;
-        if (rays.tfar[k] == -std::numeric_limits<float>::infinity()) {
+        if (rays.tfar[k] == -std::numeric_limits<float>::infinity())
             passed[k] = 0.0;
-        } else if (m_glass) {
-            passed[k] = transmittance(a[k], b[k]);
-        }
+        else if (m_glass)
+            passed[k] = glass_passed(m_impl->glass, m_impl->glass_transmittance, single[k], m_epsilon);
     }
 }
 
