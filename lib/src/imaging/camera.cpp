@@ -123,6 +123,9 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
     SensingPoints points;
     points.outputs = std::size_t(camera.width) * std::size_t(camera.height);
     points.weight = 1.0 / spp;
+    std::size_t total = 0;
+    for (const auto& row : by_row) total += row.size();
+    points.points.reserve(total);
     for (std::size_t r = 0; r < by_row.size(); ++r) {
         // Tinted mirrors' palette, in row order (the same for any thread count).
         for (std::size_t k = 0; k < row_tints[r].size(); ++k) by_row[r][k].tint = points.tint_index(row_tints[r][k]);

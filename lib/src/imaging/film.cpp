@@ -155,20 +155,21 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
     if (m_kept == 0) m_first_bin = block.first_bin;
     TPRF_CHECK_EQ(block.first_bin, m_first_bin + int(m_kept));
     TPRF_CHECK_LE(m_kept + bins, m_capacity);
-    for (std::size_t i = 0; i < n; ++i)
-        std::copy_n(source + i * bins * 3, bins * 3, m_indirect.data() + i * stride + (pad + m_kept) * 3);
     const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
-    for (std::size_t i = 0; i < n; ++i)
+    parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {  // each patch's row is its own
+        float* row = m_indirect.data() + i * stride + (pad + m_kept) * 3;
+        std::copy_n(source + i * bins * 3, bins * 3, row);
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
             const Pulse& p = m_illumination.pulses[k];
             if (!p.exact_at_sensors() || !takes_order(p.order)) continue;
             const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
-            float* v = m_indirect.data() + i * stride + (pad + m_kept + std::size_t(b)) * 3;
+            float* v = row + std::size_t(b) * 3;
             // What is left is the light of other orders in that bin; float cancellation must not
             // turn an exact zero into a small negative radiance.
             for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(p.energy[c]));
         }
+    });
     m_kept += bins;
 }
 

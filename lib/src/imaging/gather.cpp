@@ -233,15 +233,20 @@ Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n,
     int count = 0;
     for (int c = 0; c < g * g; ++c) probes[std::size_t(count++)] = a.point((c % g + 0.5) / g, (c / g + 0.5) / g);
     count += rim_probes(a, probes.data() + count);
+    thread_local std::vector<Vec3> from, to;
+    thread_local std::vector<double> passed;
     bool open = false, blocked = false;
     for (const std::size_t h : p.outer) {
         const Vec3& x = pts[h].point;
-        for (int c = 0; c < count; ++c) {
-            const Vec3& y = probes[std::size_t(c)];
-            if (!faces_source(a, x, n, y)) continue;
-            const double passed = passes_from_source(a, vis, x, n, y);
-            if (passed != 1.0 && passed != 0.0) return Shadow::dimmed;
-            (passed == 1.0 ? open : blocked) = true;
+        to.clear();
+        for (int c = 0; c < count; ++c)
+            if (faces_source(a, x, n, probes[std::size_t(c)])) to.push_back(probes[std::size_t(c)]);
+        from.assign(to.size(), x);
+        passed.resize(to.size());
+        passes_from_source(a, vis, from.data(), n, to.data(), to.size(), passed.data());
+        for (const double q : passed) {
+            if (q != 1.0 && q != 0.0) return Shadow::dimmed;
+            (q == 1.0 ? open : blocked) = true;
         }
         if (open && blocked) break;  // a penumbra (glass further on is the penumbra rays' affair)
     }
@@ -259,6 +264,12 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
     const int f = m * r;
     std::vector<double> passed(std::size_t(m * m), 0.0), facing(std::size_t(m * m), 0.0);
     const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
+    thread_local std::vector<Vec3> from, to;
+    thread_local std::vector<std::size_t> cells;
+    thread_local std::vector<double> ray_passed;
+    from.clear();
+    to.clear();
+    cells.clear();
     for (int i = 0; i < f * f; ++i) {
         const int fu = i % f, fv = i / f;
         double ju, jv, turn;
@@ -267,9 +278,15 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
         const Vec3& x = pts[std::size_t((turn - std::floor(turn)) * double(count))].point;
         const Vec3 y = a.point((fu + ju) / f, (fv + jv) / f);
         if (!faces_source(a, x, n, y)) continue;
-        const std::size_t cell = std::size_t((fv / r) * m + fu / r);
-        facing[cell] += 1.0;
-        passed[cell] += passes_from_source(a, vis, x, n, y);
+        from.push_back(x);
+        to.push_back(y);
+        cells.push_back(std::size_t((fv / r) * m + fu / r));
+    }
+    ray_passed.resize(to.size());
+    passes_from_source(a, vis, from.data(), n, to.data(), to.size(), ray_passed.data());
+    for (std::size_t k = 0; k < cells.size(); ++k) {  // summed in the rays' order, as one by one
+        facing[cells[k]] += 1.0;
+        passed[cells[k]] += ray_passed[k];
     }
     for (std::size_t c = 0; c < passed.size(); ++c) passed[c] = facing[c] > 0.0 ? passed[c] / facing[c] : 1.0;
     return passed;

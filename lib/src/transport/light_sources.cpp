@@ -305,6 +305,24 @@ double passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3
     return vis.passes(a.chain, x + vis.epsilon() * n, y + vis.epsilon() * a.normal);
 }
 
+void passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3* x, const Vec3& n, const Vec3* y,
+                        std::size_t count, double* passed) {
+    if (a.chain >= 0) {
+        for (std::size_t k = 0; k < count; ++k) passed[k] = passes_from_source(a, vis, x[k], n, y[k]);
+        return;
+    }
+    constexpr std::size_t kBatch = Visibility::kBatch;
+    Vec3 from[kBatch], to[kBatch];
+    for (std::size_t k0 = 0; k0 < count; k0 += kBatch) {
+        const std::size_t m = std::min(kBatch, count - k0);
+        for (std::size_t k = 0; k < m; ++k) {  // the lifts passes_from_source makes
+            from[k] = x[k0 + k] + vis.epsilon() * n;
+            to[k] = y[k0 + k] + vis.epsilon() * a.normal;
+        }
+        vis.transmittances(from, to, int(m), passed + k0);
+    }
+}
+
 int rim_probes(const AreaSource& a, Vec3* out) {
     const auto inset = [&](const Vec3& p) { return Vec3(a.centroid + (1.0 - 1e-3) * (p - a.centroid)); };
     int k = 0;

@@ -203,6 +203,11 @@ inline bool faces_source(const AreaSource& a, const Vec3& x, const Vec3& n, cons
 double passes_from_source(const AreaSource& a, const Visibility& visibility, const Vec3& x, const Vec3& n,
                           const Vec3& y);
 
+/// passes_from_source() of `count` points y[k] of a, each seen from x[k] (unit normal n), into
+/// passed[k]: the same answers, a real source's rays cast in packets (Visibility::transmittances).
+void passes_from_source(const AreaSource& a, const Visibility& visibility, const Vec3* x, const Vec3& n,
+                        const Vec3* y, std::size_t count, double* passed);
+
 /// Points on the rim of area source a that the shadow test probes besides its grid's cell centres: its
 /// corners and the middles of its sides, each moved a thousandth of the way to the centroid. A shadow
 /// edge that hides a sliver along a side (narrower than half a cell) misses every cell centre but
