@@ -17,7 +17,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <condition_variable>
+#include <mutex>
 #include <set>
+#include <span>
+#include <string>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -859,6 +864,75 @@ TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
         EXPECT_EQ(sa.cluster_links, sb.cluster_links);
         EXPECT_EQ(sa.candidates, sb.candidates);
         EXPECT_EQ(sa.rays, sb.rays);
+    }
+}
+
+// Shares of one build (LinkOptions::shares) side by side, each on its own thread, exchanging their
+// bytes as MPI ranks would: every share's in share order, on every share. An exchange that sees the
+// shares' bytes out of order or twice would not give the single build's links.
+std::vector<LinkSet> built_in_shares(const Prepared& p, double tolerance, double bin_width_m, int count,
+                                     std::vector<HierarchyStats>& stats) {
+    std::vector<std::vector<std::byte>> sent(static_cast<std::size_t>(count));
+    std::mutex mutex;
+    std::condition_variable all_sent;
+    int arrived = 0;
+    std::vector<LinkSet> sets(static_cast<std::size_t>(count));
+    stats.assign(std::size_t(count), {});
+    std::vector<std::thread> threads;
+    for (int index = 0; index < count; ++index)
+        threads.emplace_back([&, index] {
+            LinkOptions options;
+            options.threads = 1;
+            options.shares.index = index;
+            options.shares.count = count;
+            options.shares.exchange = [&, index](std::span<const std::byte> mine) {
+                std::unique_lock<std::mutex> lock(mutex);
+                sent[std::size_t(index)].assign(mine.begin(), mine.end());
+                if (++arrived == count) all_sent.notify_all();
+                all_sent.wait(lock, [&] { return arrived == count; });
+                std::vector<std::byte> all;
+                for (const auto& part : sent) all.insert(all.end(), part.begin(), part.end());
+                return all;
+            };
+            HierarchyOptions h;
+            h.tolerance = tolerance;
+            h.bin_width_m = bin_width_m;
+            sets[std::size_t(index)] = hierarchical_link_set(p.patches, *p.vis, options, h, &stats[std::size_t(index)]);
+        });
+    for (std::thread& t : threads) t.join();
+    return sets;
+}
+
+TEST(Hierarchy, SharesOfOneBuildGiveItsLinksOnEveryShare) {
+    // As Hierarchy.OneAndTwoThreadsGiveIdenticalLinkSets: a closed cube and plates with an occluder,
+    // each built whole and in 2 and 3 shares (MPI ranks' split of the link stage, docs/mpi.md). Every
+    // share must hold the whole build's links and counters, bit for bit.
+    Scene cube;
+    cube.max_edge = 0.1;
+    test::add_closed_cube(cube, 1.0);
+    for (const Scene& scene : {cube, plates_with_occluder(0.05)}) {
+        const Prepared p = prepare(scene);
+        HierarchyStats whole_stats;
+        const LinkSet whole = hierarchical(p, 0.005, 1, 0.01, &whole_stats);
+        ASSERT_GT(whole_stats.cluster_links, 0u);
+        for (const int count : {2, 3}) {
+            std::vector<HierarchyStats> stats;
+            const std::vector<LinkSet> sets = built_in_shares(p, 0.005, 0.01, count, stats);
+            for (int k = 0; k < count; ++k) {
+                const LinkSet& a = sets[std::size_t(k)];
+                const HierarchyStats& sa = stats[std::size_t(k)];
+                SCOPED_TRACE("share " + std::to_string(k) + " of " + std::to_string(count));
+                EXPECT_EQ(a.links.row, whole.links.row);
+                EXPECT_EQ(a.links.source, whole.links.source);
+                EXPECT_EQ(a.links.ff, whole.links.ff);
+                EXPECT_EQ(a.links.distance, whole.links.distance);
+                EXPECT_EQ(a.block_bins, whole.block_bins);
+                EXPECT_EQ(sa.leaf_links, whole_stats.leaf_links);
+                EXPECT_EQ(sa.cluster_links, whole_stats.cluster_links);
+                EXPECT_EQ(sa.candidates, whole_stats.candidates);
+                EXPECT_EQ(sa.rays, whole_stats.rays);
+            }
+        }
     }
 }
 

@@ -116,6 +116,17 @@ public:
         TPRF_CHECK_EQ(offset, all.size());
     }
 
+    // In pieces of at most 1 GiB, each waited for politely.
+    void broadcast_bytes(std::span<std::byte> data) const override {
+        for (std::size_t at = 0; at < data.size(); at += kPiece) {
+            MPI_Request request;
+            check_mpi(MPI_Ibcast(data.data() + at, int(std::min(kPiece, data.size() - at)), MPI_BYTE, 0, MPI_COMM_WORLD,
+                                 &request),
+                      "MPI_Ibcast");
+            check_mpi(wait_politely(request), "MPI_Ibcast");
+        }
+    }
+
 private:
     void abort_all(const std::string& message, int status) const override {
         std::fprintf(stderr, "tprf: error: %s\n", message.c_str());

@@ -72,6 +72,18 @@ struct Transport {
     Gather gather;
 };
 
+// Ranks that all build the links (a capture that marches them) each refine a share of the hierarchy
+// and exchange their links: the same link set on every rank, built in a rank's share of the time.
+LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
+    LinkShares shares;
+    const RankGroup* ranks = options.ranks;
+    if (!ranks || ranks->size() == 1 || !capture_needs_links(scene)) return shares;
+    shares.index = ranks->rank();
+    shares.count = ranks->size();
+    shares.exchange = [ranks](std::span<const std::byte> mine) { return ranks->all_gather(mine); };
+    return shares;
+}
+
 // Patches, visibility and (when `links`) the links: what every rank of a split render builds alike.
 void build_geometry(const Scene& scene, const RenderOptions& options, bool links, Transport& t,
                     RenderReport& report) {
@@ -88,6 +100,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
         LinkOptions link_options;
         link_options.threads = options.threads;
         link_options.progress = options.progress;
+        link_options.shares = link_shares(scene, options);
         t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
         add_mirror_links(t.links, t.patches, *t.visibility, link_options, scene.time.bin_width_m());
         report.links = t.links.links.size();

@@ -20,8 +20,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <mutex>
 #include <numeric>
+#include <type_traits>
 
 namespace tprf {
 namespace {
@@ -442,6 +444,45 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
     return jobs;
 }
 
+// The jobs' links and counters, when shares of the build (LinkOptions::shares) each refined theirs: this
+// share's jobs go out, every share's come back, and parts[j + 1] and counts[j] of every job j are
+// refilled from them. A job's bytes: its index, its record count, its counters, its records.
+void exchange_jobs(const LinkShares& shares, std::vector<std::vector<LinkRecord>>& parts, std::vector<Counts>& counts) {
+    static_assert(std::is_trivially_copyable_v<LinkRecord> && std::is_trivially_copyable_v<Counts>);
+    std::vector<std::byte> mine;
+    const auto put = [&mine](const void* data, std::size_t bytes) {
+        const auto* b = static_cast<const std::byte*>(data);
+        mine.insert(mine.end(), b, b + bytes);
+    };
+    for (std::size_t j = std::size_t(shares.index); j < counts.size(); j += std::size_t(shares.count)) {
+        const std::uint64_t header[2] = {j, parts[j + 1].size()};
+        put(header, sizeof header);
+        put(&counts[j], sizeof(Counts));
+        put(parts[j + 1].data(), parts[j + 1].size() * sizeof(LinkRecord));
+        std::vector<LinkRecord>().swap(parts[j + 1]);
+    }
+    const std::vector<std::byte> all = shares.exchange(mine);
+    std::vector<std::byte>().swap(mine);
+    std::vector<char> seen(counts.size(), 0);
+    for (std::size_t at = 0; at < all.size();) {
+        std::uint64_t header[2];
+        TPRF_CHECK_LE(at + sizeof header + sizeof(Counts), all.size());
+        std::memcpy(header, all.data() + at, sizeof header);
+        at += sizeof header;
+        const std::size_t j = std::size_t(header[0]), n = std::size_t(header[1]);
+        TPRF_CHECK_LT(j, counts.size());
+        TPRF_CHECK(!seen[j]);
+        seen[j] = 1;
+        std::memcpy(&counts[j], all.data() + at, sizeof(Counts));
+        at += sizeof(Counts);
+        TPRF_CHECK_LE(at + n * sizeof(LinkRecord), all.size());
+        parts[j + 1].resize(n);
+        std::memcpy(parts[j + 1].data(), all.data() + at, n * sizeof(LinkRecord));
+        at += n * sizeof(LinkRecord);
+    }
+    TPRF_CHECK(std::all_of(seen.begin(), seen.end(), [](char c) { return c != 0; }));
+}
+
 }  // namespace
 
 void sort_rows_by_octave(Links& links, float inv_bin, int threads) {
@@ -496,7 +537,13 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
     std::vector<Counts> counts(jobs.size());
     std::size_t done = 0;  // jobs finished, counted under the mutex so that reports never go back
     std::mutex progress_mutex;
-    parallel_for(jobs.size(), {threads, 1, true}, [&](std::size_t j) {
+    // With shares, this one refines every count-th job from its index (jobs come in no order of size).
+    const LinkShares& shares = options.shares;
+    TPRF_CHECK(shares.count >= 1 && shares.index >= 0 && shares.index < shares.count);
+    TPRF_CHECK(shares.count == 1 || shares.exchange);
+    const std::size_t share_jobs = (jobs.size() + std::size_t(shares.count - 1 - shares.index)) / std::size_t(shares.count);
+    parallel_for(share_jobs, {threads, 1, true}, [&](std::size_t k) {
+        const std::size_t j = std::size_t(shares.index) + k * std::size_t(shares.count);
         if (jobs[j].b == kNoNode)
             builder.refine_self(jobs[j].a, parts[j + 1], counts[j]);
         else
@@ -504,9 +551,10 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
         parts[j + 1].shrink_to_fit();
         if (options.progress) {
             std::lock_guard<std::mutex> lock(progress_mutex);
-            options.progress("links", 0.9 * double(++done) / double(jobs.size()));
+            options.progress("links", 0.9 * double(++done) / double(share_jobs));
         }
     });
+    if (shares.count > 1) exchange_jobs(shares, parts, counts);
     counts.push_back(top_counts);
     const float inv_bin = hierarchy.bin_width_m > 0.0 ? float(1.0 / hierarchy.bin_width_m) : 0.0f;
     set.links = assemble(set.tree.nodes(), parts, inv_bin, threads);

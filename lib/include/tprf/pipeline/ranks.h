@@ -40,6 +40,8 @@ public:
     /// gather_sizes returned there; `all` holds their sum). Other ranks pass empty `sizes` and `all`.
     virtual void gather_bytes(std::span<const std::byte> mine, std::span<const std::size_t> sizes,
                               std::span<std::byte> all) const = 0;
+    /// Rank 0's `data` into every rank's: every rank passes a span of the same size.
+    virtual void broadcast_bytes(std::span<std::byte> data) const = 0;
     /// Ends every rank: prints "tprf: error: MESSAGE" on this one and makes the launcher stop the others,
     /// with exit status `status`. For a failure on one rank while the others may wait for it in a
     /// collective; with one rank it throws InternalError instead (nothing waits: the caller rethrows).
@@ -61,6 +63,15 @@ public:
         return all;
     }
 
+    /// Every rank's values, concatenated in rank order, on every rank (gather, then broadcast).
+    template <class T>
+    std::vector<T> all_gather(std::span<const T> mine) const {
+        std::vector<T> all = gather(mine);
+        all.resize(std::size_t(broadcast(std::int64_t(all.size()))));
+        broadcast_bytes(std::as_writable_bytes(std::span<T>(all)));
+        return all;
+    }
+
 protected:
     /// abort()'s work: prints and stops every rank (or throws).
     virtual void abort_all(const std::string& message, int status) const = 0;
@@ -76,6 +87,7 @@ public:
     std::vector<std::size_t> gather_sizes(std::size_t bytes) const override { return {bytes}; }
     void gather_bytes(std::span<const std::byte> mine, std::span<const std::size_t> sizes,
                       std::span<std::byte> all) const override;
+    void broadcast_bytes(std::span<std::byte>) const override {}
 
 protected:
     void abort_all(const std::string& message, int status) const override;

@@ -5,7 +5,10 @@
 #include "tprf/core/progress.h"
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <span>
 #include <vector>
 
 namespace tprf {
@@ -48,6 +51,16 @@ struct Links {
 void check_tints(const Links& links);
 
 /// Options of the link stage.
+/// A link build split between processes that each build part of it (MPI ranks, docs/mpi.md): share
+/// `index` of `count` builds its part, and `exchange` turns its part's bytes into every share's,
+/// concatenated in share order, on every share (a collective: every share calls it once). The result
+/// is the same link set, bit for bit, on every share and for any count. Hierarchical links only; flat
+/// links are built whole by every share.
+struct LinkShares {
+    int index = 0, count = 1;
+    std::function<std::vector<std::byte>(std::span<const std::byte>)> exchange;
+};
+
 struct LinkOptions {
     int visibility_rays = 16;      ///< stratified rays per pair when the first ones disagree
     int first_rays = 4;            ///< rays cast first; when all agree the pair is decided by them
@@ -58,6 +71,7 @@ struct LinkOptions {
     FormFactorQuadrature quadrature;  ///< the adaptive rule of near pairs
     int threads = 0;               ///< 0: all cores
     ProgressFn progress;           ///< phase "links"
+    LinkShares shares;             ///< one share (this process builds everything) by default
 };
 
 /// Statistics of a link build.
