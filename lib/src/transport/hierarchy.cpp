@@ -451,6 +451,7 @@ void exchange_jobs(const LinkShares& shares, std::vector<std::vector<LinkRecord>
     static_assert(std::is_trivially_copyable_v<LinkRecord> && std::is_trivially_copyable_v<Counts>);
     std::vector<std::byte> mine;
     const auto put = [&mine](const void* data, std::size_t bytes) {
+        if (bytes == 0) return;
         const auto* b = static_cast<const std::byte*>(data);
         mine.insert(mine.end(), b, b + bytes);
     };
@@ -477,7 +478,7 @@ void exchange_jobs(const LinkShares& shares, std::vector<std::vector<LinkRecord>
         at += sizeof(Counts);
         TPRF_CHECK_LE(at + n * sizeof(LinkRecord), all.size());
         parts[j + 1].resize(n);
-        std::memcpy(parts[j + 1].data(), all.data() + at, n * sizeof(LinkRecord));
+        if (n > 0) std::memcpy(parts[j + 1].data(), all.data() + at, n * sizeof(LinkRecord));  // no null argument
         at += n * sizeof(LinkRecord);
     }
     TPRF_CHECK(std::all_of(seen.begin(), seen.end(), [](char c) { return c != 0; }));
