@@ -837,6 +837,22 @@ TEST(Hierarchy, HiddenPatchesAndSurfacesBehindAPatchSendItNothing) {
 // ---------------------------------------------------------------------------------------------------
 // 6. Determinism.
 
+// Two builds of one scene's hierarchical links: the same tree, links and counters, bit for bit.
+void expect_same_links(const LinkSet& a, const HierarchyStats& sa, const LinkSet& b, const HierarchyStats& sb) {
+    EXPECT_EQ(a.tree.leaf_order, b.tree.leaf_order);
+    EXPECT_EQ(a.tree.parent, b.tree.parent);
+    EXPECT_EQ(a.tree.radius, b.tree.radius);
+    EXPECT_EQ(a.links.row, b.links.row);
+    EXPECT_EQ(a.links.source, b.links.source);
+    EXPECT_EQ(a.links.ff, b.links.ff);
+    EXPECT_EQ(a.links.distance, b.links.distance);
+    EXPECT_EQ(a.block_bins, b.block_bins);
+    EXPECT_EQ(sa.leaf_links, sb.leaf_links);
+    EXPECT_EQ(sa.cluster_links, sb.cluster_links);
+    EXPECT_EQ(sa.candidates, sb.candidates);
+    EXPECT_EQ(sa.rays, sb.rays);
+}
+
 TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
     // More than 512 patches, so that the pairs above the jobs' cut are judged on the calling thread and
     // the jobs run on both threads; a closed cube (patch-to-patch links along its edges, cluster links
@@ -852,18 +868,7 @@ TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
         MEASURED("determinism: %zu patches, %zu links (%llu patch-to-patch, %llu with a cluster)\n", p.patches.size(),
                  a.links.size(), (unsigned long long)sa.leaf_links, (unsigned long long)sa.cluster_links);
         EXPECT_GT(sa.cluster_links, 0u);
-        EXPECT_EQ(a.tree.leaf_order, b.tree.leaf_order);
-        EXPECT_EQ(a.tree.parent, b.tree.parent);
-        EXPECT_EQ(a.tree.radius, b.tree.radius);
-        EXPECT_EQ(a.links.row, b.links.row);
-        EXPECT_EQ(a.links.source, b.links.source);
-        EXPECT_EQ(a.links.ff, b.links.ff);
-        EXPECT_EQ(a.links.distance, b.links.distance);
-        EXPECT_EQ(a.block_bins, b.block_bins);
-        EXPECT_EQ(sa.leaf_links, sb.leaf_links);
-        EXPECT_EQ(sa.cluster_links, sb.cluster_links);
-        EXPECT_EQ(sa.candidates, sb.candidates);
-        EXPECT_EQ(sa.rays, sb.rays);
+        expect_same_links(a, sa, b, sb);
     }
 }
 
@@ -922,15 +927,7 @@ TEST(Hierarchy, SharesOfOneBuildGiveItsLinksOnEveryShare) {
                 const LinkSet& a = sets[std::size_t(k)];
                 const HierarchyStats& sa = stats[std::size_t(k)];
                 SCOPED_TRACE("share " + std::to_string(k) + " of " + std::to_string(count));
-                EXPECT_EQ(a.links.row, whole.links.row);
-                EXPECT_EQ(a.links.source, whole.links.source);
-                EXPECT_EQ(a.links.ff, whole.links.ff);
-                EXPECT_EQ(a.links.distance, whole.links.distance);
-                EXPECT_EQ(a.block_bins, whole.block_bins);
-                EXPECT_EQ(sa.leaf_links, whole_stats.leaf_links);
-                EXPECT_EQ(sa.cluster_links, whole_stats.cluster_links);
-                EXPECT_EQ(sa.candidates, whole_stats.candidates);
-                EXPECT_EQ(sa.rays, whole_stats.rays);
+                expect_same_links(a, sa, whole, whole_stats);
             }
         }
     }
