@@ -853,14 +853,20 @@ void expect_same_links(const LinkSet& a, const HierarchyStats& sa, const LinkSet
     EXPECT_EQ(sa.rays, sb.rays);
 }
 
+// A closed cube (patch-to-patch links along its edges, cluster links across) and plates with an
+// occluder (rays blocked), each of more than 512 patches.
+std::vector<Scene> determinism_scenes() {
+    Scene cube;
+    cube.max_edge = 0.1;
+    test::add_closed_cube(cube, 1.0);
+    return {cube, plates_with_occluder(0.05)};
+}
+
 TEST(Hierarchy, OneAndTwoThreadsGiveIdenticalLinkSets) {
     // More than 512 patches, so that the pairs above the jobs' cut are judged on the calling thread and
     // the jobs run on both threads; a closed cube (patch-to-patch links along its edges, cluster links
     // across) and plates with an occluder (rays blocked).
-    Scene cube;
-    cube.max_edge = 0.1;
-    test::add_closed_cube(cube, 1.0);
-    for (const Scene& scene : {cube, plates_with_occluder(0.05)}) {
+    for (const Scene& scene : determinism_scenes()) {
         const Prepared p = prepare(scene);
         ASSERT_GT(p.patches.size(), 512u);
         HierarchyStats sa, sb;
@@ -912,10 +918,7 @@ TEST(Hierarchy, SharesOfOneBuildGiveItsLinksOnEveryShare) {
     // As Hierarchy.OneAndTwoThreadsGiveIdenticalLinkSets: a closed cube and plates with an occluder,
     // each built whole and in 2 and 3 shares (MPI ranks' split of the link stage, docs/mpi.md). Every
     // share must hold the whole build's links and counters, bit for bit.
-    Scene cube;
-    cube.max_edge = 0.1;
-    test::add_closed_cube(cube, 1.0);
-    for (const Scene& scene : {cube, plates_with_occluder(0.05)}) {
+    for (const Scene& scene : determinism_scenes()) {
         const Prepared p = prepare(scene);
         HierarchyStats whole_stats;
         const LinkSet whole = hierarchical(p, 0.005, 1, 0.01, &whole_stats);
