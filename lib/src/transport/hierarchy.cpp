@@ -450,6 +450,10 @@ std::vector<Job> make_jobs(const Builder& builder, const ClusterTree& tree, std:
 void exchange_jobs(const LinkShares& shares, std::vector<std::vector<LinkRecord>>& parts, std::vector<Counts>& counts) {
     static_assert(std::is_trivially_copyable_v<LinkRecord> && std::is_trivially_copyable_v<Counts>);
     std::vector<std::byte> mine;
+    std::size_t size = 0;  // sized first: the records may be hundreds of MB, not to be copied as they grow
+    for (std::size_t j = std::size_t(shares.index); j < counts.size(); j += std::size_t(shares.count))
+        size += 2 * sizeof(std::uint64_t) + sizeof(Counts) + parts[j + 1].size() * sizeof(LinkRecord);
+    mine.reserve(size);
     const auto put = [&mine](const void* data, std::size_t bytes) {
         if (bytes == 0) return;
         const auto* b = static_cast<const std::byte*>(data);
