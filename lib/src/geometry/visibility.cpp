@@ -295,9 +295,51 @@ void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double*
 }
 
 RayHit Visibility::intersect(const Vec3& origin, const Vec3& direction, double max_distance) const {
+    double t = 0.0;
+    const std::int64_t prim = closest(m_impl->opaque, origin, direction, m_epsilon, max_distance, t);
+    return first_hit(origin, direction, max_distance, prim, t);
+}
+
+void Visibility::intersect_from(const Vec3& origin, const Vec3* directions, int count, double max_distance,
+                                RayHit* out) const {
+    TPRF_CHECK(count >= 0 && count <= kBatch);
+    if (!m_impl->packets) {
+        for (int k = 0; k < count; ++k) out[k] = intersect(origin, directions[k], max_distance);
+        return;
+    }
+    alignas(32) int valid[kBatch] = {};
+    alignas(32) RTCRayHit8 rays{};
+    for (int k = 0; k < count; ++k) {
+        const RTCRay ray = make_ray(origin, directions[k], m_epsilon, max_distance);
+        valid[k] = -1;
+        rays.ray.org_x[k] = ray.org_x;
+        rays.ray.org_y[k] = ray.org_y;
+        rays.ray.org_z[k] = ray.org_z;
+        rays.ray.dir_x[k] = ray.dir_x;
+        rays.ray.dir_y[k] = ray.dir_y;
+        rays.ray.dir_z[k] = ray.dir_z;
+        rays.ray.tnear[k] = ray.tnear;
+        rays.ray.tfar[k] = ray.tfar;
+        rays.ray.mask[k] = ray.mask;
+        rays.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    rtcIntersect8(valid, m_impl->opaque, &context, &rays);
+    for (int k = 0; k < count; ++k) {
+        const bool hit = rays.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
+        out[k] = first_hit(origin, directions[k], max_distance, hit ? std::int64_t(rays.hit.primID[k]) : -1,
+                           hit ? double(rays.ray.tfar[k]) : 0.0);
+    }
+}
+
+// The hit of a ray whose closest opaque primitive is `prim` at `t` (prim < 0: none): the glass in
+// front of it, if any, and the side of the patch it meets.
+RayHit Visibility::first_hit(const Vec3& origin, const Vec3& direction, double max_distance, std::int64_t prim,
+                             double t) const {
     const Impl& im = *m_impl;
-    double t = 0.0, t_glass = 0.0;
-    std::int64_t prim = closest(im.opaque, origin, direction, m_epsilon, max_distance, t);
+    double t_glass = 0.0;
     std::uint32_t patch = prim >= 0 ? im.opaque_patch[std::size_t(prim)] : 0;
     if (m_glass) {
         const std::int64_t g = closest(im.glass, origin, direction, m_epsilon, max_distance, t_glass);

@@ -5,6 +5,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -90,22 +91,34 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
         std::vector<TracedHit> hits;
         by_row[r].reserve(std::size_t(camera.width) * std::size_t(spp));
-        for (int c = 0; c < camera.width; ++c)
-            for (int s = 0; s < spp; ++s) {
-                double sx, sy;
-                subpixel(s, spp, sx, sy);
-                const Vec3 towards = pin.direction(c + sx, double(r) + sy);
-                const Vec3 dir = towards.normalized();
-                const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
-                if (!specular) {
-                    const RayHit h = vis.intersect(camera.position, dir, std::numeric_limits<double>::infinity());
+        for (int c = 0; c < camera.width; ++c) {
+            const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
+            // A pixel's samples, a packet of rays at a time (they leave one point nearly together).
+            for (int s0 = 0; s0 < spp && !specular; s0 += Visibility::kBatch) {
+                const int count = std::min(Visibility::kBatch, spp - s0);
+                Vec3 towards[Visibility::kBatch], dir[Visibility::kBatch];
+                for (int k = 0; k < count; ++k) {
+                    double sx, sy;
+                    subpixel(s0 + k, spp, sx, sy);
+                    towards[k] = pin.direction(c + sx, double(r) + sy);
+                    dir[k] = towards[k].normalized();
+                }
+                RayHit hits_of[Visibility::kBatch];
+                vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits_of);
+                for (int k = 0; k < count; ++k) {
+                    const RayHit& h = hits_of[k];
                     if (!h.hit || !h.front) continue;
                     SensingPoint& sp = by_row[r].emplace_back(
                         SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
                     if (camera.footprint)
-                        cell_on_surface(pin, towards, straight, h.distance, patches.normal[h.patch], half_px, sp);
-                    continue;
+                        cell_on_surface(pin, towards[k], straight, h.distance, patches.normal[h.patch], half_px, sp);
                 }
+            }
+            for (int s = 0; s < spp && specular; ++s) {
+                double sx, sy;
+                subpixel(s, spp, sx, sy);
+                const Vec3 towards = pin.direction(c + sx, double(r) + sy);
+                const Vec3 dir = towards.normalized();
                 // Into mirrors and through glass: every diffuse front side the ray reaches, with its
                 // whole path and the specular weight of the way.
                 hits.clear();
@@ -119,6 +132,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
                     row_tints[r].push_back(t.tint);
                 }
             }
+        }
     });
     SensingPoints points;
     points.outputs = std::size_t(camera.width) * std::size_t(camera.height);

@@ -80,6 +80,10 @@ public:
 
     /// The first surface along origin + s * direction (unit), s in (0, max_distance), glass included.
     RayHit intersect(const Vec3& origin, const Vec3& direction, double max_distance) const;
+    /// intersect() of `count` (at most kBatch) rays from one origin along directions[k], into out[k],
+    /// traced as one packet: for rays that start together and point nearly the same way (a pixel's
+    /// camera samples), which share most of their way through the hierarchy.
+    void intersect_from(const Vec3& origin, const Vec3* directions, int count, double max_distance, RayHit* out) const;
 
     /// The specular planes and their chains.
     const std::vector<SpecularPlane>& planes() const { return m_planes; }
@@ -92,6 +96,8 @@ public:
     double epsilon() const { return m_epsilon; }
 
 private:
+    RayHit first_hit(const Vec3& origin, const Vec3& direction, double max_distance, std::int64_t prim, double t) const;
+
     struct Impl;
     std::unique_ptr<Impl> m_impl;
     double m_epsilon = 0.0;
