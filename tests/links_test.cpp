@@ -10,6 +10,9 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+#include <string>
+
 namespace tprf {
 namespace {
 
@@ -223,6 +226,53 @@ TEST(Visibility, PacketsOfRaysAnswerAsSingleRays) {
     EXPECT_GT(at, std::size_t(150));
     EXPECT_GT(hidden, 20);  // the opaque plate blocks some, the glass dims others
     EXPECT_GT(glass, 20);
+}
+
+// A packet of camera rays finds what each ray finds alone: the same surface and side (the glass sheet
+// in front of what lies behind it, the back of a patch), at the same distance to float rounding, and
+// nothing where a ray leaves the scene.
+TEST(Visibility, PacketsOfCameraRaysHitWhatSingleRaysHit) {
+    const Scene scene = parse_scene(R"({
+        "time": {"bins": 4, "bin_width": 0.1},
+        "objects": [
+            {"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0], "albedo": 0.5},
+            {"type": "rectangle", "origin": [0, 0, 0.5], "u": [0, 1, 0], "v": [0.5, 0, 0], "albedo": 0.5},
+            {"type": "rectangle", "origin": [0.5, 0, 0.3], "u": [0.5, 0, 0], "v": [0, 1, 0],
+             "material": {"type": "glass", "reflectance": 0.0, "transmittance": 0.35}}],
+        "patches": {"max_edge": 0.25}})",
+                                     "camera_packets.json");
+    const PatchSet patches = build_patches(scene);
+    const Visibility vis(patches, specular_planes(scene, patches), 1);
+    const Vec3 origin(0.5, 0.5, 1.5);
+    std::vector<Vec3> dirs;
+    Random rng(11);
+    for (int k = 0; k < 300; ++k)  // a cone that reaches past the floor's edges
+        dirs.push_back(Vec3(1.6 * rng.uniform() - 0.8, 1.6 * rng.uniform() - 0.8, -1.0).normalized());
+    int counts[3] = {0, 0, 0};  // missed, glass, front of an opaque patch
+    std::size_t at = 0;
+    for (int count = 0; at + std::size_t(count) <= dirs.size(); count = (count + 1) % (Visibility::kBatch + 1)) {
+        RayHit hits[Visibility::kBatch];
+        vis.intersect_from(origin, dirs.data() + at, count, std::numeric_limits<double>::infinity(), hits);
+        for (int k = 0; k < count; ++k) {
+            const RayHit single = vis.intersect(origin, dirs[at + std::size_t(k)], std::numeric_limits<double>::infinity());
+            const std::string which = "ray " + std::to_string(at + std::size_t(k));
+            ASSERT_EQ(hits[k].hit, single.hit) << which;
+            if (!single.hit) {
+                ++counts[0];
+                continue;
+            }
+            EXPECT_EQ(hits[k].patch, single.patch) << which;
+            EXPECT_EQ(hits[k].front, single.front) << which;
+            EXPECT_NEAR(hits[k].distance, single.distance, 1e-6 * single.distance) << which;
+            EXPECT_LT((hits[k].point - single.point).norm(), 1e-6) << which;
+            ++counts[vis.plane_of(single.patch) >= 0 ? 1 : 2];
+        }
+        at += std::size_t(count);
+    }
+    EXPECT_GT(at, std::size_t(250));
+    EXPECT_GT(counts[0], 20);
+    EXPECT_GT(counts[1], 20);
+    EXPECT_GT(counts[2], 20);
 }
 
 }  // namespace
