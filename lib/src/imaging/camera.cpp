@@ -74,6 +74,34 @@ void cell_on_surface(const Pinhole& pin, const Vec3& direction, const Eigen::Mat
     }
 }
 
+// Pixel (c, r)'s samples in a scene without mirrors or glass, a packet of rays at a time (they leave
+// one point nearly together): each reaches at most one surface, kept when it meets its front.
+void straight_samples(const Camera& camera, const Pinhole& pin, const PatchSet& patches, const Visibility& vis, int r,
+                      int c, double half_px, std::vector<SensingPoint>& out) {
+    const int spp = std::max(1, camera.spp);
+    const std::uint32_t pixel = std::uint32_t(r * camera.width + c);
+    const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
+    for (int s0 = 0; s0 < spp; s0 += Visibility::kBatch) {
+        const int count = std::min(Visibility::kBatch, spp - s0);
+        Vec3 towards[Visibility::kBatch], dir[Visibility::kBatch];
+        for (int k = 0; k < count; ++k) {
+            double sx, sy;
+            subpixel(s0 + k, spp, sx, sy);
+            towards[k] = pin.direction(c + sx, double(r) + sy);
+            dir[k] = towards[k].normalized();
+        }
+        RayHit hits[Visibility::kBatch];
+        vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits);
+        for (int k = 0; k < count; ++k) {
+            const RayHit& h = hits[k];
+            if (!h.hit || !h.front) continue;
+            SensingPoint& sp =
+                out.emplace_back(SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
+            if (camera.footprint) cell_on_surface(pin, towards[k], straight, h.distance, patches.normal[h.patch], half_px, sp);
+        }
+    }
+}
+
 }  // namespace
 
 Vec3 camera_ray(const Camera& camera, double column, double row) {
@@ -87,34 +115,16 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
     std::vector<std::vector<SensingPoint>> by_row(std::size_t(camera.height));
     std::vector<std::vector<Rgb>> row_tints(std::size_t(camera.height));  // per point, with mirrors
     const bool specular = !vis.planes().empty();
-    const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     parallel_for(std::size_t(camera.height), {threads, 1, true}, [&](std::size_t r) {
         std::vector<TracedHit> hits;
         by_row[r].reserve(std::size_t(camera.width) * std::size_t(spp));
         for (int c = 0; c < camera.width; ++c) {
             const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
-            // A pixel's samples, a packet of rays at a time (they leave one point nearly together).
-            for (int s0 = 0; s0 < spp && !specular; s0 += Visibility::kBatch) {
-                const int count = std::min(Visibility::kBatch, spp - s0);
-                Vec3 towards[Visibility::kBatch], dir[Visibility::kBatch];
-                for (int k = 0; k < count; ++k) {
-                    double sx, sy;
-                    subpixel(s0 + k, spp, sx, sy);
-                    towards[k] = pin.direction(c + sx, double(r) + sy);
-                    dir[k] = towards[k].normalized();
-                }
-                RayHit hits_of[Visibility::kBatch];
-                vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits_of);
-                for (int k = 0; k < count; ++k) {
-                    const RayHit& h = hits_of[k];
-                    if (!h.hit || !h.front) continue;
-                    SensingPoint& sp = by_row[r].emplace_back(
-                        SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
-                    if (camera.footprint)
-                        cell_on_surface(pin, towards[k], straight, h.distance, patches.normal[h.patch], half_px, sp);
-                }
+            if (!specular) {
+                straight_samples(camera, pin, patches, vis, int(r), c, half_px, by_row[r]);
+                continue;
             }
-            for (int s = 0; s < spp && specular; ++s) {
+            for (int s = 0; s < spp; ++s) {
                 double sx, sy;
                 subpixel(s, spp, sx, sy);
                 const Vec3 towards = pin.direction(c + sx, double(r) + sy);
