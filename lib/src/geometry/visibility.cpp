@@ -198,6 +198,19 @@ RTCRay make_ray(const Vec3& origin, const Vec3& dir, double tnear, double tfar) 
     return ray;
 }
 
+// Lane k of a packet of eight rays set to `ray`.
+void set_lane(RTCRay8& rays, int k, const RTCRay& ray) {
+    rays.org_x[k] = ray.org_x;
+    rays.org_y[k] = ray.org_y;
+    rays.org_z[k] = ray.org_z;
+    rays.dir_x[k] = ray.dir_x;
+    rays.dir_y[k] = ray.dir_y;
+    rays.dir_z[k] = ray.dir_z;
+    rays.tnear[k] = ray.tnear;
+    rays.tfar[k] = ray.tfar;
+    rays.mask[k] = ray.mask;
+}
+
 // The closest primitive of `scene` along the ray, or -1; its distance in `t`.
 std::int64_t closest(RTCScene scene, const Vec3& origin, const Vec3& dir, double tnear, double tfar, double& t) {
     RTCIntersectContext context;
@@ -271,16 +284,7 @@ void Visibility::transmittances(const Vec3* a, const Vec3* b, int count, double*
         passed[k] = 1.0;
         if (!segment_ray(a[k], b[k], m_epsilon, single[k])) continue;
         valid[k] = -1;
-        const RTCRay& ray = single[k];
-        rays.org_x[k] = ray.org_x;
-        rays.org_y[k] = ray.org_y;
-        rays.org_z[k] = ray.org_z;
-        rays.dir_x[k] = ray.dir_x;
-        rays.dir_y[k] = ray.dir_y;
-        rays.dir_z[k] = ray.dir_z;
-        rays.tnear[k] = ray.tnear;
-        rays.tfar[k] = ray.tfar;
-        rays.mask[k] = ray.mask;
+        set_lane(rays, k, single[k]);
     }
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
@@ -310,17 +314,8 @@ void Visibility::intersect_from(const Vec3& origin, const Vec3* directions, int 
     alignas(32) int valid[kBatch] = {};
     alignas(32) RTCRayHit8 rays{};
     for (int k = 0; k < count; ++k) {
-        const RTCRay ray = make_ray(origin, directions[k], m_epsilon, max_distance);
         valid[k] = -1;
-        rays.ray.org_x[k] = ray.org_x;
-        rays.ray.org_y[k] = ray.org_y;
-        rays.ray.org_z[k] = ray.org_z;
-        rays.ray.dir_x[k] = ray.dir_x;
-        rays.ray.dir_y[k] = ray.dir_y;
-        rays.ray.dir_z[k] = ray.dir_z;
-        rays.ray.tnear[k] = ray.tnear;
-        rays.ray.tfar[k] = ray.tfar;
-        rays.ray.mask[k] = ray.mask;
+        set_lane(rays.ray, k, make_ray(origin, directions[k], m_epsilon, max_distance));
         rays.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
     }
     RTCIntersectContext context;

@@ -77,10 +77,9 @@ void cell_on_surface(const Pinhole& pin, const Vec3& direction, const Eigen::Mat
 // Pixel (c, r)'s samples in a scene without mirrors or glass, a packet of rays at a time (they leave
 // one point nearly together): each reaches at most one surface, kept when it meets its front.
 void straight_samples(const Camera& camera, const Pinhole& pin, const PatchSet& patches, const Visibility& vis, int r,
-                      int c, double half_px, std::vector<SensingPoint>& out) {
-    const int spp = std::max(1, camera.spp);
+                      int c, int spp, double half_px, std::vector<SensingPoint>& out) {
     const std::uint32_t pixel = std::uint32_t(r * camera.width + c);
-    const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
+    static const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     for (int s0 = 0; s0 < spp; s0 += Visibility::kBatch) {
         const int count = std::min(Visibility::kBatch, spp - s0);
         Vec3 towards[Visibility::kBatch], dir[Visibility::kBatch];
@@ -119,11 +118,11 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
         std::vector<TracedHit> hits;
         by_row[r].reserve(std::size_t(camera.width) * std::size_t(spp));
         for (int c = 0; c < camera.width; ++c) {
-            const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
             if (!specular) {
-                straight_samples(camera, pin, patches, vis, int(r), c, half_px, by_row[r]);
+                straight_samples(camera, pin, patches, vis, int(r), c, spp, half_px, by_row[r]);
                 continue;
             }
+            const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
             for (int s = 0; s < spp; ++s) {
                 double sx, sy;
                 subpixel(s, spp, sx, sy);

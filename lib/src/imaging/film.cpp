@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <tuple>
+#include <type_traits>
 
 namespace tprf {
 
@@ -236,51 +237,38 @@ void TransientFilm::add_fused(const FilmTaps& taps, const FilmTaps::Tap& tap, co
     typedef float Lanes __attribute__((vector_size(32)));
     constexpr std::int64_t kLanes = 8;
     std::int64_t e = e0;
-    // Four groups of eight at a time: each bin of the kernel is read once for 32 outputs. The same
-    // sums as one group at a time, in the same order.
-    for (; e + 4 * kLanes <= e1; e += 4 * kLanes) {
-        Lanes acc[4] = {}, odd[4] = {}, x;
-        std::int64_t j = 0;
-        for (; j + 1 < length; j += 2) {
-            const float* a = profile + (e - shift - 3 * j);
-            const float* b = a - 3;
-            for (int g = 0; g < 4; ++g) {
-                std::memcpy(&x, a + g * kLanes, sizeof x);
-                acc[g] += kernel[j] * x;
-                std::memcpy(&x, b + g * kLanes, sizeof x);
-                odd[g] += kernel[j + 1] * x;
+    // G groups of eight outputs at a time, each kernel bin read once for all of them: four groups, then
+    // one for what is left. Two sums per group (even and odd kernel bins): half the chain of dependent
+    // multiply-adds. Every output's sum is the same whatever G.
+    const auto groups = [&]<int G>(std::integral_constant<int, G>) {
+        for (; e + G * kLanes <= e1; e += G * kLanes) {
+            Lanes acc[G] = {}, odd[G] = {}, x;
+            std::int64_t j = 0;
+            for (; j + 1 < length; j += 2) {
+                const float* a = profile + (e - shift - 3 * j);
+                for (int g = 0; g < G; ++g) {
+                    std::memcpy(&x, a + g * kLanes, sizeof x);
+                    acc[g] += kernel[j] * x;
+                    std::memcpy(&x, a - 3 + g * kLanes, sizeof x);
+                    odd[g] += kernel[j + 1] * x;
+                }
+            }
+            if (j < length) {
+                const float* a = profile + (e - shift - 3 * j);
+                for (int g = 0; g < G; ++g) {
+                    std::memcpy(&x, a + g * kLanes, sizeof x);
+                    acc[g] += kernel[j] * x;
+                }
+            }
+            for (int g = 0; g < G; ++g) {
+                std::memcpy(&x, out + e + g * kLanes, sizeof x);
+                x += acc[g] + odd[g];
+                std::memcpy(out + e + g * kLanes, &x, sizeof x);
             }
         }
-        if (j < length) {
-            const float* a = profile + (e - shift - 3 * j);
-            for (int g = 0; g < 4; ++g) {
-                std::memcpy(&x, a + g * kLanes, sizeof x);
-                acc[g] += kernel[j] * x;
-            }
-        }
-        for (int g = 0; g < 4; ++g) {
-            std::memcpy(&x, out + e + g * kLanes, sizeof x);
-            x += acc[g] + odd[g];
-            std::memcpy(out + e + g * kLanes, &x, sizeof x);
-        }
-    }
-    for (; e + kLanes <= e1; e += kLanes) {
-        Lanes acc = {}, odd = {}, x, y;  // two sums: half the chain of dependent multiply-adds
-        std::int64_t j = 0;
-        for (; j + 1 < length; j += 2) {
-            std::memcpy(&x, profile + (e - shift - 3 * j), sizeof x);
-            std::memcpy(&y, profile + (e - shift - 3 * j - 3), sizeof y);
-            acc += kernel[j] * x;
-            odd += kernel[j + 1] * y;
-        }
-        if (j < length) {
-            std::memcpy(&x, profile + (e - shift - 3 * j), sizeof x);
-            acc += kernel[j] * x;
-        }
-        std::memcpy(&x, out + e, sizeof x);
-        x += acc + odd;
-        std::memcpy(out + e, &x, sizeof x);
-    }
+    };
+    groups(std::integral_constant<int, 4>{});
+    groups(std::integral_constant<int, 1>{});
     for (; e < e1; ++e) out[e] += sum(e);
 }
 
