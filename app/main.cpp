@@ -1,6 +1,7 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
+#include "tprf/pipeline/capture.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/pipeline/ranks.h"
 #include "tprf/pipeline/render.h"
@@ -29,6 +30,14 @@ namespace {
 
 // The phase that the run was in last, for the message of a cancelled run.
 std::string g_phase = "load";
+
+// The time line of `tprf info`, and the march's when a capture marches on wider bins.
+void print_time(const tprf::Scene& scene) {
+    std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
+    if (scene.capture && scene.capture->march_bin_factor > 1)
+        std::printf("march    %s (capture.march_bin_factor %d: the links and the march of orders 4 and up)\n",
+                    tprf::describe_time(tprf::march_time(scene)).c_str(), scene.capture->march_bin_factor);
+}
 
 // Progress on stderr: a one-line bar with the time left, redrawn at most ten times a second, on a
 // terminal; with --progress-lines, one line per phase and per tenth of it (for log files of batch jobs).
@@ -164,7 +173,7 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
         std::printf("links    not built: the link stage needs about %.0f MB, over the limit of %.0f MB\n",
                     double(e.link_stage_bytes) / 1e6, double(tprf::memory_limit_bytes(options)) / 1e6);
-        std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
+        print_time(scene);
         return 0;
     }
     ProgressBar bar(quiet, progress_lines);
@@ -183,7 +192,7 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     if (s.mirror_links > 0)
         std::printf("mirrors  %llu of the links go through mirrors and glass\n",
                     static_cast<unsigned long long>(s.mirror_links));
-    std::printf("time     %s\n", tprf::describe_time(scene.time).c_str());
+    print_time(scene);
     std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
     return 0;
 }

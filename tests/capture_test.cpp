@@ -18,6 +18,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <optional>
 #include <string>
@@ -49,7 +50,8 @@ struct Built {
     explicit Built(const std::string& text) : scene(parse_scene(text, "capture_test.json")) {
         patches = build_patches(scene);
         visibility = std::make_unique<Visibility>(patches);
-        if (capture_needs_links(scene)) links = make_link_set(patches, *visibility, scene.links, scene.time.bin_width_m());
+        if (capture_needs_links(scene))
+            links = make_link_set(patches, *visibility, scene.links, march_time(scene).bin_width_m());
     }
     CaptureResult capture(int batch = 0) const {
         CaptureOptions options;
@@ -277,6 +279,57 @@ TEST(Capture, BatchedMarchesMatchSingleOnes) {
     EXPECT_GT(all, only3 * 1.001);
 }
 
+// A march on wider bins (march_bin_factor F) marches the same light: each link splits its delay between
+// two of its bins so that the mean delay is kept, and each march bin is spread back over the scene's
+// bins by a hat that keeps its light and its mean path. So, per pair of points, the light of the later
+// bounces (every bounce less the first three, which do not march) and its mean path are those of the
+// march on the scene's bins, to float rounding, while its shape is blurred over about F bins. A window
+// that ends before the later bounces do would cut the two marches' light differently: 12 m holds them.
+TEST(Capture, AWiderMarchKeepsTheLightAndMeanPathOfLaterBounces) {
+    const std::string time = R"({"bins": 600, "bin_width": 0.02})";
+    const CaptureResult first3 = Built(corner_scene(R"(, "max_bounces": 3)", time)).capture();
+    const CaptureResult fine = Built(corner_scene("", time)).capture();
+    const std::size_t T = 600, pairs = fine.H.size() / T;
+    ASSERT_EQ(first3.H.size(), fine.H.size());
+    // The later bounces' light per pair, and its sum of bin x light.
+    const auto later = [&](const CaptureResult& r, std::size_t q, double& light, double& moment, double& tail) {
+        light = moment = tail = 0.0;
+        for (std::size_t t = 0; t < T; ++t) {
+            const double v = double(r.H[q * T + t]) - double(first3.H[q * T + t]);
+            light += v;
+            moment += v * double(t);
+            if (t >= T - 20) tail += std::abs(v);
+        }
+    };
+    for (const int F : {4, 8}) {
+        SCOPED_TRACE("march_bin_factor " + std::to_string(F));
+        const Built wide(corner_scene(R"(, "march_bin_factor": )" + std::to_string(F), time));
+        EXPECT_EQ(march_time(wide.scene).bins, 600 / F + 1);
+        const CaptureResult r = wide.capture();
+        ASSERT_EQ(r.H.size(), fine.H.size());
+        double worst_light = 0.0, worst_mean = 0.0, blur = 0.0, total = 0.0;
+        for (std::size_t q = 0; q < pairs; ++q) {
+            double a = 0, ma = 0, ta = 0, b = 0, mb = 0, tb = 0;
+            later(fine, q, a, ma, ta);
+            later(r, q, b, mb, tb);
+            ASSERT_GT(a, 0.0);
+            ASSERT_LT(ta, 1e-5 * a) << ta / a;  // the window holds the later bounces
+            worst_light = std::max(worst_light, std::abs(b - a) / a);
+            worst_mean = std::max(worst_mean, std::abs(mb / b - ma / a));
+            for (std::size_t t = 0; t < T; ++t)
+                blur += std::abs(double(r.H[q * T + t]) - double(fine.H[q * T + t]));
+            total += a;
+        }
+        EXPECT_LT(worst_light, 1e-5);
+        EXPECT_LT(worst_mean, 1e-3) << "bins";  // of 2 cm
+        // Not a bound the physics fixes, a check that the blur is a blur: its L1 is a fraction of the light.
+        EXPECT_GT(blur, 0.0);
+        EXPECT_LT(blur, 0.5 * total);
+        std::printf("F %d: later light %.2e, mean path %.2e bins, blur L1 %.3f of the later light\n", F, worst_light,
+                    worst_mean, blur / total);
+    }
+}
+
 // A window that starts late keeps the marched light that left the patches before it began and reaches
 // the sensor points inside it: bin for bin what the same bins of a window from 0 hold.
 TEST(Capture, ALateWindowHoldsWhatTheSameBinsOfAnEarlyOneHold) {
@@ -451,6 +504,29 @@ TEST(Capture, GridPointOnAPatchCornerIsOnTheWall) {
 TEST_F(CaptureCli, ZeroPointsAlongAGridSideIsRefused) {
     expect_refused(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0],
         "nu": 0, "nv": 4}})", "capture.grid.nu", "must be > 0");
+}
+
+TEST_F(CaptureCli, MarchBinFactorOutOfRangeIsRefused) {
+    const std::string grid = R"("grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0], "v": [0, 1, 0], "nu": 4, "nv": 4})";
+    for (const char* factor : {"0", "65"})
+        expect_refused(R"({)" + kDevices + ", " + grid + R"(, "march_bin_factor": )" + factor + "}",
+                       "capture.march_bin_factor", "must be an integer in [1, 64]");
+}
+
+// A camera's light is marched on the scene's bins, with the same links as the capture's.
+TEST_F(CaptureCli, WiderMarchWithACameraIsRefused) {
+    const std::string file = scene(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0],
+        "v": [0, 1, 0], "nu": 4, "nv": 4}, "march_bin_factor": 4})");
+    std::ifstream in(file);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    text.insert(1, R"("camera": {"position": [0, -1.5, 0.3], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov": 40, "width": 8,
+        "height": 8}, )");
+    std::ofstream(file) << text;
+    const test::Outcome o = test::run_tprf("render " + file + " -o " + (m_dir / "out").string());
+    EXPECT_EQ(o.status, 2) << o.err;
+    EXPECT_NE(o.err.find("scene.json: capture.march_bin_factor: must be 1 in a scene with a camera"), std::string::npos)
+        << o.err;
+    EXPECT_FALSE(fs::exists(m_dir / "out"));
 }
 
 TEST_F(CaptureCli, ExhaustiveWithoutGridsIsRefused) {

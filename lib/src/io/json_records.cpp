@@ -75,6 +75,7 @@ std::string render_json_text(const RenderRecord& r) {
                         {"solved", c->solved},
                         {"batch", c->batch},
                         {"marches", c->marches},
+                        {"march_bin_factor", c->march_bin_factor},
                         {"view_pairs", c->view_pairs},
                         {"link_bin_updates", c->link_bin_updates},
                         {"seconds", {{"views", c->seconds_views}, {"solve", c->seconds_solve},

@@ -47,6 +47,10 @@ struct CapturePlan {
     std::size_t pair_base = 0;     // the first pair of this rank's rows of H (0: one rank)
     int T = 0;
     double start = 0.0, inv_bin = 0.0;
+    // The march's axis (march_time): bins `factor` times wider than the scene's, from the same start.
+    TimeAxis march{};
+    int factor = 1;
+    double march_inv_bin = 0.0;
     double laser_leg(std::size_t l) const { return capture.account_first_and_last_bounces ? points.laser[l].device_leg : 0.0; }
     double sensor_leg(std::size_t s) const {
         return capture.account_first_and_last_bounces ? points.sensor[s].device_leg : 0.0;
@@ -57,6 +61,7 @@ struct CapturePlan {
     std::size_t pair_count() const { return confocal ? 1 : sensors; }
     std::size_t sensor_of(std::size_t l, std::size_t k) const { return confocal ? l : k; }
     std::int64_t bin(double path) const { return std::int64_t(std::floor((path - start) * inv_bin)); }
+    std::int64_t march_bin(double path) const { return std::int64_t(std::floor((path - start) * march_inv_bin)); }
 };
 
 void deposit(std::vector<float>& H, const CapturePlan& p, std::size_t pair, double path, double value) {
@@ -191,19 +196,19 @@ MeanView mean_view(const PatchView& v) {
 }
 
 // The pulses that laser point l's spot sends into the patch system for the march (CSR by patch): each
-// patch's first-bounce exitance at its mean path, split between the two bins about it as the taps
-// split their legs. The gather takes these pulses out of the solved profiles again (their light is
+// patch's first-bounce exitance at its mean path, split between the two bins of the march about it as
+// the taps split their legs. The gather takes these pulses out of the solved profiles again (their light is
 // add_third_bounce's, exact per sample); they only feed the later bounces.
 Illumination spot_illumination(const CapturePlan& p, std::size_t l, const std::vector<PatchView>& views) {
     const WallPoint& laser = p.points.laser[l];
     const Rgb spot = p.patches.albedo[laser.patch] * p.capture.laser_power / (M_PI * kViewSamples);
-    const double bin_width = 1.0 / p.inv_bin;
+    const double bin_width = 1.0 / p.march_inv_bin;
     Illumination out;
     out.row.assign(p.patches.size() + 1, 0);
     for (const PatchView& v : views) {
         const MeanView m = mean_view(v);
         if (!(m.sum > 0.0)) continue;
-        const double at = (p.laser_leg(l) + m.path - p.start) * p.inv_bin;
+        const double at = (p.laser_leg(l) + m.path - p.start) * p.march_inv_bin;
         const double whole = std::floor(at), f = at - whole;
         for (int side = 0; side < 2; ++side) {
             const double share = side == 0 ? 1.0 - f : f;
@@ -255,6 +260,10 @@ void add_exact(const CapturePlan& p, std::size_t l, const std::vector<PatchView>
 
 // One laser point's profiles of a solved block, less its exact pulses, at its sensor points: each tap
 // shifts its patch's profile by its leg, split between two bins (or rounded, with solver.delay nearest).
+// A march on bins F times wider (march_bin_factor) is spread back over the scene's bins: march bin k
+// stands for the path k F scene bins after the start (as a delta there is split between the two march
+// bins about it), and its light goes to the scene's bins about that path by linear interpolation, a
+// hat F bins wide on either side. Each bin's light is kept, and so is its mean path.
 class CaptureFilm {
 public:
     CaptureFilm(const CapturePlan& p, std::vector<float>& H) : m_plan(p), m_H(H) {}
@@ -270,7 +279,7 @@ public:
         for (std::size_t j = 0; j < n; ++j)
             for (std::uint64_t k = pulses.row[j]; k < pulses.row[j + 1]; ++k) {
                 const Pulse& pulse = pulses.pulses[k];
-                const std::int64_t b = m_plan.bin(pulse.path) - block.first_bin;
+                const std::int64_t b = m_plan.march_bin(pulse.path) - block.first_bin;
                 if (b < 0 || b >= std::int64_t(bins)) continue;
                 float* v = indirect.data() + (j * bins + std::size_t(b)) * 3;
                 // What is left is the light of later orders; float cancellation must not make it negative.
@@ -288,14 +297,23 @@ private:
         const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
         const float f = nearest ? 0.0f : float(lag - double(whole));
         const float w[3] = {float(tap.weight[0] / 3.0), float(tap.weight[1] / 3.0), float(tap.weight[2] / 3.0)};
+        // The march bin's light over scene bins [-(F - 1), F] about its path plus `whole`: the hat of
+        // the march bin, h(m) = (F - |m|) / F^2, and the leg's split, (1 - f) h(m) + f h(m - 1). For F = 1
+        // that is the split alone: 1 - f and f.
+        const int F = m_plan.factor;
+        const auto hat = [F](int m) { return std::abs(m) < F ? float(F - std::abs(m)) / float(F * F) : 0.0f; };
+        float kernel[2 * Capture::kMaxMarchBinFactor];
+        for (int m = 1 - F; m <= F; ++m) kernel[m + F - 1] = (1.0f - f) * hat(m) + f * hat(m - 1);
         const float* in = indirect.data() + std::size_t(tap.patch) * bins * 3;
         float* out = m_H.data() + (pair - m_plan.pair_base) * std::size_t(m_plan.T);
         for (std::size_t b = 0; b < bins; ++b) {
             const float v = w[0] * in[b * 3] + w[1] * in[b * 3 + 1] + w[2] * in[b * 3 + 2];
             if (v == 0.0f) continue;
-            const std::int64_t t = first_bin + std::int64_t(b) + whole;
-            if (t >= 0 && t < m_plan.T) out[t] += (1.0f - f) * v;
-            if (t + 1 >= 0 && t + 1 < m_plan.T) out[t + 1] += f * v;
+            const std::int64_t t0 = (first_bin + std::int64_t(b)) * F + whole;
+            for (int m = 1 - F; m <= F; ++m) {
+                const std::int64_t t = t0 + m;
+                if (t >= 0 && t < m_plan.T) out[t] += kernel[m + F - 1] * v;
+            }
         }
     }
 
@@ -313,6 +331,9 @@ CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibil
     p.T = scene.time.bins;
     p.start = scene.time.start_m();
     p.inv_bin = 1.0 / scene.time.bin_width_m();
+    p.march = march_time(scene);
+    p.factor = p.capture.march_bin_factor;
+    p.march_inv_bin = 1.0 / p.march.bin_width_m();
     return p;
 }
 
@@ -342,11 +363,12 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std
             for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
     for (const auto& list : sensor_taps_all)
         for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
-    solver.first_bin = -bins_before_window(p.scene.time, longest);
+    // A march bin's hat reaches F - 1 scene bins before its path: one march bin more.
+    solver.first_bin = -bins_before_window(p.march, longest) - (p.factor > 1 ? 1 : 0);
     const CaptureFilm film(p, result.H);
     double film_seconds = 0.0;
     const auto start = Clock::now();
-    const SolveStats stats = solve_transient(p.patches, links, std::span<const Illumination* const>(batch), p.scene.time,
+    const SolveStats stats = solve_transient(p.patches, links, std::span<const Illumination* const>(batch), p.march,
                                              solver, [&](const SolveBlock& block) {
         const auto t0 = Clock::now();
         parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
@@ -371,8 +393,8 @@ int choose_batch(const CapturePlan& p, const LinkSet& links, const CaptureOption
     for (const auto& t : links.links.tints) grey = grey && t[0] == t[1] && t[1] == t[2];  // tinted mirrors
     SolverOptions solver;
     solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;
-    const double one = double(solve_working_bytes(p.patches, links, p.scene.time, solver, 1, grey ? 1 : 3));
-    const double all = double(solve_working_bytes(p.patches, links, p.scene.time, solver, kMaxBatch, grey ? 1 : 3));
+    const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, grey ? 1 : 3));
+    const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, grey ? 1 : 3));
     const double per_lane = std::max(0.0, (all - one) / (kMaxBatch - 1));
     const double room = double(options.memory_bytes) - one;
     if (room < 0.0)
@@ -492,5 +514,14 @@ bool capture_needs_links(const Scene& scene) {
 }
 
 bool render_needs_links(const Scene& scene) { return scene.camera || capture_needs_links(scene); }
+
+TimeAxis march_time(const Scene& scene) {
+    const int F = scene.capture ? scene.capture->march_bin_factor : 1;
+    if (F <= 1) return scene.time;
+    TimeAxis axis = scene.time;
+    axis.bin_width *= F;
+    axis.bins = (scene.time.bins + F - 1) / F + 1;
+    return axis;
+}
 
 }  // namespace tprf

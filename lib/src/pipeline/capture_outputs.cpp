@@ -145,6 +145,7 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
     record.sensor_points = r.points.sensor.size();
     record.solved = r.solved;
     record.batch = r.batch;
+    record.march_bin_factor = scene.capture->march_bin_factor;
     record.marches = r.marches;
     record.view_pairs = r.view_pairs;
     record.link_bin_updates = r.link_bin_updates;

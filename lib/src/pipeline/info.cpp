@@ -62,15 +62,15 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     link_options.progress = options.progress;
     LinkStats link_stats;
     HierarchyStats stats;
-    LinkSet links = make_link_set(patches, visibility, scene.links, scene.time.bin_width_m(), link_options, &stats,
-                                  &link_stats);
+    const double bin_m = march_time(scene).bin_width_m();
+    LinkSet links = make_link_set(patches, visibility, scene.links, bin_m, link_options, &stats, &link_stats);
     if (scene.links.method != LinkMethod::Flat) {
         s.clusters = links.tree.clusters();
         s.cluster_links = stats.cluster_links;
         s.patch_links = stats.leaf_links;
         s.candidates = stats.candidates;
     }
-    s.mirror_links = add_mirror_links(links, patches, visibility, link_options, scene.time.bin_width_m());
+    s.mirror_links = add_mirror_links(links, patches, visibility, link_options, bin_m);
     s.links = links.links.size();
     s.link_bytes = links.bytes();
     s.pairs_tested = link_stats.pairs_tested;
@@ -608,13 +608,16 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     e.patch_bytes = to_size(kPatchBytes * n + kCornerBytes * double(census.corners));
     e.visibility_bytes = to_size(kEmbreeBytesPerPatch * n);
     e.seconds.patches = kPatchSeconds * n + kMeshSecondsPerFace * double(census.mesh_faces);
-    const double bin_m = scene.time.bin_width_m();
-    const PairShares shares = pair_shares(scene, census, kBlockBins * bin_m, bin_m, near_gap_m(census, bin_m));
+    // The links and the march are on the march's bins (march_time: a capture's may be wider).
+    Scene marched = scene;
+    marched.time = march_time(scene);
+    const double bin_m = marched.time.bin_width_m();
+    const PairShares shares = pair_shares(marched, census, kBlockBins * bin_m, bin_m, near_gap_m(census, bin_m));
     e.facing_fraction = shares.facing;
-    estimate_links(scene, census, shares, e);
-    estimate_mirror_links(scene, census, e);
+    estimate_links(marched, census, shares, e);
+    estimate_mirror_links(marched, census, e);
     estimate_camera(scene, census, shares, e);
-    const double per_illumination = estimate_solver(scene, census, shares, e);
+    const double per_illumination = estimate_solver(marched, census, shares, e);
     estimate_outputs(scene, census, patch_profiles, e);
     estimate_capture(scene, options, per_illumination, e);
     sum_peak(e);

@@ -101,8 +101,9 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
         link_options.threads = options.threads;
         link_options.progress = options.progress;
         link_options.shares = link_shares(scene, options);
-        t.links = make_link_set(t.patches, *t.visibility, scene.links, scene.time.bin_width_m(), link_options);
-        add_mirror_links(t.links, t.patches, *t.visibility, link_options, scene.time.bin_width_m());
+        const double bin_m = march_time(scene).bin_width_m();
+        t.links = make_link_set(t.patches, *t.visibility, scene.links, bin_m, link_options);
+        add_mirror_links(t.links, t.patches, *t.visibility, link_options, bin_m);
         report.links = t.links.links.size();
     }
     report.seconds.links = seconds_since(start);

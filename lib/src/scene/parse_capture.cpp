@@ -43,7 +43,8 @@ void parse_grids(const JsonNode& n, Capture& c) {
 }  // namespace
 
 Capture parse_capture(const JsonNode& n) {
-    n.check_keys({"type", "laser", "sensor", "grid", "sensor_grid", "account_first_and_last_bounces", "max_bounces"});
+    n.check_keys({"type", "laser", "sensor", "grid", "sensor_grid", "account_first_and_last_bounces", "max_bounces",
+                  "march_bin_factor"});
     Capture c;
     c.json_path = n.path;
     if (const auto type = n.find("type")) {
@@ -67,6 +68,7 @@ Capture parse_capture(const JsonNode& n) {
         // -1 is the Capture's "all", which a scene file says with null; validate() refuses the rest.
         if (c.max_bounces == -1) max_bounces->fail("must be >= 2, or null for every bounce");
     }
+    if (const auto factor = n.find("march_bin_factor")) c.march_bin_factor = factor->integer();
     return c;
 }
 

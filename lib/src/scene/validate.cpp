@@ -377,6 +377,9 @@ void check_capture(const Capture& c, const At& at) {
     if (exhaustive) check_grid(c.sensor_grid, at.key(c.sensor_grid_key));
     if (c.max_bounces < -1 || c.max_bounces == 0 || c.max_bounces == 1)
         at.key("max_bounces").fail("must be >= 2 (3: laser spot -> hidden surface -> sensor point), or null for every bounce");
+    if (c.march_bin_factor < 1 || c.march_bin_factor > Capture::kMaxMarchBinFactor)
+        at.key("march_bin_factor").fail("must be an integer in [1, " + std::to_string(Capture::kMaxMarchBinFactor) +
+                                        "] (1: the march of orders 4 and up on the scene's bins)");
 }
 
 void check_objects(const Scene& scene, const At& root) {
@@ -425,7 +428,13 @@ void validate(const Scene& scene) {
     for (std::size_t i = 0; i < scene.lights.size(); ++i) check_light(scene.lights[i], lights.index(i));
     check_objects(scene, root);
     check_settings(scene, root);
-    if (scene.capture) check_capture(*scene.capture, At{scene.file, scene.capture->json_path});
+    if (scene.capture) {
+        const At capture{scene.file, scene.capture->json_path};
+        check_capture(*scene.capture, capture);
+        if (scene.capture->march_bin_factor > 1 && scene.camera)
+            capture.key("march_bin_factor").fail("must be 1 in a scene with a camera (the camera's links are marched on "
+                                                 "the scene's bins): render the capture from a scene without one");
+    }
     if (!scene.sensor) return;
     const SensorSettings& s = *scene.sensor;
     const At sensor{s.file.empty() ? scene.file : s.file, s.json_path.empty() ? "sensor" : s.json_path};

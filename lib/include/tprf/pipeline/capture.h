@@ -77,4 +77,9 @@ bool capture_needs_links(const Scene& scene);
 /// Whether a render of `scene` builds links: for a camera's solve, or a capture that marches.
 bool render_needs_links(const Scene& scene);
 
+/// The time axis the links are built for and marched on: the scene's, or for a capture with
+/// march_bin_factor F > 1 (no camera), bins F times wider from the same start, enough of them that the
+/// light of the last spreads back to the end of the scene's window (ceil(T / F) + 1).
+TimeAxis march_time(const Scene& scene);
+
 }  // namespace tprf

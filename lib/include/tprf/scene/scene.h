@@ -165,6 +165,11 @@ struct Capture {
     CaptureGrid sensor_grid;
     bool account_first_and_last_bounces = false;  ///< device legs in the time (false: the NLOS convention)
     int max_bounces = -1;                  ///< -1: all; >= 2 (3: laser spot -> hidden surface -> sensor point)
+    /// The march of orders 4 and up (the exact orders 1 to 3 keep the scene's bins) runs on bins this
+    /// many times wider, its light spread back over the scene's bins: >= 1, at most kMaxMarchBinFactor;
+    /// above 1, no camera (its links would be marched on the scene's bins). docs/capture.md.
+    int march_bin_factor = 1;
+    static constexpr int kMaxMarchBinFactor = 64;
     std::string json_path = "capture";     ///< for error messages
     /// The keys the grids came from ("grid" or "sensor_grid"), for error messages.
     std::string laser_grid_key = "grid";
