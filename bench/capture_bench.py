@@ -4,16 +4,17 @@ wall, rendered by `tprf render` as a user would, timed from render.json.
 
 Usage: bench/capture_bench.py [--tprf build/bin/tprf] [--grid 64] [--bins 512] [--cell 0.0165]
                               [--out bench/out] [--threads N] [--skip-all] [--launcher "mpirun -np 2"]
-                              [--march-bin-factor F]
+                              [--march-bin-factor F] [--march-grid-step S] [--name NAME]
 
 Runs, each a separate `tprf render` process:
   1. third bounce only (max_bounces 3): laser spot -> hidden surface -> sensor point, no links;
   2. every bounce (max_bounces null): the batched march over hierarchical links;
   3. one laser point with every bounce: what each of GRID x GRID separate renders would cost, for the ratio.
 With --launcher, run 2 is started through it (MPI ranks sharing the laser points, docs/mpi.md).
-With --march-bin-factor, runs 2 and 3 march the later bounces on bins F times wider (docs/capture.md;
-bench/capture_march_factor.py measures what that costs in accuracy).
-Prints the seconds, render.json's phases and peak memory, and writes OUT/capture_bench.json.
+With --march-bin-factor, runs 2 and 3 march the later bounces on bins F times wider, and with
+--march-grid-step run 2 marches them at every S-th grid point only, interpolating the others
+(docs/capture.md; bench/capture_march_factor.py measures what both cost in accuracy).
+Prints the seconds, render.json's phases and peak memory, and writes OUT/capture_bench.json (or NAME.json).
 The hidden mesh is scripts/make_statue_mesh.py's bust at --cell (0.0165: about 12k triangles).
 """
 
@@ -31,7 +32,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 PYTHON = "/usr/bin/python3" if pathlib.Path("/usr/bin/python3").exists() else sys.executable
 
 
-def scene(mesh, grid, bins, max_bounces, single=False, march_bin_factor=1):
+def scene(mesh, grid, bins, max_bounces, single=False, march_bin_factor=1, march_grid_step=1):
     g = {"origin": [-0.9, -0.9, 0], "u": [1.8, 0, 0], "v": [0, 1.8, 0], "nu": grid, "nv": grid}
     if single:  # the middle point of the full grid, alone
         step = 1.8 / grid
@@ -47,7 +48,8 @@ def scene(mesh, grid, bins, max_bounces, single=False, march_bin_factor=1):
         "patches": {"max_edge": 0.05},
         "links": {"method": "hierarchical", "tolerance": 0.001},
         "capture": {"type": "confocal", "laser": {"position": [0, -1.5, 0.3]}, "sensor": {"position": [0, -1.5, 0.3]},
-                    "grid": g, "max_bounces": max_bounces, "march_bin_factor": march_bin_factor},
+                    "grid": g, "max_bounces": max_bounces, "march_bin_factor": march_bin_factor,
+                    "march_grid_step": march_grid_step},
     }
 
 
@@ -87,6 +89,8 @@ def main():
     parser.add_argument("--skip-all", action="store_true", help="only the third-bounce run")
     parser.add_argument("--launcher", default="", help="put before tprf for the every-bounce run, e.g. 'mpirun -np 2'")
     parser.add_argument("--march-bin-factor", type=int, default=1, help="capture.march_bin_factor of the every-bounce runs")
+    parser.add_argument("--march-grid-step", type=int, default=1, help="capture.march_grid_step of the every-bounce scan")
+    parser.add_argument("--name", default="capture_bench", help="the results file's name, without .json")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="tprf_capture_bench_") as tmp:
         work = pathlib.Path(tmp)
@@ -96,12 +100,14 @@ def main():
         header = mesh.read_bytes()[:400].decode("latin-1")
         faces = int(header.split("element face ")[1].split()[0])
         print(f"hidden mesh: {faces} triangles; {args.grid}x{args.grid} confocal, {args.bins} bins")
-        results = {"grid": args.grid, "bins": args.bins, "triangles": faces, "march_bin_factor": args.march_bin_factor}
+        results = {"grid": args.grid, "bins": args.bins, "triangles": faces, "march_bin_factor": args.march_bin_factor,
+                   "march_grid_step": args.march_grid_step}
         results["third"] = render(args.tprf, work, "third", scene(mesh, args.grid, args.bins, 3), args.threads)
         print(describe("third bounce only", results["third"]))
         if not args.skip_all:
             results["all"] = render(args.tprf, work, "all",
-                                    scene(mesh, args.grid, args.bins, None, march_bin_factor=args.march_bin_factor),
+                                    scene(mesh, args.grid, args.bins, None, march_bin_factor=args.march_bin_factor,
+                                          march_grid_step=args.march_grid_step),
                                     args.threads, args.launcher)
             print(describe("every bounce", results["all"]))
             results["single"] = render(args.tprf, work, "single",
@@ -114,7 +120,7 @@ def main():
             print(f"{args.grid * args.grid} separate renders: {separate:.0f} s; the batched capture is {ratio:.0f}x "
                   f"faster")
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "capture_bench.json").write_text(json.dumps(results, indent=1) + "\n")
+    (args.out / f"{args.name}.json").write_text(json.dumps(results, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -330,6 +330,67 @@ TEST(Capture, AWiderMarchKeepsTheLightAndMeanPathOfLaterBounces) {
     }
 }
 
+// march_grid_step S marches the later bounces at every S-th grid point (and the last) along each side
+// and interpolates them bilinearly in between. Fixed in advance: a marched point holds what the full
+// march gives it (its own march, in another batch: to rounding), and every other point's later light,
+// bin by bin, is the bilinear blend of the full march's at the four marched points around it (so it
+// lies between their least and most).
+TEST(Capture, AMarchedLatticeGivesItsPointsTheirOwnLightAndTheOthersABlend) {
+    const std::string confocal = R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0, -1.5, 0.3]},
+        "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 7, "nv": 6})";
+    const char* plane =
+        R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
+    const char* side =
+        R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
+    const std::string objects = std::string(kWall) + "," + plane + "," + side;
+    const std::string time = R"({"bins": 150, "bin_width": 0.02})";
+    const auto run = [&](const std::string& extra) {
+        return Built(scene_text(objects, confocal + extra + "}", time, 0.1)).capture();
+    };
+    const CaptureResult first3 = run(R"(, "max_bounces": 3)"), full = run(""), blend = run(R"(, "march_grid_step": 3)");
+    const std::size_t T = 150, nv = 6;
+    ASSERT_EQ(full.H.size(), 42 * T);
+    ASSERT_EQ(blend.H.size(), full.H.size());
+    EXPECT_EQ(blend.marches, 1);  // 3 x 3 lattice points (a in 0, 3, 6; b in 0, 3, 5): one batch
+    double largest = 0.0;
+    for (float v : full.H) largest = std::max(largest, double(v));
+    const auto later = [&](const CaptureResult& r, std::size_t l, std::size_t t) {
+        return double(r.H[l * T + t]) - double(first3.H[l * T + t]);
+    };
+    double worst_marched = 0.0, worst_blend = 0.0, worst_outside = 0.0, later_light = 0.0;
+    for (std::size_t a = 0; a < 7; ++a)
+        for (std::size_t b = 0; b < nv; ++b) {
+            const std::size_t l = a * nv + b;
+            const std::size_t a0 = a < 3 ? 0 : (a < 6 ? 3 : 6), a1 = a < 3 ? 3 : 6;
+            const std::size_t b0 = b < 3 ? 0 : (b < 5 ? 3 : 5), b1 = b < 3 ? 3 : 5;
+            const bool marched = (a == a0) && (b == b0);
+            for (std::size_t t = 0; t < T; ++t) {
+                later_light += later(full, l, t);
+                if (marched) {
+                    worst_marched = std::max(worst_marched, std::abs(double(blend.H[l * T + t]) - double(full.H[l * T + t])));
+                    continue;
+                }
+                const double wa = double(a - a0) / double(a1 - a0), wb = double(b - b0) / double(b1 - b0);
+                double expected = 0.0, lo = INFINITY, hi = -INFINITY;
+                for (std::size_t ca : {a0, a1})
+                    for (std::size_t cb : {b0, b1}) {
+                        const double v = later(full, ca * nv + cb, t);
+                        expected += (ca == a0 ? 1.0 - wa : wa) * (cb == b0 ? 1.0 - wb : wb) * v;
+                        lo = std::min(lo, v);
+                        hi = std::max(hi, v);
+                    }
+                const double v = later(blend, l, t);
+                worst_blend = std::max(worst_blend, std::abs(v - expected));
+                worst_outside = std::max({worst_outside, lo - v, v - hi});
+            }
+        }
+    EXPECT_GT(later_light, 0.0);
+    EXPECT_LE(worst_marched, 1e-6 * largest);
+    EXPECT_LE(worst_blend, 1e-6 * largest);
+    EXPECT_LE(worst_outside, 1e-6 * largest);
+}
+
 // A window that starts late keeps the marched light that left the patches before it began and reaches
 // the sensor points inside it: bin for bin what the same bins of a window from 0 hold.
 TEST(Capture, ALateWindowHoldsWhatTheSameBinsOfAnEarlyOneHold) {
@@ -527,6 +588,12 @@ TEST_F(CaptureCli, WiderMarchWithACameraIsRefused) {
     EXPECT_NE(o.err.find("scene.json: capture.march_bin_factor: must be 1 in a scene with a camera"), std::string::npos)
         << o.err;
     EXPECT_FALSE(fs::exists(m_dir / "out"));
+}
+
+TEST_F(CaptureCli, MarchGridStepOfAnExhaustiveCaptureIsRefused) {
+    expect_refused(R"({"type": "exhaustive", )" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0],
+        "v": [0, 1, 0], "nu": 4, "nv": 4}, "march_grid_step": 2})",
+                   "capture.march_grid_step", "must be 1 for an exhaustive capture");
 }
 
 TEST_F(CaptureCli, ExhaustiveWithoutGridsIsRefused) {

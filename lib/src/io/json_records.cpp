@@ -76,6 +76,7 @@ std::string render_json_text(const RenderRecord& r) {
                         {"batch", c->batch},
                         {"marches", c->marches},
                         {"march_bin_factor", c->march_bin_factor},
+                        {"march_grid_step", c->march_grid_step},
                         {"view_pairs", c->view_pairs},
                         {"link_bin_updates", c->link_bin_updates},
                         {"seconds", {{"views", c->seconds_views}, {"solve", c->seconds_solve},

@@ -266,9 +266,10 @@ void add_exact(const CapturePlan& p, std::size_t l, const std::vector<PatchView>
 // hat F bins wide on either side. Each bin's light is kept, and so is its mean path.
 class CaptureFilm {
 public:
-    CaptureFilm(const CapturePlan& p, std::vector<float>& H) : m_plan(p), m_H(H) {}
+    explicit CaptureFilm(const CapturePlan& p) : m_plan(p) {}
 
-    void add(const SolveBlock& block, std::size_t lane, std::size_t l, const Illumination& pulses,
+    // `rows`: the laser point's row of H for its first sensor point (its others follow, T bins each).
+    void add(const SolveBlock& block, std::size_t lane, float* rows, const Illumination& pulses,
              const std::vector<std::vector<SensorTap>>& taps_by_pair, std::vector<float>& indirect) const {
         const std::size_t n = block.patches, bins = std::size_t(block.bins), K = std::size_t(block.illuminations);
         indirect.resize(n * bins * 3);
@@ -286,12 +287,12 @@ public:
                 for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(pulse.energy[c]));
             }
         for (std::size_t k = 0; k < m_plan.pair_count(); ++k)
-            for (const SensorTap& tap : taps_by_pair[k]) add_tap(tap, m_plan.first_pair(l) + k, block.first_bin, bins, indirect);
+            for (const SensorTap& tap : taps_by_pair[k])
+                add_tap(tap, rows + k * std::size_t(m_plan.T), block.first_bin, bins, indirect);
     }
 
 private:
-    void add_tap(const SensorTap& tap, std::size_t pair, int first_bin, std::size_t bins,
-                 const std::vector<float>& indirect) const {
+    void add_tap(const SensorTap& tap, float* out, int first_bin, std::size_t bins, const std::vector<float>& indirect) const {
         const double lag = tap.leg * m_plan.inv_bin;
         const bool nearest = m_plan.scene.solver.delay == DelayMode::Nearest;
         const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
@@ -305,7 +306,6 @@ private:
         float kernel[2 * Capture::kMaxMarchBinFactor];
         for (int m = 1 - F; m <= F; ++m) kernel[m + F - 1] = (1.0f - f) * hat(m) + f * hat(m - 1);
         const float* in = indirect.data() + std::size_t(tap.patch) * bins * 3;
-        float* out = m_H.data() + (pair - m_plan.pair_base) * std::size_t(m_plan.T);
         for (std::size_t b = 0; b < bins; ++b) {
             const float v = w[0] * in[b * 3] + w[1] * in[b * 3 + 1] + w[2] * in[b * 3 + 2];
             if (v == 0.0f) continue;
@@ -318,7 +318,6 @@ private:
     }
 
     const CapturePlan& m_plan;
-    std::vector<float>& m_H;
 };
 
 CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {
@@ -337,18 +336,19 @@ CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibil
     return p;
 }
 
-// Laser points [l0, l1) solved together: their spots' pulses march through the links in one batch, and
-// every block is filmed at their sensor points.
-void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std::size_t l1,
-                 const std::vector<std::vector<PatchView>>& laser_views,
+// Laser points `lasers` solved together: their spots' pulses march through the links in one batch, and
+// every block is filmed at their sensor points, laser point k's into rows[k] (rows of T bins, one per
+// sensor point it is paired with).
+void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std::size_t> lasers,
+                 std::span<float* const> rows, const std::vector<std::vector<PatchView>>& laser_views,
                  const std::vector<std::vector<SensorTap>>& sensor_taps_all, const CaptureOptions& options,
                  CaptureResult& result) {
-    const std::size_t K = l1 - l0;
+    const std::size_t K = lasers.size();
     std::vector<Illumination> illuminations(K);
     std::vector<std::vector<std::vector<SensorTap>>> taps(K);
     parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
-        illuminations[k] = spot_illumination(p, l0 + k, laser_views[k]);
-        if (p.confocal) taps[k] = {sensor_taps(p, l0 + k, laser_views[k])};
+        illuminations[k] = spot_illumination(p, lasers[k], laser_views[k]);
+        if (p.confocal) taps[k] = {sensor_taps(p, lasers[k], laser_views[k])};
     });
     std::vector<const Illumination*> batch;
     for (const Illumination& i : illuminations) batch.push_back(&i);
@@ -365,7 +365,7 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std
         for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
     // A march bin's hat reaches F - 1 scene bins before its path: one march bin more.
     solver.first_bin = -bins_before_window(p.march, longest) - (p.factor > 1 ? 1 : 0);
-    const CaptureFilm film(p, result.H);
+    const CaptureFilm film(p);
     double film_seconds = 0.0;
     const auto start = Clock::now();
     const SolveStats stats = solve_transient(p.patches, links, std::span<const Illumination* const>(batch), p.march,
@@ -373,7 +373,7 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::size_t l0, std
         const auto t0 = Clock::now();
         parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
             thread_local std::vector<float> indirect;
-            film.add(block, k, l0 + k, illuminations[k], p.confocal ? taps[k] : sensor_taps_all, indirect);
+            film.add(block, k, rows[k], illuminations[k], p.confocal ? taps[k] : sensor_taps_all, indirect);
         });
         film_seconds += seconds_from(t0);
     });
@@ -413,9 +413,77 @@ std::pair<std::size_t, std::size_t> share_of(std::size_t lasers, std::size_t uni
     return {start(rank), start(rank + 1)};
 }
 
+// The marched coordinates along a grid side of `count` points: every step-th from 0, and the last.
+std::vector<int> lattice(int count, int step) {
+    std::vector<int> at;
+    for (int a = 0; a < count; a += step) at.push_back(a);
+    if (at.back() != count - 1) at.push_back(count - 1);
+    return at;
+}
+
+// Where coordinate a falls among the marched ones `at`: the index of the last one not after it, and
+// the weight of the next one (0 on a marched coordinate).
+std::pair<std::size_t, float> bracket(const std::vector<int>& at, int a) {
+    const std::size_t k = std::size_t(std::upper_bound(at.begin(), at.end(), a) - at.begin()) - 1;
+    if (at[k] == a) return {k, 0.0f};
+    return {k, float(a - at[k]) / float(at[k + 1] - at[k])};
+}
+
+// march_grid_step S > 1 (confocal): the later bounces marched at the lattice of every S-th grid point
+// along each side (and the last), the ranks sharing the lattice by whole batches as they share the
+// laser points and every rank receiving every lattice point's rows; then added to this rank's rows of
+// H, laser points [first, last), each interpolated bilinearly between the four lattice points around
+// it (a lattice point takes its own rows, weight 1).
+void march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& ranks, std::size_t first,
+                   std::size_t last, const CaptureOptions& options, CaptureResult& result, CaptureShare& share) {
+    const CaptureGrid& g = p.capture.laser_grid;
+    const std::vector<int> as = lattice(g.nu, p.capture.march_grid_step), bs = lattice(g.nv, p.capture.march_grid_step);
+    std::vector<std::size_t> marched;
+    for (int a : as)
+        for (int b : bs) marched.push_back(std::size_t(a) * std::size_t(g.nv) + std::size_t(b));
+    const std::size_t T = std::size_t(p.T), batch = std::size_t(result.batch);
+    const auto [m0, m1] = share_of(marched.size(), batch, ranks.rank(), ranks.size());
+    std::vector<float> mine((m1 - m0) * T, 0.0f);
+    const std::vector<std::vector<SensorTap>> no_sensor_taps;  // confocal: each laser point's own
+    for (std::size_t k0 = m0; k0 < m1; k0 += batch) {
+        const std::size_t k1 = std::min(m1, k0 + batch);
+        const auto t0 = Clock::now();
+        std::vector<WallPoint> points;
+        std::vector<float*> rows;
+        for (std::size_t k = k0; k < k1; ++k) {
+            points.push_back(p.points.laser[marched[k]]);
+            rows.push_back(mine.data() + (k - m0) * T);
+        }
+        const std::vector<std::vector<PatchView>> views = view_all(p, points, 0, points.size(), options.threads);
+        share.seconds_views += seconds_from(t0);
+        solve_batch(p, links, std::span<const std::size_t>(marched).subspan(k0, k1 - k0), rows, views, no_sensor_taps,
+                    options, result);
+        if (options.progress) options.progress("march", double(k1 - m0) / double(m1 - m0));
+    }
+    const std::vector<float> later = ranks.all_gather(std::span<const float>(mine));
+    TPRF_CHECK_EQ(later.size(), marched.size() * T);
+    const auto t1 = Clock::now();
+    parallel_for(last - first, {options.threads, 16, true}, [&](std::size_t k) {
+        const std::size_t l = first + k;
+        const auto [ia, wa] = bracket(as, int(l / std::size_t(g.nv)));
+        const auto [ib, wb] = bracket(bs, int(l % std::size_t(g.nv)));
+        float* out = result.H.data() + (p.first_pair(l) - p.pair_base) * T;
+        const std::size_t corner[4] = {ia * bs.size() + ib, (ia + 1) * bs.size() + ib, ia * bs.size() + ib + 1,
+                                       (ia + 1) * bs.size() + ib + 1};
+        const float weight[4] = {(1.0f - wa) * (1.0f - wb), wa * (1.0f - wb), (1.0f - wa) * wb, wa * wb};
+        for (int c = 0; c < 4; ++c) {
+            if (weight[c] == 0.0f) continue;  // (and the corner may lie beyond the last marched one)
+            const float* from = later.data() + corner[c] * T;
+            for (std::size_t t = 0; t < T; ++t) out[t] += weight[c] * from[t];
+        }
+    });
+    share.seconds_gather += seconds_from(t1);
+}
+
 // Laser points [first, last) into this rank's rows of H: views, the exact orders and, batch by batch,
-// the march. `sensor_views` and `taps_all`: the sensor side of an exhaustive capture.
-void compute_share(const CapturePlan& p, const LinkSet* links, std::size_t first, std::size_t last,
+// the march (or, with march_grid_step > 1, march_lattice after them). `sensor_views` and `taps_all`: the
+// sensor side of an exhaustive capture.
+void compute_share(const CapturePlan& p, const LinkSet* links, const RankGroup& ranks, std::size_t first, std::size_t last,
                    const std::vector<std::vector<PatchView>>& sensor_views,
                    const std::vector<std::vector<SensorTap>>& taps_all, const CaptureOptions& options,
                    CaptureResult& result, CaptureShare& share) {
@@ -430,9 +498,18 @@ void compute_share(const CapturePlan& p, const LinkSet* links, std::size_t first
                      [&](std::size_t k) { add_exact(p, l0 + k, laser_views[k], sensor_views, result.H); });
         for (std::size_t k = 0; k < l1 - l0 && p.confocal; ++k) share.view_pairs += laser_views[k].size();
         share.seconds_gather += seconds_from(t1);
-        if (p.solve) solve_batch(p, *links, l0, l1, laser_views, taps_all, options, result);
+        if (p.solve && p.capture.march_grid_step == 1) {
+            std::vector<std::size_t> lasers(l1 - l0);
+            std::vector<float*> rows(l1 - l0);
+            for (std::size_t k = 0; k < l1 - l0; ++k) {
+                lasers[k] = l0 + k;
+                rows[k] = result.H.data() + (p.first_pair(l0 + k) - p.pair_base) * std::size_t(p.T);
+            }
+            solve_batch(p, *links, lasers, rows, laser_views, taps_all, options, result);
+        }
         if (options.progress) options.progress("capture", double(l1 - first) / double(last - first));
     }
+    if (p.solve && p.capture.march_grid_step > 1) march_lattice(p, *links, ranks, first, last, options, result, share);
     share.marches = result.marches;
     share.link_bin_updates = result.link_bin_updates;
     share.seconds_solve = result.seconds_solve;
@@ -499,7 +576,7 @@ CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const
             for (std::size_t s = 0; s < p.sensors; ++s) taps_all.push_back(sensor_taps(p, s, sensor_views[s]));
         share.seconds_views += seconds_from(t0);
     }
-    compute_share(p, links, first, last, sensor_views, taps_all, options, result, share);
+    compute_share(p, links, ranks, first, last, sensor_views, taps_all, options, result, share);
     result.seconds_views = share.seconds_views;
     result.seconds_gather = share.seconds_gather;
     result.view_pairs = share.view_pairs;
@@ -514,6 +591,12 @@ bool capture_needs_links(const Scene& scene) {
 }
 
 bool render_needs_links(const Scene& scene) { return scene.camera || capture_needs_links(scene); }
+
+std::size_t marched_laser_points(const Capture& capture) {
+    const CaptureGrid& g = capture.laser_grid;
+    if (capture.march_grid_step <= 1) return g.size();
+    return lattice(g.nu, capture.march_grid_step).size() * lattice(g.nv, capture.march_grid_step).size();
+}
 
 TimeAxis march_time(const Scene& scene) {
     const int F = scene.capture ? scene.capture->march_bin_factor : 1;

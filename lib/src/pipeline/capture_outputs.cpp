@@ -146,6 +146,7 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
     record.solved = r.solved;
     record.batch = r.batch;
     record.march_bin_factor = scene.capture->march_bin_factor;
+    record.march_grid_step = scene.capture->march_grid_step;
     record.marches = r.marches;
     record.view_pairs = r.view_pairs;
     record.link_bin_updates = r.link_bin_updates;

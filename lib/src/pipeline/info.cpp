@@ -506,7 +506,7 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
         double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes + e.solver_bytes);
     const double room = limit > 0 ? double(limit) - held : INFINITY;
     const int batch = int(std::clamp(1.0 + std::floor(room / std::max(per_illumination, 1.0)), 1.0, double(kMaxBatch)));
-    const std::size_t lasers = scene.capture->laser_grid.size();
+    const std::size_t lasers = marched_laser_points(*scene.capture);
     e.capture_batch = batch;
     e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
     e.solver_bytes = to_size(fixed + batch * per_illumination);

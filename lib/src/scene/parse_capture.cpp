@@ -44,7 +44,7 @@ void parse_grids(const JsonNode& n, Capture& c) {
 
 Capture parse_capture(const JsonNode& n) {
     n.check_keys({"type", "laser", "sensor", "grid", "sensor_grid", "account_first_and_last_bounces", "max_bounces",
-                  "march_bin_factor"});
+                  "march_bin_factor", "march_grid_step"});
     Capture c;
     c.json_path = n.path;
     if (const auto type = n.find("type")) {
@@ -69,6 +69,7 @@ Capture parse_capture(const JsonNode& n) {
         if (c.max_bounces == -1) max_bounces->fail("must be >= 2, or null for every bounce");
     }
     if (const auto factor = n.find("march_bin_factor")) c.march_bin_factor = factor->integer();
+    if (const auto step = n.find("march_grid_step")) c.march_grid_step = step->integer();
     return c;
 }
 

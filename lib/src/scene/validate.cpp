@@ -380,6 +380,11 @@ void check_capture(const Capture& c, const At& at) {
     if (c.march_bin_factor < 1 || c.march_bin_factor > Capture::kMaxMarchBinFactor)
         at.key("march_bin_factor").fail("must be an integer in [1, " + std::to_string(Capture::kMaxMarchBinFactor) +
                                         "] (1: the march of orders 4 and up on the scene's bins)");
+    if (c.march_grid_step < 1 || c.march_grid_step > Capture::kMaxMarchGridStep)
+        at.key("march_grid_step").fail("must be an integer in [1, " + std::to_string(Capture::kMaxMarchGridStep) +
+                                       "] (1: the later bounces marched at every grid point)");
+    if (c.march_grid_step > 1 && exhaustive)
+        at.key("march_grid_step").fail("must be 1 for an exhaustive capture (it interpolates a confocal scan's points)");
 }
 
 void check_objects(const Scene& scene, const At& root) {

@@ -46,6 +46,7 @@ struct CaptureRecord {
     int batch = 0;                    ///< illuminations per march
     int marches = 0;
     int march_bin_factor = 1;         ///< capture.march_bin_factor: the march's bins per scene bin
+    int march_grid_step = 1;          ///< capture.march_grid_step: marched grid points, every S-th
     std::size_t view_pairs = 0;       ///< (wall point, patch) pairs seen
     std::uint64_t link_bin_updates = 0;
     double seconds_views = 0.0, seconds_solve = 0.0, seconds_gather = 0.0;  ///< rank 0's

@@ -82,4 +82,8 @@ bool render_needs_links(const Scene& scene);
 /// light of the last spreads back to the end of the scene's window (ceil(T / F) + 1).
 TimeAxis march_time(const Scene& scene);
 
+/// The laser points whose later bounces are marched: every one, or with march_grid_step S > 1 the
+/// lattice of every S-th grid point along each side and the last (the others are interpolated).
+std::size_t marched_laser_points(const Capture& capture);
+
 }  // namespace tprf

@@ -170,6 +170,10 @@ struct Capture {
     /// above 1, no camera (its links would be marched on the scene's bins). docs/capture.md.
     int march_bin_factor = 1;
     static constexpr int kMaxMarchBinFactor = 64;
+    /// Confocal only: the later bounces are marched at every S-th grid point along each side (and the
+    /// last), and interpolated bilinearly between them; >= 1, at most kMaxMarchGridStep. docs/capture.md.
+    int march_grid_step = 1;
+    static constexpr int kMaxMarchGridStep = 64;
     std::string json_path = "capture";     ///< for error messages
     /// The keys the grids came from ("grid" or "sensor_grid"), for error messages.
     std::string laser_grid_key = "grid";
