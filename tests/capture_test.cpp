@@ -204,7 +204,16 @@ TEST(Capture, ThirdBounceOfASmallPatchMatchesTheClosedForm) {
     }
 }
 
-// A hidden corner (the tilted plane and a wall standing on it), every bounce marched.
+// The relay wall and a hidden corner in front of it (a tilted plane and a wall standing on it).
+std::string corner_objects() {
+    const char* plane =
+        R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
+    const char* side =
+        R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
+    return std::string(kWall) + "," + plane + "," + side;
+}
+
+// The hidden corner scanned exhaustively, every bounce marched.
 std::string corner_scene(const std::string& extra_capture = "",
                          const std::string& time = R"({"bins": 150, "bin_width": 0.02})",
                          const std::string& links = R"({"method": "flat"})") {
@@ -212,11 +221,7 @@ std::string corner_scene(const std::string& extra_capture = "",
         "sensor": {"position": [0, -1.5, 0.3]},
         "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 3, "nv": 3})" +
                                 extra_capture + "}";
-    const char* plane =
-        R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
-    const char* side =
-        R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
-    return scene_text(std::string(kWall) + "," + plane + "," + side, capture, time, 0.1, links);
+    return scene_text(corner_objects(), capture, time, 0.1, links);
 }
 
 // Helmholtz reciprocity: with the laser and the sensor at one position and one grid, H[l, s] = H[s, l] at
@@ -339,14 +344,9 @@ TEST(Capture, AMarchedLatticeGivesItsPointsTheirOwnLightAndTheOthersABlend) {
     const std::string confocal = R"({"type": "confocal", "laser": {"position": [0, -1.5, 0.3]},
         "sensor": {"position": [0, -1.5, 0.3]},
         "grid": {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": 7, "nv": 6})";
-    const char* plane =
-        R"({"type": "rectangle", "origin": [-0.5, -0.5, 0.5], "u": [0, 1, 0], "v": [1, 0, 0.2], "albedo": 0.6})";
-    const char* side =
-        R"({"type": "rectangle", "origin": [-0.5, 0.5, 0.1], "u": [1, 0, 0], "v": [0, 0, 0.5], "albedo": 0.7})";
-    const std::string objects = std::string(kWall) + "," + plane + "," + side;
     const std::string time = R"({"bins": 150, "bin_width": 0.02})";
     const auto run = [&](const std::string& extra) {
-        return Built(scene_text(objects, confocal + extra + "}", time, 0.1)).capture();
+        return Built(scene_text(corner_objects(), confocal + extra + "}", time, 0.1)).capture();
     };
     const CaptureResult first3 = run(R"(, "max_bounces": 3)"), full = run(""), blend = run(R"(, "march_grid_step": 3)");
     const std::size_t T = 150, nv = 6;

@@ -47,9 +47,9 @@ struct CapturePlan {
     std::size_t pair_base = 0;     // the first pair of this rank's rows of H (0: one rank)
     int T = 0;
     double start = 0.0, inv_bin = 0.0;
-    // The march's axis (march_time): bins `factor` times wider than the scene's, from the same start.
+    // The march's axis (march_time): bins capture.march_bin_factor times wider than the scene's, from
+    // the same start.
     TimeAxis march{};
-    int factor = 1;
     double march_inv_bin = 0.0;
     double laser_leg(std::size_t l) const { return capture.account_first_and_last_bounces ? points.laser[l].device_leg : 0.0; }
     double sensor_leg(std::size_t s) const {
@@ -301,7 +301,7 @@ private:
         // The march bin's light over scene bins [-(F - 1), F] about its path plus `whole`: the hat of
         // the march bin, h(m) = (F - |m|) / F^2, and the leg's split, (1 - f) h(m) + f h(m - 1). For F = 1
         // that is the split alone: 1 - f and f.
-        const int F = m_plan.factor;
+        const int F = m_plan.capture.march_bin_factor;
         const auto hat = [F](int m) { return std::abs(m) < F ? float(F - std::abs(m)) / float(F * F) : 0.0f; };
         float kernel[2 * Capture::kMaxMarchBinFactor];
         for (int m = 1 - F; m <= F; ++m) kernel[m + F - 1] = (1.0f - f) * hat(m) + f * hat(m - 1);
@@ -331,7 +331,6 @@ CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibil
     p.start = scene.time.start_m();
     p.inv_bin = 1.0 / scene.time.bin_width_m();
     p.march = march_time(scene);
-    p.factor = p.capture.march_bin_factor;
     p.march_inv_bin = 1.0 / p.march.bin_width_m();
     return p;
 }
@@ -364,7 +363,7 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std
     for (const auto& list : sensor_taps_all)
         for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
     // A march bin's hat reaches F - 1 scene bins before its path: one march bin more.
-    solver.first_bin = -bins_before_window(p.march, longest) - (p.factor > 1 ? 1 : 0);
+    solver.first_bin = -bins_before_window(p.march, longest) - (p.capture.march_bin_factor > 1 ? 1 : 0);
     const CaptureFilm film(p);
     double film_seconds = 0.0;
     const auto start = Clock::now();
@@ -454,6 +453,8 @@ void march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& 
             points.push_back(p.points.laser[marched[k]]);
             rows.push_back(mine.data() + (k - m0) * T);
         }
+        // Viewed again (compute_share viewed them for their exact orders): keeping every point's views
+        // until here would hold hundreds of MB on a large scan, viewing them again costs a few percent.
         const std::vector<std::vector<PatchView>> views = view_all(p, points, 0, points.size(), options.threads);
         share.seconds_views += seconds_from(t0);
         solve_batch(p, links, std::span<const std::size_t>(marched).subspan(k0, k1 - k0), rows, views, no_sensor_taps,
