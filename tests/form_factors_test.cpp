@@ -111,5 +111,34 @@ TEST(FormFactors, PerpendicularSquaresSharingAnEdgeMatchHowellC14) {
     EXPECT_NEAR(d / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 6e-4);
 }
 
+TEST(FormFactors, AFloorReachingBehindAWallIntegratesOnlyItsPartInFront) {
+    // Floor [-0.5, 1] x [0, 1] facing up; wall x = 0 facing +x. Points of the floor at x < 0 see the
+    // wall's back, which sends nothing, so F = (area in front / area) F_C14 = F_C14 / 1.5. The first
+    // cells of the rule straddle x = 0: a rule that integrates across the step misses the lit strip.
+    const auto floor = square(-0.5, 0, 1.5, 1, 0.0, true);
+    const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
+    const double expected = test::ff_perpendicular_rectangles(1, 1, 1) / 1.5;
+    const double d = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    // Measured 5.5e-7 (3.9% before the rule cut the floor at the wall's plane); the bound is the default
+    // rule's on the square alone (PerpendicularSquaresSharingAnEdgeMatchHowellC14).
+    EXPECT_NEAR(d / expected, 1.0, 6e-4);
+    // A floor wholly behind the wall: nothing.
+    const auto behind = square(-1, 0, 0.5, 1, 0.0, true);
+    EXPECT_EQ(polygon_form_factor(behind.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX()), 0.0);
+}
+
+TEST(FormFactors, TheTwoTrianglesOfASquareSendWhatTheSquareSends) {
+    // The floor square of the C-14 pair cut along its diagonal from the wall's corner: one triangle
+    // shares an edge with the wall, the other only a corner. A_1 F_1 + A_2 F_2 = A F_C14 (A = 1).
+    const std::array<Vec3, 3> edge = {Vec3(0, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
+    const std::array<Vec3, 3> corner = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0)};
+    const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
+    const double f_edge = polygon_form_factor(edge.data(), 3, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    const double f_corner = polygon_form_factor(corner.data(), 3, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    EXPECT_GT(f_edge, f_corner);  // the triangle along the wall sees more of it
+    // Measured 5.5e-7 off; the bound is the default rule's on the whole square.
+    EXPECT_NEAR((0.5 * f_edge + 0.5 * f_corner) / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 6e-4);
+}
+
 }  // namespace
 }  // namespace tprf

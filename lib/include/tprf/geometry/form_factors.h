@@ -50,7 +50,9 @@ struct FormFactorQuadrature {
 
 /// Form factor F_ab from polygon a to polygon b (both convex, planar, CCW about their normals),
 /// without occlusion: (1 / A_a) integral over a of point_polygon_form_factor(x, n_a, b).
-/// Adaptive subdivision of a until each cell's estimate is stable.
+/// Over the part of a in front of b's plane (the rest sees b's back), by adaptive subdivision until
+/// each cell's estimate is stable: quad cells by the centroid rule, triangle cells (a triangle, or
+/// the fan of a cut polygon) by the three-point rule of degree 2, which stops two levels earlier.
 double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
                            std::size_t b_count, const Vec3& b_normal,
                            const FormFactorQuadrature& quadrature = {});
