@@ -6,7 +6,7 @@ cost.
 usage: /usr/bin/python3 bench/accuracy_vs_flat.py [--scene meshes/cornell-box.json] [--max-edge 0.05]
            [--tolerances 0.01,0.003,0.001,0.0003] [--bins N] [--bin-width W] [--size N] [--spp N]
            [--rebin 4] [--lit 1e-3] [--threads N] [--tprf build/bin/tprf] [--out bench/out] [--name NAME]
-           [--reference-method flat] [--method hierarchical]
+           [--reference-method flat] [--method hierarchical] [--reference-dir DIR]
 
 Metrics of each render H against the flat render F (transient.npy (H, W, T, 3), steady.npy (H, W, 3)):
   transient  per pixel, the relative L1 of its time profile after summing every --rebin consecutive bins
@@ -21,6 +21,9 @@ Writes OUT/NAME.csv, OUT/NAME.json and OUT/NAME.png (transient and steady error 
 seconds, log-log; the flat render's cost as a dashed line). NAME defaults to accuracy_<scene>_<max_edge>.
 --method and --reference-method (flat, hierarchical or scene: as the scene file says) exist so that the
 script itself can be tested on a build without hierarchical links (e.g. --method flat: every error 0).
+--reference-dir keeps the reference render in DIR, and reuses it when DIR already holds one of the same
+scene (DIR/scene.json; any other scene is refused): two builds can then be set against one flat render
+(the statue's takes 8 minutes and 14 GB). The reference is whatever build rendered it first.
 """
 
 import argparse
@@ -46,6 +49,7 @@ def parse_args():
     p.add_argument("--tolerances", default="0.01,0.003,0.001,0.0003")
     p.add_argument("--method", choices=["hierarchical", "flat", "scene"], default="hierarchical")
     p.add_argument("--reference-method", choices=["hierarchical", "flat", "scene"], default="flat")
+    p.add_argument("--reference-dir", default=None, help="keep the reference render here; reuse it if present")
     p.add_argument("--bins", type=int, default=None)
     p.add_argument("--bin-width", type=float, default=None)
     p.add_argument("--size", type=int, default=None, help="camera width and height")
@@ -127,11 +131,24 @@ def main():
         scene = json.loads(json.dumps(base))
         tr.set_links(scene, args.reference_method, None)
         print(f"[accuracy] reference ({args.reference_method}) ...", file=sys.stderr, flush=True)
-        rec, ref_dir = tr.render(args.tprf, scene, scratch, "reference", args.threads, args.timeout, keep=True)
+        kept = pathlib.Path(args.reference_dir) if args.reference_dir else None
+        if kept and (kept / "record.json").exists():
+            if json.loads((kept / "scene.json").read_text()) != scene:
+                sys.exit(f"accuracy_vs_flat: {kept} holds the reference of another scene")
+            print(f"[accuracy]   reused from {kept}", file=sys.stderr, flush=True)
+            rec, ref_dir = json.loads((kept / "record.json").read_text()), kept
+        else:
+            rec, ref_dir = tr.render(args.tprf, scene, scratch, "reference", args.threads, args.timeout, keep=True)
         ref = Reference(ref_dir, args.rebin, args.lit)
         ref.record = rec
         ref.title = f"{stem}, max_edge {edge}, {rec['patches']} patches, {rec['bins']} bins"
-        shutil.rmtree(ref_dir)
+        if kept and ref_dir != kept:
+            shutil.rmtree(kept, ignore_errors=True)
+            shutil.move(str(ref_dir), str(kept))
+            (kept / "scene.json").write_text(json.dumps(scene, indent=1))
+            (kept / "record.json").write_text(json.dumps(rec, indent=1))
+        elif not kept:
+            shutil.rmtree(ref_dir)
         for tol in tolerances:
             scene = json.loads(json.dumps(base))
             tr.set_links(scene, args.method, tol)

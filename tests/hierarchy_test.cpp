@@ -767,6 +767,61 @@ TEST(Hierarchy, TheTimingCriterionBringsEachPatchsProfileToTheFlatOne) {
     EXPECT_LE(b.steady, a.steady);
 }
 
+TEST(Hierarchy, APatchEndAddsNoTimingOffsetToALink) {
+    // A cluster link hands all the patches of a cluster end one delay kernel; a patch end gets one
+    // delay from its patch links just as well. So the timing criterion counts only the cluster ends'
+    // radii: a cluster far smaller than a bin needs no refinement for timing, whatever the size of the
+    // patch at the other end. Here a 1 mm ball of 320 triangles 15 cm above a floor of 5 cm squares
+    // (bins of 1 cm): the links between the squares and the ball's clusters are those made with the
+    // criterion off. (Counting the squares' 3.5 cm radii too, the near ones were refined to triangles.)
+    const Scene scene = parse_scene(R"({
+      "time": {"bins": 256, "bin_width": 0.01, "unit": "m"},
+      "lights": [{"type": "point", "position": [0.1, -0.1, 0.4], "intensity": 1.0}],
+      "objects": [
+        {"type": "rectangle", "origin": [-0.25, -0.25, 0], "u": [0.5, 0, 0], "v": [0, 0.5, 0], "albedo": 0.6},
+        {"type": "mesh", "file": "icosphere.obj", "albedo": 0.7,
+         "transform": {"scale": 0.001, "translate": [0.0, 0.0, 0.15]}}],
+      "patches": {"max_edge": 0.05}})",
+                                    std::filesystem::path(TPRF_SOURCE_DIR) / "meshes" / "ball.json");
+    const Prepared p = prepare(scene);
+    const auto links = [&](double time_bins) {
+        HierarchyOptions h;
+        h.tolerance = 0.01;
+        h.bin_width_m = scene.time.bin_width_m();
+        h.time_bins = time_bins;
+        return hierarchical_link_set(p.patches, *p.vis, LinkOptions{}, h);
+    };
+    // Node pairs between a square and a cluster of the ball's triangles, either way.
+    const auto square_cluster_pairs = [&](const LinkSet& set) {
+        const ClusterTree& t = set.tree;
+        const auto square = [&](std::uint32_t m) { return t.is_leaf(m) && p.patches.area[m] > 1e-3; };
+        const auto ball = [&](std::uint32_t m) {
+            if (t.is_leaf(m)) return false;
+            for (std::uint32_t k = t.first[m]; k < t.last[m]; ++k)
+                if (p.patches.area[t.leaf_order[k]] > 1e-3) return false;
+            return true;
+        };
+        std::set<std::pair<std::uint32_t, std::uint32_t>> pairs;
+        for (const NodePair& np : node_pairs(set))
+            if ((square(np.receiver) && ball(np.source)) || (ball(np.receiver) && square(np.source)))
+                pairs.insert(std::minmax(np.receiver, np.source));
+        return pairs;
+    };
+    const LinkSet on = links(4.0), off = links(0.0), f = flat_link_set(p.patches, *p.vis);
+    const auto with = square_cluster_pairs(on), without = square_cluster_pairs(off);
+    const AgainstFlat a = against_flat(p, on, f, scene.time);
+    MEASURED("patch ends: %zu patches, links %zu (criterion off %zu, flat %zu); square-cluster pairs %zu (off %zu); "
+             "profiles L1 %.4g, steady %.4g\n", p.patches.size(), on.links.size(), off.links.size(), f.links.size(),
+             with.size(), without.size(), a.profiles, a.steady);
+    // Measured: 2,079 pairs either way (1,900 with the squares' radii counted); profiles 1.0e-6 and
+    // steady 5.1e-7 from flat. The bounds are the issue's (1% transient, 0.5% steady).
+    EXPECT_GT(without.size(), 0u);
+    EXPECT_EQ(with.size(), without.size());
+    EXPECT_TRUE(with == without);
+    EXPECT_LT(a.profiles, 0.01);
+    EXPECT_LT(a.steady, 0.005);
+}
+
 // The form factor from patch j to patch i that the link set applies: every node pair (R, S) above
 // or at (i, j) hands i its F_RS (push), of which j's share is A_j / A_S (pull). N x N, receiver-major.
 std::vector<double> effective_form_factors(const LinkSet& set) {

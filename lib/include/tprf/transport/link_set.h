@@ -84,8 +84,9 @@ struct HierarchyOptions {
     int samples = 16;              ///< point pairs sampled per candidate cluster link
     int kernel_pieces = 4;         ///< most pieces of a cluster link's delay kernel
     /// Timing inside the nodes: a cluster link gives all its members one delay kernel, while a member's
-    /// own paths are offset by up to the two nodes' radii. When > 0 (with bin_width_m), a link whose
-    /// form factor times that offset in bins exceeds time_bins x tolerance is refined. 0: off.
+    /// own paths are offset by up to the radii of the link's cluster ends (a patch end adds nothing: its
+    /// patch links give it one delay too). When > 0 (with bin_width_m), a link whose form factor times
+    /// that offset in bins exceeds time_bins x tolerance is refined. 0: off.
     double time_bins = 0.0;
     /// Cluster links are kept only between nodes at least this many bins apart (when bin_width_m > 0);
     /// nearer pairs are refined, and the solver's blocks are this long. 0: four typical patch sizes
