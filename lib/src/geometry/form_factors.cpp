@@ -156,16 +156,7 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
     // that lie in that plane (a shared edge of perpendicular patches) are kept: they add nothing.
     double scale2 = 0.0;
     for (std::size_t k = 0; k < count; ++k) scale2 = std::max(scale2, (poly[k] - x).squaredNorm());
-    const double tolerance = 1e-12 * std::sqrt(scale2);
-    Clipped clipped;
-    for (std::size_t k = 0; k < count; ++k) {
-        const Vec3& p = poly[k];
-        const Vec3& q = poly[(k + 1) % count];
-        const double hp = n.dot(p - x), hq = n.dot(q - x);
-        const bool in_p = hp >= -tolerance, in_q = hq >= -tolerance;
-        if (in_p) clipped.v[clipped.count++] = p;
-        if (in_p != in_q) clipped.v[clipped.count++] = p + (hp / (hp - hq)) * (q - p);
-    }
+    const Clipped clipped = clip_to_front(poly, count, x, n, 1e-12 * std::sqrt(scale2));
     if (clipped.count < 3) return 0.0;
 
     // Lambert's contour integral. With the polygon counter-clockwise about a normal that faces x,
