@@ -210,7 +210,7 @@ void check_tree(const PatchSet& patches, const ClusterTree& t) {
         // Members: centroid within the sphere, corners too (the sphere includes corners), normal
         // within the cone; the centre is the members' area centroid.
         Vec3 centroid = Vec3::Zero();
-        double tight = 0.0;
+        double tight = 0.0, widest = 1.0;  // widest: the smallest normal . axis of a member
         for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k) {
             const std::uint32_t i = t.leaf_order[k];
             centroid += patches.area[i] * patches.centroid[i];
@@ -221,6 +221,12 @@ void check_tree(const PatchSet& patches, const ClusterTree& t) {
                 EXPECT_LE(r, t.radius[c] + 1e-9) << "cluster " << c << " patch " << i;
             }
             EXPECT_GE(patches.normal[i].dot(t.cone_axis[c]), t.cone_cos[c] - 1e-9) << "cluster " << c << " patch " << i;
+            widest = std::min(widest, patches.normal[i].dot(t.cone_axis[c]));
+        }
+        // The cone is as narrow as its members allow: a looser one (the union of the children's
+        // cones was) makes the oracle treat clusters that all face a node as facing away.
+        if (t.cone_cos[c] > -1.0) {
+            EXPECT_NEAR(t.cone_cos[c], widest, 1e-12) << "cluster " << c;
         }
         EXPECT_LT((centroid / t.area[c] - t.centre[c]).norm(), 1e-9) << "cluster " << c;
         EXPECT_NEAR(t.cone_axis[c].norm(), 1.0, 1e-9);

@@ -157,11 +157,25 @@ void tighten(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
     t.radius[c] = std::sqrt(r2);
 }
 
+// Cluster c's cone from its patches' normals: the widest angle between the axis and a normal. The
+// union of the children's cones (merge) is wider at every level up, and a loose cone makes the oracle
+// take clusters whose patches all face a node for clusters with some facing away (its facing rule).
+void narrow_cone(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
+    if (t.cone_cos[c] <= -1.0) return;  // no axis: open
+    double lowest = 1.0;
+    for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k)
+        lowest = std::min(lowest, t.cone_axis[c].dot(patches.normal[t.leaf_order[k]]));
+    t.cone_cos[c] = std::max(lowest, -1.0);
+}
+
 void finish(const PatchSet& patches, ClusterTree& t) {
     for (std::uint32_t i = 0; i < t.leaves; ++i) set_leaf(patches, t, i);
     // Preorder ids: every child has a larger id than its parent, so a reverse sweep is bottom-up.
     for (std::size_t c = t.nodes(); c-- > t.leaves;) merge(t, std::uint32_t(c));
-    for (std::size_t c = t.leaves; c < t.nodes(); ++c) tighten(patches, t, std::uint32_t(c));
+    for (std::size_t c = t.leaves; c < t.nodes(); ++c) {
+        tighten(patches, t, std::uint32_t(c));
+        narrow_cone(patches, t, std::uint32_t(c));
+    }
     t.area_prefix.assign(t.leaves + 1, 0.0);
     for (std::size_t k = 0; k < t.leaves; ++k) t.area_prefix[k + 1] = t.area_prefix[k] + t.area[t.leaf_order[k]];
 }
