@@ -19,29 +19,18 @@ void set_leaf(const PatchSet& patches, ClusterTree& t, std::uint32_t i) {
     t.cone_cos[i] = 1.0;
 }
 
-// Angle of a cone, from its cosine (clamped).
-double cone_angle(double c) { return std::acos(std::clamp(c, -1.0, 1.0)); }
-
-// Cluster c's area, centre and cone from its two children: the area-weighted centre and a cone about
-// the area-weighted mean normal holding both children's cones (its sphere: tighten()).
+// Cluster c's area, centre and cone axis from its two children: the area-weighted centre and mean of
+// their axes (its sphere: tighten(); its cone's width: cone_width()). No axis (the cone is open) when
+// the children's normals cancel.
 void merge(ClusterTree& t, std::uint32_t c) {
     const auto [a, b] = t.children[c - t.leaves];
     t.area[c] = t.area[a] + t.area[b];
     t.centre[c] = (t.area[a] * t.centre[a] + t.area[b] * t.centre[b]) / t.area[c];
     const Vec3 sum = t.area[a] * t.cone_axis[a] + t.area[b] * t.cone_axis[b];
     const double len = sum.norm();
-    if (!(len > 1e-9 * t.area[c])) {
-        t.cone_axis[c] = t.cone_axis[a];
-        t.cone_cos[c] = -1.0;
-        return;
-    }
-    t.cone_axis[c] = sum / len;
-    double widest = 0.0;
-    for (std::uint32_t k : {a, b}) {
-        const double between = cone_angle(t.cone_axis[c].dot(t.cone_axis[k]));
-        widest = std::max(widest, between + cone_angle(t.cone_cos[k]));
-    }
-    t.cone_cos[c] = widest >= M_PI ? -1.0 : std::cos(widest);
+    const bool open = !(len > 1e-9 * t.area[c]) || t.cone_cos[a] <= -1.0 || t.cone_cos[b] <= -1.0;
+    t.cone_axis[c] = len > 1e-9 * t.area[c] ? Vec3(sum / len) : t.cone_axis[a];
+    t.cone_cos[c] = open ? -1.0 : 1.0;  // the width: cone_width(), once every axis is set
 }
 
 struct Range {
@@ -157,11 +146,11 @@ void tighten(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
     t.radius[c] = std::sqrt(r2);
 }
 
-// Cluster c's cone from its patches' normals: the widest angle between the axis and a normal. The
-// union of the children's cones (merge) is wider at every level up, and a loose cone makes the oracle
-// take clusters whose patches all face a node for clusters with some facing away (its facing rule).
-void narrow_cone(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
-    if (t.cone_cos[c] <= -1.0) return;  // no axis: open
+// Cluster c's cone width from its patches' normals: the widest angle between the axis and a normal.
+// (The union of the children's cones, used before, was wider at every level up, and a loose cone makes
+// the oracle take clusters whose patches all face a node for clusters with some facing away.)
+void cone_width(const PatchSet& patches, ClusterTree& t, std::uint32_t c) {
+    if (t.cone_cos[c] <= -1.0) return;  // open
     double lowest = 1.0;
     for (std::uint32_t k = t.first[c]; k < t.last[c]; ++k)
         lowest = std::min(lowest, t.cone_axis[c].dot(patches.normal[t.leaf_order[k]]));
@@ -174,7 +163,7 @@ void finish(const PatchSet& patches, ClusterTree& t) {
     for (std::size_t c = t.nodes(); c-- > t.leaves;) merge(t, std::uint32_t(c));
     for (std::size_t c = t.leaves; c < t.nodes(); ++c) {
         tighten(patches, t, std::uint32_t(c));
-        narrow_cone(patches, t, std::uint32_t(c));
+        cone_width(patches, t, std::uint32_t(c));
     }
     t.area_prefix.assign(t.leaves + 1, 0.0);
     for (std::size_t k = 0; k < t.leaves; ++k) t.area_prefix[k + 1] = t.area_prefix[k] + t.area[t.leaf_order[k]];

@@ -123,8 +123,12 @@ double refine(const Integrand& f, const Cell& cell, double estimate, double tole
 }
 
 // The part of polygon p (count corners) on the front side of the plane through `origin` with normal
-// `normal` (corners within `tolerance` of the plane kept): Sutherland-Hodgman.
-Clipped clip_to_front(const Vec3* p, std::size_t count, const Vec3& origin, const Vec3& normal, double tolerance) {
+// `normal`, by Sutherland-Hodgman. Corners within 1e-12 of the farthest corner's distance from
+// `origin` of the plane are kept (a shared edge of perpendicular patches lies in it).
+Clipped clip_to_front(const Vec3* p, std::size_t count, const Vec3& origin, const Vec3& normal) {
+    double scale2 = 0.0;
+    for (std::size_t k = 0; k < count; ++k) scale2 = std::max(scale2, (p[k] - origin).squaredNorm());
+    const double tolerance = 1e-12 * std::sqrt(scale2);
     Clipped out;
     for (std::size_t k = 0; k < count; ++k) {
         const Vec3& x = p[k];
@@ -152,11 +156,9 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
     // One-sided: from behind, the polygon's back is all one sees, and it sends nothing.
     if (poly_normal.dot(x - poly[0]) <= 0.0) return 0.0;
 
-    // Clip to x's upper hemisphere (Sutherland-Hodgman against the plane n . (y - x) = 0). Corners
-    // that lie in that plane (a shared edge of perpendicular patches) are kept: they add nothing.
-    double scale2 = 0.0;
-    for (std::size_t k = 0; k < count; ++k) scale2 = std::max(scale2, (poly[k] - x).squaredNorm());
-    const Clipped clipped = clip_to_front(poly, count, x, n, 1e-12 * std::sqrt(scale2));
+    // Clip to x's upper hemisphere (the plane n . (y - x) = 0). Corners that lie in that plane (a
+    // shared edge of perpendicular patches) are kept: they add nothing.
+    const Clipped clipped = clip_to_front(poly, count, x, n);
     if (clipped.count < 3) return 0.0;
 
     // Lambert's contour integral. With the polygon counter-clockwise about a normal that faces x,
@@ -213,9 +215,7 @@ double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_nor
     // where a crosses that plane. Integrated over the part in front only, so that no cell straddles
     // the step (on a mesh's near pairs, cells that did were estimated as wholly dark or wholly lit:
     // 1% of them were 100% off).
-    double scale2 = 0.0;
-    for (std::size_t k = 0; k < a_count; ++k) scale2 = std::max(scale2, (a[k] - b[0]).squaredNorm());
-    const Clipped front = clip_to_front(a, a_count, b[0], b_normal, 1e-12 * std::sqrt(scale2));
+    const Clipped front = clip_to_front(a, a_count, b[0], b_normal);
     if (front.count < 3) return 0.0;
     // The cells to refine: a itself when nothing was cut, else a fan of triangles over the front part.
     std::array<Cell, 7> roots;

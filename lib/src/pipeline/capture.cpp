@@ -51,6 +51,8 @@ struct CapturePlan {
     // the same start.
     TimeAxis march{};
     double march_inv_bin = 0.0;
+    // Laser point l's rows of this rank's H (T bins per sensor point it is paired with).
+    float* rows_of(std::vector<float>& H, std::size_t l) const { return H.data() + (first_pair(l) - pair_base) * std::size_t(T); }
     double laser_leg(std::size_t l) const { return capture.account_first_and_last_bounces ? points.laser[l].device_leg : 0.0; }
     double sensor_leg(std::size_t s) const {
         return capture.account_first_and_last_bounces ? points.sensor[s].device_leg : 0.0;
@@ -468,7 +470,7 @@ void march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& 
         const std::size_t l = first + k;
         const auto [ia, wa] = bracket(as, int(l / std::size_t(g.nv)));
         const auto [ib, wb] = bracket(bs, int(l % std::size_t(g.nv)));
-        float* out = result.H.data() + (p.first_pair(l) - p.pair_base) * T;
+        float* out = p.rows_of(result.H, l);
         const std::size_t corner[4] = {ia * bs.size() + ib, (ia + 1) * bs.size() + ib, ia * bs.size() + ib + 1,
                                        (ia + 1) * bs.size() + ib + 1};
         const float weight[4] = {(1.0f - wa) * (1.0f - wb), wa * (1.0f - wb), (1.0f - wa) * wb, wa * wb};
@@ -504,7 +506,7 @@ void compute_share(const CapturePlan& p, const LinkSet* links, const RankGroup& 
             std::vector<float*> rows(l1 - l0);
             for (std::size_t k = 0; k < l1 - l0; ++k) {
                 lasers[k] = l0 + k;
-                rows[k] = result.H.data() + (p.first_pair(l0 + k) - p.pair_base) * std::size_t(p.T);
+                rows[k] = p.rows_of(result.H, l0 + k);
             }
             solve_batch(p, *links, lasers, rows, laser_views, taps_all, options, result);
         }

@@ -28,9 +28,8 @@ struct ClusterTree {
     std::vector<Vec3> centre;                          ///< M: area centroid, metres
     std::vector<double> radius;                        ///< M: bounding sphere about `centre` (corners included)
     std::vector<Vec3> cone_axis;                       ///< M: unit axis of the normal cone
-    std::vector<double> cone_cos;                      ///< M: every member normal n has n . axis >= cone_cos
-                                                       ///< (the largest such bound, set by the widest member; -1: open)
-                                                       ///< (-1: any direction)
+    std::vector<double> cone_cos;                      ///< M: every member normal n has n . axis >= cone_cos,
+                                                       ///< the widest member's (-1: any direction)
     std::vector<std::array<std::uint32_t, 2>> children;///< M - N: children of cluster N + k
     std::vector<std::uint32_t> leaf_order;             ///< N: patches in tree order
     std::vector<std::uint32_t> first, last;            ///< M: node m covers leaf_order[first[m], last[m])
