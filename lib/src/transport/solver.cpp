@@ -39,11 +39,13 @@ public:
                    std::vector<float>(std::size_t(plan.recent_bins) * plan.n * std::size_t(plan.C), 0.0f)),
           m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
-          m_iterate(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
-          m_previous(plan.same_radius > 0.0 ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0),
           m_same(plan.same_bin() ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0, 0.0f),
           m_out_total(plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3),
-          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {}
+          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {
+        if (plan.same_bin())
+            for (int k = 0; k < plan.sweep_buffers(); ++k)
+                m_sweep[k].assign(std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C), 0.0f);
+    }
 
     // Step 1 (in a region): per receiver, the block's emission and, for every window that starts at
     // this block, each of its links as one contiguous multiply-add over the window, reading history
@@ -66,7 +68,7 @@ private:
     const float* recent(int layer, std::size_t q, std::int64_t bin) const {
         return m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
     }
-    // The bin-by-bin state of the patch at position q (m_base, m_iterate, m_previous, m_same).
+    // The bin-by-bin state of the patch at position q (m_base, m_same).
     std::size_t state_at(int layer, std::size_t q) const {
         return (std::size_t(layer) * m_plan.n + q) * std::size_t(m_plan.C);
     }
@@ -91,22 +93,24 @@ private:
     template <int CT>
     void short_pass_lanes(std::int64_t b0);
     template <int CT>
-    void short_links_of(std::size_t q, std::int64_t b0, int o);
+    void short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed);
     // g += the short links (or the same-bin links), grey and tinted, of the patch at position q at `bin`,
     // from layer src.
     template <int CT>
     void add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const;
+    // g += the same-bin links of the system's row r from layer src of the iterate `x` (SolvePlan::sweep_at).
     template <int CT>
-    void add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const;
+    void add_same_links(const float* x, int src, std::size_t r, float* g) const;
     void push_node(std::uint32_t i, std::int64_t b0);
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
     template <int CT>
-    bool jacobi_sweep(std::int64_t bin, int iteration);
+    bool jacobi_sweep(int iteration);
     template <int CT>
-    void sweep_patch(std::size_t q, std::int64_t bin, bool extrapolate, float omega, float* change, float* largest);
-    bool sweeps_converged() const;
+    void sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega, float* change,
+                   float* largest);
+    bool sweeps_converged(int parity) const;
     void block_totals(std::size_t i, std::int64_t lo, int count);
     void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
 
@@ -117,12 +121,18 @@ private:
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
     std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x N x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
-    // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the sweep's new
-    // values, the iterate before the current one (Chebyshev), the last bin's same-bin share.
-    std::vector<float> m_base, m_iterate, m_previous, m_same;
+    // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the last bin's
+    // same-bin share.
+    std::vector<float> m_base, m_same;
+    // The same-bin system's iterates, L x rows x C (SolvePlan::sweep_at): sweep k reads buffer
+    // (k - 1) % B, writes k % B and with Chebyshev reads the one before from (k + 1) % B, B being
+    // SolvePlan::sweep_buffers. Sweep 1 starts from buffer 0, filled as each bin's values are made.
+    std::vector<float> m_sweep[3];
     std::vector<float> m_out_total, m_out_terms;
-    // The Jacobi sweep's max-reductions per lane: the largest change and the largest value.
-    float m_change[kMaxLanes] = {}, m_largest[kMaxLanes] = {};
+    // The Jacobi sweep's max-reductions per lane, by the sweep's parity (a thread still reading one
+    // sweep's result while another resets the next's): the largest change and the largest value;
+    // and the bin's largest value outside the system (final before the sweeps).
+    float m_change[2][kMaxLanes] = {}, m_largest[2][kMaxLanes] = {}, m_fixed[kMaxLanes] = {};
     std::atomic<int> m_worst_iterations{0};
     std::uint64_t m_sweeps = 0;                 // written by one thread (omp single)
     bool m_stop = false;                        // a cancelled run, as read by one thread (omp single)
@@ -259,23 +269,23 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
 }
 
 template <int CT>
-void March::add_same_links(int src, std::size_t q, std::int64_t bin, float* g) const {
+void March::add_same_links(const float* x, int src, std::size_t r, float* g) const {
     const SolvePlan& p = m_plan;
     const int C = CT > 0 ? CT : p.C;
     float sum[CT > 0 ? CT : kMaxLanes];
     std::fill_n(sum, C, 0.0f);
-    for (std::uint64_t k = p.same_row[q]; k < p.same_row[q + 1]; ++k) {
-        const float* h = recent(src, p.same_links[k].source, bin);
+    for (std::uint64_t k = p.same_row[r]; k < p.same_row[r + 1]; ++k) {
+        const float* h = x + p.sweep_at(src, p.same_links[k].source);
         for (int c = 0; c < C; ++c) sum[c] += p.same_links[k].w * h[c];
     }
     if (!p.tinted_same.empty())
-        for (std::uint64_t k = p.tinted_same_row[q]; k < p.tinted_same_row[q + 1]; ++k)
-            add_tinted(sum, p.tinted_same[k].w, recent(src, p.tinted_same[k].source, bin), C, p.channels);
+        for (std::uint64_t k = p.tinted_same_row[r]; k < p.tinted_same_row[r + 1]; ++k)
+            add_tinted(sum, p.tinted_same[k].w, x + p.sweep_at(src, p.tinted_same[k].source), C, p.channels);
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
 template <int CT>
-void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
+void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) {
     const SolvePlan& p = m_plan;
     const int C = CT > 0 ? CT : p.C;
     const std::int64_t bin = b0 + o;
@@ -300,6 +310,12 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o) {
             // the sweeps take longest, so they start nearer their fixed point.
             const float* last = m_same.data() + state_at(l, q);
             for (int c = 0; c < C; ++c) b[c] += last[c];
+            // The sweeps start from these values; outside the system they are final.
+            const std::int32_t r = p.sweep_row_of[q];
+            if (r >= 0)
+                std::copy_n(b, C, m_sweep[0].data() + p.sweep_at(l, std::size_t(r)));
+            else
+                for (int c = 0; c < C; ++c) fixed[c] = std::max(fixed[c], std::abs(b[c]));
         }
         store_recent(l, q, bin, b, C);
     }
@@ -378,61 +394,56 @@ void March::pull_block(std::int64_t b0) {
 // x_{k+1} = omega_{k+1} (J(x_k) - x_{k-1}) + x_{k-1}, which has the same fixed point and, for a
 // spectrum in [-rho, rho], converges at rho / (1 + sqrt(1 - rho^2)) per sweep instead of rho.
 template <int CT>
-bool March::jacobi_sweep(std::int64_t bin, int iteration) {
+bool March::jacobi_sweep(int iteration) {
     const SolvePlan& p = m_plan;
     const int C = CT > 0 ? CT : p.C;
     const bool extrapolate = p.same_radius > 0.0 && iteration > 1;
     const float omega = extrapolate ? p.omega[std::size_t(std::min(iteration, kMaxSweeps) - 1)] : 1.0f;
+    const int B = p.sweep_buffers(), parity = iteration & 1;
+    const float* x = m_sweep[(iteration - 1) % B].data();
+    float* next = m_sweep[iteration % B].data();
+    const float* before = extrapolate ? m_sweep[(iteration + 1) % B].data() : nullptr;
 #pragma omp single
     {
-        std::fill_n(m_change, C, 0.0f);
-        std::fill_n(m_largest, C, 0.0f);
+        std::fill_n(m_change[parity], C, 0.0f);
+        std::fill_n(m_largest[parity], C, 0.0f);
     }
     float change[CT > 0 ? CT : kMaxLanes], largest[CT > 0 ? CT : kMaxLanes];
     std::fill_n(change, C, 0.0f);
     std::fill_n(largest, C, 0.0f);
 #pragma omp for schedule(static) nowait
-    for (std::size_t q = 0; q < p.n; ++q) sweep_patch<CT>(q, bin, extrapolate, omega, change, largest);
+    for (std::size_t r = 0; r < p.sweep_rows.size(); ++r) sweep_row<CT>(r, x, next, before, omega, change, largest);
 #pragma omp critical(tprf_jacobi_reduction)
     for (int c = 0; c < C; ++c) {
-        m_change[c] = std::max(m_change[c], change[c]);
-        m_largest[c] = std::max(m_largest[c], largest[c]);
+        m_change[parity][c] = std::max(m_change[parity][c], change[c]);
+        m_largest[parity][c] = std::max(m_largest[parity][c], largest[c]);
     }
 #pragma omp barrier
-    // Read the shared result before the barrier that ends the next loop, so that the next sweep's
-    // reset cannot overtake a slow thread.
-    const bool converged = sweeps_converged();
-#pragma omp for schedule(static)
-    for (std::size_t q = 0; q < p.n; ++q)
-        for (int l = 0; l < p.L; ++l) {
-            if (p.same_radius > 0.0) std::copy_n(recent(l, q, bin), C, m_previous.data() + state_at(l, q));
-            store_recent(l, q, bin, m_iterate.data() + state_at(l, q), C);
-        }
-    return converged;
+    return sweeps_converged(parity);
 }
 
-// The sweep's new values of the patch at position q (m_iterate), and per lane the largest change from
-// the current ones and the largest new value so far.
+// The sweep's new values of the system's row r (into `next`) from the iterate `x` (and with Chebyshev
+// the one before it, `before`), and per lane the largest change from x and the largest new value so far.
 template <int CT>
-void March::sweep_patch(std::size_t q, std::int64_t bin, bool extrapolate, float omega, float* change,
-                        float* largest) {
+void March::sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega,
+                      float* change, float* largest) {
     const SolvePlan& p = m_plan;
     const int C = CT > 0 ? CT : p.C;
+    const std::size_t q = p.sweep_rows[r];
     const float* albedo = p.albedo.data() + std::size_t(C) * q;
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         const float* keep = m_base.data() + state_at(l, q);
-        float* next = m_iterate.data() + state_at(l, q);
+        const std::size_t at = p.sweep_at(l, r);
         float g[CT > 0 ? CT : kMaxLanes];
         std::fill_n(g, C, 0.0f);
-        if (src >= 0) add_same_links<CT>(src, q, bin, g);
-        const float* now = recent(l, q, bin);
-        const float* before = extrapolate ? m_previous.data() + state_at(l, q) : nullptr;
+        if (src >= 0) add_same_links<CT>(x, src, r, g);
         for (int c = 0; c < C; ++c) {
-            next[c] = keep[c] + albedo[c] * g[c];
-            if (extrapolate) next[c] = before[c] + omega * (next[c] - before[c]);
-            change[c] = std::max(change[c], std::abs(next[c] - now[c]));
-            largest[c] = std::max(largest[c], std::abs(next[c]));
+            float v = keep[c] + albedo[c] * g[c];
+            if (before) v = before[at + std::size_t(c)] + omega * (v - before[at + std::size_t(c)]);
+            next[at + std::size_t(c)] = v;
+            change[c] = std::max(change[c], std::abs(v - x[at + std::size_t(c)]));
+            largest[c] = std::max(largest[c], std::abs(v));
         }
     }
 }
@@ -440,13 +451,13 @@ void March::sweep_patch(std::size_t q, std::int64_t bin, bool extrapolate, float
 // Whether every illumination's same-bin values have converged to float resolution: its largest change
 // at most 1e-7 of its largest value. Each illumination is judged on its own lanes, so that a faint one
 // sweeps as long as it would alone, however bright the others.
-bool March::sweeps_converged() const {
+bool March::sweeps_converged(int parity) const {
     const int channels = m_plan.channels;
     for (int k = 0; k < m_plan.K; ++k) {
         float change = 0.0f, largest = 0.0f;
         for (int c = k * channels; c < (k + 1) * channels; ++c) {
-            change = std::max(change, m_change[c]);
-            largest = std::max(largest, m_largest[c]);
+            change = std::max(change, m_change[parity][c]);
+            largest = std::max({largest, m_largest[parity][c], m_fixed[c]});
         }
         if (!(change <= 1e-7f * largest)) return false;
     }
@@ -455,16 +466,30 @@ bool March::sweeps_converged() const {
 
 template <int CT>
 void March::short_pass_lanes(std::int64_t b0) {
-    for (int o = 0; o < m_plan.bt; ++o) {
+    const SolvePlan& p = m_plan;
+    const bool same = p.same_bin();
+    for (int o = 0; o < p.bt; ++o) {
         // A cancelled run leaves the block here (solve_transient throws after the region): every
         // thread reads the one answer after the single's barrier, so all leave at the same bin.
 #pragma omp single
-        m_stop = cancel_requested();
+        {
+            m_stop = cancel_requested();
+            std::fill_n(m_fixed, p.C, 0.0f);
+        }
         if (m_stop) break;
-#pragma omp for schedule(static)
-        for (std::size_t q = 0; q < m_plan.n; ++q) short_links_of<CT>(q, b0, o);
-        for (int iteration = 1; iteration <= kMaxSweeps && m_plan.same_bin(); ++iteration) {
-            if (!jacobi_sweep<CT>(b0 + o, iteration)) continue;
+        float fixed[kMaxLanes];
+        std::fill_n(fixed, p.C, 0.0f);
+#pragma omp for schedule(static) nowait
+        for (std::size_t q = 0; q < p.n; ++q) short_links_of<CT>(q, b0, o, fixed);
+        if (same) {
+#pragma omp critical(tprf_jacobi_reduction)
+            for (int c = 0; c < p.C; ++c) m_fixed[c] = std::max(m_fixed[c], fixed[c]);
+        }
+#pragma omp barrier
+        int last = 0;  // the sweep whose iterate is the bin's value
+        for (int iteration = 1; iteration <= kMaxSweeps && same; ++iteration) {
+            last = iteration;
+            if (!jacobi_sweep<CT>(iteration)) continue;
 #pragma omp single
             {
                 if (iteration > m_worst_iterations.load()) m_worst_iterations.store(iteration);
@@ -472,13 +497,16 @@ void March::short_pass_lanes(std::int64_t b0) {
             }
             break;
         }
-        // The sweeps updated the recent bins only: the rings take the converged values, and the
-        // next bin's sweeps the same-bin share.
+        // The system's rows take the converged values into the recent bins, every patch its value
+        // into its ring, and the next bin's sweeps the same-bin share.
+        const float* converged = same ? m_sweep[last % p.sweep_buffers()].data() : nullptr;
 #pragma omp for schedule(static)
-        for (std::size_t q = 0; q < m_plan.n; ++q)
-            for (int l = 0; l < m_plan.L; ++l) {
+        for (std::size_t q = 0; q < p.n; ++q)
+            for (int l = 0; l < p.L; ++l) {
+                const std::int32_t r = same ? p.sweep_row_of[q] : -1;
+                if (r >= 0) store_recent(l, q, b0 + o, converged + p.sweep_at(l, std::size_t(r)), p.C);
                 const float* v = recent(l, q, b0 + o);
-                store(l, m_plan.order[q], b0 + o, v);
+                store(l, p.order[q], b0 + o, v);
                 if (m_same.empty()) continue;
                 const std::size_t at = state_at(l, q);
                 for (int c = 0; c < m_plan.C; ++c) m_same[at + std::size_t(c)] = v[c] - m_base[at + std::size_t(c)];

@@ -322,6 +322,40 @@ void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
     }
 }
 
+// The same-bin system restricted to its rows (SolvePlan::sweep_rows): the patches that receive or send a
+// same-bin link, in position order, their link lists re-indexed by row.
+void compact_same_bin(SolvePlan& plan) {
+    plan.sweep_row_of.assign(plan.n, -1);
+    if (!plan.same_bin()) return;
+    std::vector<char> in(plan.n, 0);
+    for (std::size_t q = 0; q < plan.n; ++q) {
+        const bool receives = plan.same_row[q + 1] > plan.same_row[q] ||
+                              (!plan.tinted_same.empty() && plan.tinted_same_row[q + 1] > plan.tinted_same_row[q]);
+        in[q] = char(in[q] | receives);
+        for (std::uint64_t k = plan.same_row[q]; k < plan.same_row[q + 1]; ++k) in[plan.same_links[k].source] = 1;
+        if (!plan.tinted_same.empty())
+            for (std::uint64_t k = plan.tinted_same_row[q]; k < plan.tinted_same_row[q + 1]; ++k)
+                in[plan.tinted_same[k].source] = 1;
+    }
+    for (std::size_t q = 0; q < plan.n; ++q)
+        if (in[q]) {
+            plan.sweep_row_of[q] = std::int32_t(plan.sweep_rows.size());
+            plan.sweep_rows.push_back(std::uint32_t(q));
+        }
+    auto by_row = [&](std::vector<std::uint64_t>& row, auto& list) {
+        if (row.empty()) return;  // no tinted links
+        std::vector<std::uint64_t> compact(plan.sweep_rows.size() + 1, 0);
+        for (std::size_t r = 0; r < plan.sweep_rows.size(); ++r) {
+            const std::size_t q = plan.sweep_rows[r];
+            compact[r + 1] = compact[r] + (row[q + 1] - row[q]);
+        }
+        for (auto& l : list) l.source = std::uint32_t(plan.sweep_row_of[l.source]);
+        row = std::move(compact);  // rows keep their links in position order: the lists stay as they are
+    };
+    by_row(plan.same_row, plan.same_links);
+    by_row(plan.tinted_same_row, plan.tinted_same);
+}
+
 // Every node's ring of C lanes per bin: patches' rings in leaf order (the bin-by-bin passes store them
 // in that order), then clusters'.
 void plan_rings(SolvePlan& plan) {
@@ -370,6 +404,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
     plan_sweeps(patches, plan);
+    compact_same_bin(plan);
     plan_rings(plan);
     plan.T = time.bins;
     plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
@@ -395,13 +430,15 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
 // Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
 std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
-    const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_iterate, m_previous, m_same
-    const std::size_t states = 2 + (p.same_radius > 0.0 ? 1 : 0) + (p.same_bin() ? 1 : 0);
+    const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_same
+    const std::size_t states = 1 + (p.same_bin() ? 1 : 0);
+    const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers()) * L * p.sweep_rows.size() * C : 0;
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
-                               L * std::size_t(p.recent_bins) * p.n * C + states * state +
+                               L * std::size_t(p.recent_bins) * p.n * C + states * state + sweeps +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
     return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
-           p.same_links.size() * sizeof(SameBinLink) + 2 * (p.n + 1) * sizeof(std::uint64_t) +
+           p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
+           p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
            p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() +
            p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
            p.tinted_same.size() * sizeof(TintedSameLink) +

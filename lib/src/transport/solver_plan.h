@@ -189,6 +189,17 @@ struct SolvePlan {
     std::vector<TintedLink> tinted_long, tinted_short;
     std::vector<TintedSameLink> tinted_same;
     bool same_bin() const { return !same_links.empty() || !tinted_same.empty(); }
+    // The same-bin system's rows: the patches that receive or send a same-bin link, by position (most
+    // of a scene's patches have none: their values are final before the sweeps). Once the plan is
+    // made, same_row and tinted_same_row are by row and the same-bin links name their source's row, so
+    // that the sweeps read and write compact iterates (L x rows x C).
+    std::vector<std::uint32_t> sweep_rows;   // row -> position
+    std::vector<std::int32_t> sweep_row_of;  // position -> row, or -1 outside the system
+    std::size_t sweep_at(int layer, std::size_t row) const {
+        return (std::size_t(layer) * sweep_rows.size() + row) * std::size_t(C);
+    }
+    // Iterates the sweeps rotate through: the current and the next, and with Chebyshev the one before.
+    int sweep_buffers() const { return same_radius > 0.0 ? 3 : 2; }
     // The bin-by-bin passes visit patches in the cluster tree's leaf order (near patches together)
     // and keep their state by position in it: short and same-bin links name their source's position.
     std::vector<std::uint32_t> order;     // position -> patch
