@@ -342,10 +342,14 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin)
             std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), m_plan.C, 0.0f);
+    // A patch's bins from the recent bins (by position, so a cluster's patches are together there).
+    auto value = [&](int l, std::uint32_t node, std::int64_t bin) {
+        return node < m_plan.n ? recent(l, m_plan.position[node], bin) : ring_at(l, node, bin);
+    };
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
-            const float* va = ring_at(l, a, bin);
-            const float* vb = ring_at(l, b, bin);
+            const float* va = value(l, a, bin);
+            const float* vb = value(l, b, bin);
             float v[kMaxLanes];
             for (int ch = 0; ch < m_plan.C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
             store(l, c, bin, v);
@@ -497,21 +501,27 @@ void March::short_pass_lanes(std::int64_t b0) {
             }
             break;
         }
-        // The system's rows take the converged values into the recent bins, every patch its value
-        // into its ring, and the next bin's sweeps the same-bin share.
-        const float* converged = same ? m_sweep[last % p.sweep_buffers()].data() : nullptr;
+        // The system's rows take the converged values into the recent bins, and the next bin's
+        // sweeps the same-bin share.
+        if (!same) continue;
+        const float* converged = m_sweep[last % p.sweep_buffers()].data();
 #pragma omp for schedule(static)
         for (std::size_t q = 0; q < p.n; ++q)
             for (int l = 0; l < p.L; ++l) {
-                const std::int32_t r = same ? p.sweep_row_of[q] : -1;
+                const std::int32_t r = p.sweep_row_of[q];
                 if (r >= 0) store_recent(l, q, b0 + o, converged + p.sweep_at(l, std::size_t(r)), p.C);
                 const float* v = recent(l, q, b0 + o);
-                store(l, p.order[q], b0 + o, v);
-                if (m_same.empty()) continue;
                 const std::size_t at = state_at(l, q);
-                for (int c = 0; c < m_plan.C; ++c) m_same[at + std::size_t(c)] = v[c] - m_base[at + std::size_t(c)];
+                for (int c = 0; c < p.C; ++c) m_same[at + std::size_t(c)] = v[c] - m_base[at + std::size_t(c)];
             }
     }
+    // The block's bins into every patch's ring at once: a patch's bins are together there (a cache
+    // line or two), its bins of one time far apart. Nothing reads a patch's ring at the block's bins
+    // before the pull; the bin-by-bin passes read the recent bins.
+#pragma omp for schedule(static)
+    for (std::size_t q = 0; q < p.n; ++q)
+        for (int l = 0; l < p.L; ++l)
+            for (std::int64_t bin = b0; bin < b0 + p.bt; ++bin) store(l, p.order[q], bin, recent(l, q, bin));
 }
 
 // Patch i's total and per-order terms for the bins [lo, lo + count) of the output block, every
