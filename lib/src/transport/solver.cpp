@@ -39,7 +39,8 @@ public:
                    std::vector<float>(std::size_t(plan.recent_bins) * plan.n * std::size_t(plan.C), 0.0f)),
           m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
-          m_same(plan.same_bin() ? std::size_t(plan.L) * plan.n * std::size_t(plan.C) : 0, 0.0f),
+          m_same(plan.same_bin() ? std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C) : 0, 0.0f),
+          m_same_before(m_same.size(), 0.0f),
           m_out_total(plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {
         if (plan.same_bin())
@@ -68,7 +69,7 @@ private:
     const float* recent(int layer, std::size_t q, std::int64_t bin) const {
         return m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
     }
-    // The bin-by-bin state of the patch at position q (m_base, m_same).
+    // The bin-by-bin state of the patch at position q (m_base).
     std::size_t state_at(int layer, std::size_t q) const {
         return (std::size_t(layer) * m_plan.n + q) * std::size_t(m_plan.C);
     }
@@ -123,7 +124,10 @@ private:
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
     // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the last bin's
     // same-bin share.
-    std::vector<float> m_base, m_same;
+    std::vector<float> m_base;
+    // L x rows x C (SolvePlan::sweep_at): the same-bin share (converged value less m_base) of the
+    // last bin and of the one before it, from which the next bin's sweeps start.
+    std::vector<float> m_same, m_same_before;
     // The same-bin system's iterates, L x rows x C (SolvePlan::sweep_at): sweep k reads buffer
     // (k - 1) % B, writes k % B and with Chebyshev reads the one before from (k + 1) % B, B being
     // SolvePlan::sweep_buffers. Sweep 1 starts from buffer 0, filled as each bin's values are made.
@@ -305,18 +309,19 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
         for (int c = 0; c < C; ++c) keep[c] = b[c];
-        if (!m_same.empty()) {
-            // The same-bin sweeps start from the last bin's same-bin share: profiles are smooth where
-            // the sweeps take longest, so they start nearer their fixed point.
-            const float* last = m_same.data() + state_at(l, q);
-            for (int c = 0; c < C; ++c) b[c] += last[c];
-            // The sweeps start from these values; outside the system they are final.
-            const std::int32_t r = p.sweep_row_of[q];
-            if (r >= 0)
-                std::copy_n(b, C, m_sweep[0].data() + p.sweep_at(l, std::size_t(r)));
-            else
-                for (int c = 0; c < C; ++c) fixed[c] = std::max(fixed[c], std::abs(b[c]));
+        const std::int32_t r = m_same.empty() ? -1 : p.sweep_row_of[q];
+        if (r >= 0) {
+            // The system's rows: the sweeps start from the same-bin share extrapolated from the last
+            // two bins (profiles are smooth where the sweeps take longest, so they start nearer their
+            // fixed point), and store the converged value.
+            const std::size_t s = p.sweep_at(l, std::size_t(r));
+            float* start = m_sweep[0].data() + s;
+            for (int c = 0; c < C; ++c) start[c] = b[c] + (2.0f * m_same[s + std::size_t(c)] - m_same_before[s + std::size_t(c)]);
+            continue;
         }
+        // Outside the system the value is final.
+        if (!m_same.empty())
+            for (int c = 0; c < C; ++c) fixed[c] = std::max(fixed[c], std::abs(b[c]));
         store_recent(l, q, bin, b, C);
     }
 }
@@ -506,13 +511,16 @@ void March::short_pass_lanes(std::int64_t b0) {
         if (!same) continue;
         const float* converged = m_sweep[last % p.sweep_buffers()].data();
 #pragma omp for schedule(static)
-        for (std::size_t q = 0; q < p.n; ++q)
+        for (std::size_t r = 0; r < p.sweep_rows.size(); ++r)
             for (int l = 0; l < p.L; ++l) {
-                const std::int32_t r = p.sweep_row_of[q];
-                if (r >= 0) store_recent(l, q, b0 + o, converged + p.sweep_at(l, std::size_t(r)), p.C);
-                const float* v = recent(l, q, b0 + o);
-                const std::size_t at = state_at(l, q);
-                for (int c = 0; c < p.C; ++c) m_same[at + std::size_t(c)] = v[c] - m_base[at + std::size_t(c)];
+                const std::size_t q = p.sweep_rows[r], s = p.sweep_at(l, r);
+                const float* v = converged + s;
+                store_recent(l, q, b0 + o, v, p.C);
+                const float* base = m_base.data() + state_at(l, q);
+                for (int c = 0; c < p.C; ++c) {
+                    m_same_before[s + std::size_t(c)] = m_same[s + std::size_t(c)];
+                    m_same[s + std::size_t(c)] = v[c] - base[c];
+                }
             }
     }
     // The block's bins into every patch's ring at once: a patch's bins are together there (a cache

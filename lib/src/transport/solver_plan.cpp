@@ -430,9 +430,10 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
 // Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
 std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
-    const std::size_t state = L * p.n * C;  // per patch and lane: m_base, m_same
-    const std::size_t states = 1 + (p.same_bin() ? 1 : 0);
-    const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers()) * L * p.sweep_rows.size() * C : 0;
+    const std::size_t state = L * p.n * C;  // per patch and lane: m_base
+    const std::size_t states = 1;
+    // Per row of the same-bin system: the iterates and the last two bins' shares.
+    const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers() + 2) * L * p.sweep_rows.size() * C : 0;
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
                                L * std::size_t(p.recent_bins) * p.n * C + states * state + sweeps +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
