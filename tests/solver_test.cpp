@@ -195,6 +195,36 @@ TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
     }
 }
 
+// Bins of 0.25 m put the links across the cube's edges (centroids 0.14 m apart) within one bin and
+// the others (0.32 m and more) later: with the linear delay (the nearest one rounds them to a bin),
+// the same-bin system holds the 96 squares along the edges only, and the brightest squares (the
+// floor's middle, under the light) lie outside it, where the sweeps' stopping rule has to take their
+// values from. The sweeps of each bin start from the last two bins' shares; wherever they start, the
+// time integral is the steady state, for one thread or two alike.
+TEST(Solver, ASameBinSystemOnPartOfTheSceneConvergesToTheSteadyState) {
+    Scene scene;
+    scene.max_edge = 0.2;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.3), Rgb::Constant(1.0)});
+    const Prepared p = prepare(scene);
+    const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
+    for (int block : {8, 32}) {  // windows of 8 to 32 bins, and one window
+        SolverOptions one, two;
+        one.threads = 1;
+        two.threads = 2;
+        one.block_bins = two.block_bins = block;
+        // Light loses at least half its energy per bounce of at most sqrt(3) m: after 60 m, below 1e-6.
+        const Profiles a = solve(p, time_axis(240, 0.25), one), b = solve(p, time_axis(240, 0.25), two);
+        EXPECT_GT(a.stats.max_jacobi_iterations, 1);
+        EXPECT_EQ(a.total, b.total);
+        for (std::size_t i = 0; i < p.patches.size(); ++i) {
+            double sum = 0.0;
+            for (int t = 0; t < a.bins; ++t) sum += a.at(i, t, 0);
+            EXPECT_NEAR(sum, steady[i][0], 1e-4 * steady[i][0]) << "patch " << i;
+        }
+    }
+}
+
 TEST(Solver, LinearDelaySplitsABinBetweenTheTwoItOverlaps) {
     // Two 1 cm squares facing each other 1.2345 m apart, bins of 0.1 m: the link's delay is 12.345
     // bins. A pulse at path 0 on the lower square fills its bin 0 = [0, 0.1 m); shifted by 1.2345 m it
