@@ -36,7 +36,7 @@ public:
           m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
           m_recent(std::size_t(plan.L),
-                   std::vector<float>(std::size_t(plan.recent_bins) * plan.n * std::size_t(plan.C), 0.0f)),
+                   std::vector<float>(std::size_t(plan.recent_bins) * plan.m * std::size_t(plan.C), 0.0f)),
           m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_same(plan.same_bin() ? std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C) : 0, 0.0f),
@@ -120,7 +120,7 @@ private:
     const SolvePlan& m_plan;
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
-    std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x N x C (SolvePlan::recent_at)
+    std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x M x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
     // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the last bin's
     // same-bin share.
@@ -188,12 +188,17 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
         const int src = p.layers.source[std::size_t(l)];
         if (src < 0) continue;
         const float* ring_src = m_rings[std::size_t(src)].data();
+        const RecentView recent_src{m_recent[std::size_t(src)].data(), p.m * std::size_t(p.C), p.recent_bins - 1};
         for (std::size_t i = i0; i < i1; ++i)
             for (int d = 0; d < count; ++d) cursor[i - i0][d] = p.segments[i * (S + 1) + std::size_t(due[d])];
         for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
             const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
             for (std::size_t i = i0; i < i1; ++i) {
                 float* a = m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
+                // The shortest window's links, from their own list, with the first source tile.
+                if (p.recent_kernel && s0 == 0)
+                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], p.inv_bin_f, p.delay, recent_src, b0,
+                                    p.C, a, p.acc_stride());
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
@@ -347,10 +352,8 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin)
             std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), m_plan.C, 0.0f);
-    // A patch's bins from the recent bins (by position, so a cluster's patches are together there).
-    auto value = [&](int l, std::uint32_t node, std::int64_t bin) {
-        return node < m_plan.n ? recent(l, m_plan.position[node], bin) : ring_at(l, node, bin);
-    };
+    // The children's bins from the recent bins (by node slot: a cluster's children are near there).
+    auto value = [&](int l, std::uint32_t node, std::int64_t bin) { return recent(l, m_plan.node_slot(node), bin); };
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
             const float* va = value(l, a, bin);
@@ -358,6 +361,7 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
             float v[kMaxLanes];
             for (int ch = 0; ch < m_plan.C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
             store(l, c, bin, v);
+            store_recent(l, c, bin, v, m_plan.C);
         }
 }
 

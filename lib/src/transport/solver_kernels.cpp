@@ -88,7 +88,66 @@ void gather_lanes(const Links& links, std::uint64_t& cursor, std::uint64_t end, 
         for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
 }
 
+// The shortest window's links from patches (SolvePlan::recent_kernel) of one receiver, [k0, k1) of the
+// near list, for CT lanes (0: C, counted at run time): as gather_long, each bin of a source's window read
+// from the recent bins instead of its ring.
+template <int CT, int BT>
+void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, float inv_bin, DelayMode mode,
+                   const RecentView& recent, std::int64_t b0, int lanes, float* acc, std::size_t stride) {
+    if (k0 == k1) return;
+    const std::uint32_t* __restrict position = near.position.data();
+    const float* __restrict distance = near.distance.data();
+    const float* __restrict ff = near.ff.data();
+    const int C = CT > 0 ? CT : lanes;
+    float local[(CT > 0 ? CT : kMaxLanes) * BT];
+    std::fill_n(local, C * BT, 0.0f);
+    auto at = [&](std::int64_t bin, std::uint32_t q) {
+        return recent.data + std::size_t(int(bin & recent.mask)) * recent.slice + std::size_t(q) * std::size_t(C);
+    };
+    for (std::uint64_t k = k0; k < k1; ++k) {
+        if (k + kAhead < k1 && BT <= 2) {  // the window's bins kAhead links on, each in its own bin's slice
+            const std::int64_t first = b0 - int(distance[k + kAhead] * inv_bin) - 1;
+            for (int b = 0; b <= BT; ++b) __builtin_prefetch(at(first + b, position[k + kAhead]));
+        }
+        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const std::int64_t first = b0 - t.lag - 1;
+        const float* __restrict h = at(first, position[k]);
+        for (int b = 0; b < BT; ++b) {
+            const float* __restrict next = at(first + b + 1, position[k]);
+            for (int c = 0; c < C; ++c) {  // two accumulations, as in gather_long
+                local[b * C + c] += t.w0 * next[c];
+                local[b * C + c] += t.w1 * h[c];
+            }
+            h = next;
+        }
+    }
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+}
+
+template <int BT>
+RecentKernel recent_for_lanes(int C) {
+    switch (C) {
+        case 1: return gather_recent<1, BT>;
+        case 3: return gather_recent<3, BT>;
+        case 8: return gather_recent<8, BT>;
+        case 16: return gather_recent<16, BT>;
+        default: return gather_recent<0, BT>;
+    }
+}
+
 }  // namespace
+
+RecentKernel recent_kernel_for(int C, int bins) {
+    switch (bins) {
+        case 1: return recent_for_lanes<1>(C);
+        case 2: return recent_for_lanes<2>(C);
+        case 4: return recent_for_lanes<4>(C);
+        case 8: return recent_for_lanes<8>(C);
+        case 16: return recent_for_lanes<16>(C);
+        default: return nullptr;
+    }
+}
 
 // The same for windows longer than kLongestWindow without a specialisation (long blocks): summed
 // straight into the accumulators, a bin's lanes at a time.

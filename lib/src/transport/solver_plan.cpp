@@ -356,6 +356,25 @@ void compact_same_bin(SolvePlan& plan) {
     by_row(plan.tinted_same_row, plan.tinted_same);
 }
 
+// The first window's links into SolvePlan::near, out of the segments.
+void copy_near_links(SolvePlan& plan) {
+    const Links& l = *plan.links;
+    const std::size_t S = std::size_t(plan.windows);
+    NearLinks& near = plan.near;
+    near.row.assign(plan.m + 1, 0);
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        std::uint64_t k = plan.segments[i * (S + 1)];
+        const std::uint64_t end = plan.segments[i * (S + 1) + 1];
+        for (; k < end; ++k) {
+            near.position.push_back(std::uint32_t(plan.node_slot(l.source[k])));
+            near.ff.push_back(l.ff[k]);
+            near.distance.push_back(l.distance[k]);
+        }
+        plan.segments[i * (S + 1)] = k;
+        near.row[i + 1] = near.position.size();
+    }
+}
+
 // Every node's ring of C lanes per bin: patches' rings in leaf order (the bin-by-bin passes store them
 // in that order), then clusters'.
 void plan_rings(SolvePlan& plan) {
@@ -409,6 +428,10 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.T = time.bins;
     plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
     for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
+    // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
+    // shortest window's links read.
+    if (plan.windows > 1 && plan.recent_bins >= 2 * plan.bt) plan.recent_kernel = recent_kernel_for(plan.C, plan.bt);
+    if (plan.recent_kernel) copy_near_links(plan);
     for (int s = 0; s < plan.windows; ++s) {
         plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s));
         if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s));
@@ -435,12 +458,12 @@ std::size_t working_bytes(const SolvePlan& p) {
     // Per row of the same-bin system: the iterates and the last two bins' shares.
     const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers() + 2) * L * p.sweep_rows.size() * C : 0;
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
-                               L * std::size_t(p.recent_bins) * p.n * C + states * state + sweeps +
+                               L * std::size_t(p.recent_bins) * p.m * C + states * state + sweeps +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
     return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
-           p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() +
+           p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() + p.near.bytes() +
            p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
            p.tinted_same.size() * sizeof(TintedSameLink) +
            (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);

@@ -107,6 +107,26 @@ struct RingSlot {
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, const RingSlot*, std::int64_t, float*, std::size_t);
+// Where the shortest window's links read their sources' history: the recent bins, bin-major by node slot
+// (SolvePlan::recent_at), `slice` floats a bin, `mask` = recent_bins - 1.
+struct RecentView {
+    const float* data;
+    std::size_t slice;
+    int mask;
+};
+// The shortest window's links, copied out of the rows into one contiguous list (a window's links are
+// short runs between the other windows' in a row): per receiver node, sources as node slots.
+struct NearLinks {
+    std::vector<std::uint64_t> row;  // m + 1
+    std::vector<std::uint32_t> position;  // the source's node slot
+    std::vector<float> ff, distance;
+    std::size_t bytes() const {
+        return row.size() * sizeof(std::uint64_t) + position.size() * sizeof(std::uint32_t) +
+               (ff.size() + distance.size()) * sizeof(float);
+    }
+};
+using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, float, DelayMode, const RecentView&,
+                              std::int64_t, int, float*, std::size_t);
 using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                             const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
 
@@ -226,6 +246,12 @@ struct SolvePlan {
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
+    // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
+    // recent bins hold then, instead of their rings: near links have near sources, whose values share
+    // cache lines there, where each source's ring is a line of its own (bench/RESULTS.md, 2026-11-27).
+    // Null with one window (blocks of the longest window).
+    RecentKernel recent_kernel = nullptr;
+    NearLinks near;  // the links it applies (taken out of `segments`: the first window is empty)
 
     std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
@@ -235,11 +261,12 @@ struct SolvePlan {
         return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
     }
     std::size_t acc_stride() const { return m * std::size_t(C); }
-    // The patches' radiosity of the last `recent_bins` bins, bin-major like the accumulators and by
-    // position: what the bin-by-bin passes read (a few bins of every patch, contiguous), besides the rings.
+    // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
+    // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
+    // shortest window read (a few bins of near nodes together), besides the rings.
     int recent_bins = 0;
-    std::size_t recent_at(std::size_t q, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * n + q) * std::size_t(C);
+    std::size_t recent_at(std::size_t slot, std::int64_t bin) const {
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * m + slot) * std::size_t(C);
     }
     int window_bins(int s) const { return bt << s; }
     // The window of a link `lag` bins long: -1 below the block.
@@ -266,6 +293,10 @@ bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const 
 GatherKernel pick_kernel(int C, int bins);
 /// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
 LaneKernel lane_kernel_for(int bins);
+/// The kernel of the shortest window's links from patches for C lanes and blocks of `bins` bins, reading
+/// the recent bins (specialised for the lane counts gather_long has, any other count at run time), or
+/// null for blocks of more than 16 bins.
+RecentKernel recent_kernel_for(int C, int bins);
 /// Any lane count and window length, summed straight into the accumulators.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
                      float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
