@@ -150,6 +150,27 @@ TEST(Solver, NothingArrivesBetweenTheDirectPulseAndTheFirstEcho) {
     EXPECT_GT(energy(4, 3.49, 4.0), 0.0);
 }
 
+// A closed grey cube (1 m, albedo 0.5) in squares of `max_edge`, lit by a unit point light.
+Prepared lit_cube(double max_edge, const Vec3& light) {
+    Scene scene;
+    scene.max_edge = max_edge;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.lights.push_back(PointLight{light, Rgb::Constant(1.0)});
+    return prepare(scene);
+}
+
+// Every patch's profile summed over the bins against the steady state, in `channels` channels: float
+// accumulation over ~40 bounces and the steady solve's 1e-8 make 1e-4 relative (plus `floor`, for
+// channels that carry almost nothing).
+void expect_integrals_are_steady(const Profiles& pr, const std::vector<Rgb>& steady, int channels, double floor = 0.0) {
+    for (std::size_t i = 0; i < steady.size(); ++i)
+        for (int c = 0; c < channels; ++c) {
+            double sum = 0.0;
+            for (int t = 0; t < pr.bins; ++t) sum += pr.at(i, t, c);
+            EXPECT_NEAR(sum, steady[i][c], 1e-4 * steady[i][c] + floor) << "patch " << i << " channel " << c;
+        }
+}
+
 TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
     Scene scene;
     scene.max_edge = 0.2;
@@ -164,34 +185,20 @@ TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
         options.delay = mode;
         const Profiles pr = solve(p, time_axis(800, 0.05), options);
         EXPECT_EQ(pr.stats.channels, 3);
-        for (std::size_t i = 0; i < p.patches.size(); ++i)
-            for (int c = 0; c < 3; ++c) {
-                double sum = 0.0;
-                for (int t = 0; t < pr.bins; ++t) sum += pr.at(i, t, c);
-                // Float accumulation over ~40 bounces and the steady solve's 1e-8: 1e-4 relative.
-                EXPECT_NEAR(sum, steady[i][c], 1e-4 * steady[i][c] + 1e-9) << "patch " << i << " channel " << c;
-            }
+        expect_integrals_are_steady(pr, steady, 3, 1e-9);
     }
 }
 
 TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
     // Bins of 10 m: every link of a 1 m cube has delay 0, so all the light lands in bin 0.
-    Scene scene;
-    scene.max_edge = 0.25;
-    test::add_closed_cube(scene, 1.0, 0.5);
-    scene.lights.push_back(PointLight{Vec3(0.3, 0.4, 0.5), Rgb::Constant(1.0)});
-    const Prepared p = prepare(scene);
+    const Prepared p = lit_cube(0.25, Vec3(0.3, 0.4, 0.5));
     const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
     for (DelayMode mode : {DelayMode::Linear, DelayMode::Nearest}) {
         SolverOptions options;
         options.delay = mode;
         const Profiles pr = solve(p, time_axis(4, 10.0), options);
         EXPECT_GT(pr.stats.max_jacobi_iterations, 1);
-        for (std::size_t i = 0; i < p.patches.size(); ++i) {
-            double sum = 0.0;
-            for (int t = 0; t < pr.bins; ++t) sum += pr.at(i, t, 0);
-            EXPECT_NEAR(sum, steady[i][0], 1e-4 * steady[i][0]) << "patch " << i;
-        }
+        expect_integrals_are_steady(pr, steady, 1);
     }
 }
 
@@ -202,11 +209,7 @@ TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
 // values from. The sweeps of each bin start from the last two bins' shares; wherever they start, the
 // time integral is the steady state, for one thread or two alike.
 TEST(Solver, ASameBinSystemOnPartOfTheSceneConvergesToTheSteadyState) {
-    Scene scene;
-    scene.max_edge = 0.2;
-    test::add_closed_cube(scene, 1.0, 0.5);
-    scene.lights.push_back(PointLight{Vec3(0.5, 0.5, 0.3), Rgb::Constant(1.0)});
-    const Prepared p = prepare(scene);
+    const Prepared p = lit_cube(0.2, Vec3(0.5, 0.5, 0.3));
     const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
     for (int block : {8, 32}) {  // windows of 8 to 32 bins, and one window
         SolverOptions one, two;
@@ -217,11 +220,7 @@ TEST(Solver, ASameBinSystemOnPartOfTheSceneConvergesToTheSteadyState) {
         const Profiles a = solve(p, time_axis(240, 0.25), one), b = solve(p, time_axis(240, 0.25), two);
         EXPECT_GT(a.stats.max_jacobi_iterations, 1);
         EXPECT_EQ(a.total, b.total);
-        for (std::size_t i = 0; i < p.patches.size(); ++i) {
-            double sum = 0.0;
-            for (int t = 0; t < a.bins; ++t) sum += a.at(i, t, 0);
-            EXPECT_NEAR(sum, steady[i][0], 1e-4 * steady[i][0]) << "patch " << i;
-        }
+        expect_integrals_are_steady(a, steady, 1);
     }
 }
 
