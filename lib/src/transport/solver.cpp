@@ -314,7 +314,8 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
         for (int c = 0; c < C; ++c) keep[c] = b[c];
-        const std::int32_t r = m_same.empty() ? -1 : p.sweep_row_of[q];
+        const bool same = !m_same.empty();
+        const std::int32_t r = same ? p.sweep_row_of[q] : -1;
         if (r >= 0) {
             // The system's rows: the sweeps start from the same-bin share extrapolated from the last
             // two bins (profiles are smooth where the sweeps take longest, so they start nearer their
@@ -325,7 +326,7 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
             continue;
         }
         // Outside the system the value is final.
-        if (!m_same.empty())
+        if (same)
             for (int c = 0; c < C; ++c) fixed[c] = std::max(fixed[c], std::abs(b[c]));
         store_recent(l, q, bin, b, C);
     }
@@ -529,7 +530,7 @@ void March::short_pass_lanes(std::int64_t b0) {
     }
     // The block's bins into every patch's ring at once: a patch's bins are together there (a cache
     // line or two), its bins of one time far apart. Nothing reads a patch's ring at the block's bins
-    // before the pull; the bin-by-bin passes read the recent bins.
+    // before the next block's long pass: the bin-by-bin passes and the pull read the recent bins.
 #pragma omp for schedule(static)
     for (std::size_t q = 0; q < p.n; ++q)
         for (int l = 0; l < p.L; ++l)

@@ -366,12 +366,12 @@ void copy_near_links(SolvePlan& plan) {
         std::uint64_t k = plan.segments[i * (S + 1)];
         const std::uint64_t end = plan.segments[i * (S + 1) + 1];
         for (; k < end; ++k) {
-            near.position.push_back(std::uint32_t(plan.node_slot(l.source[k])));
+            near.slot.push_back(std::uint32_t(plan.node_slot(l.source[k])));
             near.ff.push_back(l.ff[k]);
             near.distance.push_back(l.distance[k]);
         }
         plan.segments[i * (S + 1)] = k;
-        near.row[i + 1] = near.position.size();
+        near.row[i + 1] = near.slot.size();
     }
 }
 
@@ -454,11 +454,10 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
 std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
     const std::size_t state = L * p.n * C;  // per patch and lane: m_base
-    const std::size_t states = 1;
     // Per row of the same-bin system: the iterates and the last two bins' shares.
     const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers() + 2) * L * p.sweep_rows.size() * C : 0;
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
-                               L * std::size_t(p.recent_bins) * p.m * C + states * state + sweeps +
+                               L * std::size_t(p.recent_bins) * p.m * C + state + sweeps +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
     return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +

@@ -117,11 +117,11 @@ struct RecentView {
 // The shortest window's links, copied out of the rows into one contiguous list (a window's links are
 // short runs between the other windows' in a row): per receiver node, sources as node slots.
 struct NearLinks {
-    std::vector<std::uint64_t> row;  // m + 1
-    std::vector<std::uint32_t> position;  // the source's node slot
+    std::vector<std::uint64_t> row;   // m + 1
+    std::vector<std::uint32_t> slot;  // the source's node slot (SolvePlan::node_slot)
     std::vector<float> ff, distance;
     std::size_t bytes() const {
-        return row.size() * sizeof(std::uint64_t) + position.size() * sizeof(std::uint32_t) +
+        return row.size() * sizeof(std::uint64_t) + slot.size() * sizeof(std::uint32_t) +
                (ff.size() + distance.size()) * sizeof(float);
     }
 };
@@ -293,7 +293,7 @@ bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const 
 GatherKernel pick_kernel(int C, int bins);
 /// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
 LaneKernel lane_kernel_for(int bins);
-/// The kernel of the shortest window's links from patches for C lanes and blocks of `bins` bins, reading
+/// The kernel of the shortest window's links (SolvePlan::near) for C lanes and blocks of `bins` bins, reading
 /// the recent bins (specialised for the lane counts gather_long has, any other count at run time), or
 /// null for blocks of more than 16 bins.
 RecentKernel recent_kernel_for(int C, int bins);
