@@ -240,6 +240,34 @@ std::vector<SensorTap> sensor_taps(const CapturePlan& p, std::size_t s, const st
     return taps;
 }
 
+// A confocal point's last legs by patch, as a marched lattice moves its later light (march_grid_step):
+// a patch's taps added up (straight and through mirrors), `factor` the colour mean of their weights and
+// `leg` their factor-weighted mean leg, metres; at a marched point, `light` is the later light the point
+// received by way of the patch (summed over the bins).
+struct PatchLeg {
+    std::uint32_t patch = 0;
+    float factor = 0.0f;
+    float leg = 0.0f;
+    float light = 0.0f;
+};
+
+// `taps` in patch order (sensor_taps keeps the views' order); `received`, if not null, each tap's light.
+std::vector<PatchLeg> patch_legs(const std::vector<SensorTap>& taps, const double* received) {
+    std::vector<PatchLeg> out;
+    double factor = 0.0, moment = 0.0, light = 0.0;
+    for (std::size_t i = 0; i < taps.size(); ++i) {
+        const double w = mean3(taps[i].weight);
+        factor += w;
+        moment += w * taps[i].leg;
+        if (received) light += received[i];
+        if (i + 1 < taps.size() && taps[i + 1].patch == taps[i].patch) continue;
+        if (factor > 0.0 && (!received || light > 0.0))
+            out.push_back({taps[i].patch, float(factor), float(moment / factor), float(light)});
+        factor = moment = light = 0.0;
+    }
+    return out;
+}
+
 // The views of a set of wall points, in parallel.
 std::vector<std::vector<PatchView>> view_all(const CapturePlan& p, const std::vector<WallPoint>& points, std::size_t from,
                                              std::size_t to, int threads) {
@@ -271,8 +299,10 @@ public:
     explicit CaptureFilm(const CapturePlan& p) : m_plan(p) {}
 
     // `rows`: the laser point's row of H for its first sensor point (its others follow, T bins each).
+    // `received` (or null): the light each of the first sensor point's taps gave it, added up.
     void add(const SolveBlock& block, std::size_t lane, float* rows, const Illumination& pulses,
-             const std::vector<std::vector<SensorTap>>& taps_by_pair, std::vector<float>& indirect) const {
+             const std::vector<std::vector<SensorTap>>& taps_by_pair, std::vector<float>& indirect,
+             double* received) const {
         const std::size_t n = block.patches, bins = std::size_t(block.bins), K = std::size_t(block.illuminations);
         indirect.resize(n * bins * 3);
         for (std::size_t j = 0; j < n; ++j)
@@ -289,12 +319,16 @@ public:
                 for (int c = 0; c < 3; ++c) v[c] = std::max(0.0f, v[c] - float(pulse.energy[c]));
             }
         for (std::size_t k = 0; k < m_plan.pair_count(); ++k)
-            for (const SensorTap& tap : taps_by_pair[k])
-                add_tap(tap, rows + k * std::size_t(m_plan.T), block.first_bin, bins, indirect);
+            for (std::size_t i = 0; i < taps_by_pair[k].size(); ++i) {
+                const double light = add_tap(taps_by_pair[k][i], rows + k * std::size_t(m_plan.T), block.first_bin, bins, indirect);
+                if (k == 0 && received) received[i] += light;
+            }
     }
 
 private:
-    void add_tap(const SensorTap& tap, float* out, int first_bin, std::size_t bins, const std::vector<float>& indirect) const {
+    // Adds the tap's light to `out` and returns it (the kernel's taps sum to 1: what falls outside the
+    // window included).
+    double add_tap(const SensorTap& tap, float* out, int first_bin, std::size_t bins, const std::vector<float>& indirect) const {
         const double lag = tap.leg * m_plan.inv_bin;
         const bool nearest = m_plan.scene.solver.delay == DelayMode::Nearest;
         const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
@@ -308,15 +342,18 @@ private:
         float kernel[2 * Capture::kMaxMarchBinFactor];
         for (int m = 1 - F; m <= F; ++m) kernel[m + F - 1] = (1.0f - f) * hat(m) + f * hat(m - 1);
         const float* in = indirect.data() + std::size_t(tap.patch) * bins * 3;
+        double light = 0.0;
         for (std::size_t b = 0; b < bins; ++b) {
             const float v = w[0] * in[b * 3] + w[1] * in[b * 3 + 1] + w[2] * in[b * 3 + 2];
             if (v == 0.0f) continue;
+            light += double(v);
             const std::int64_t t0 = (first_bin + std::int64_t(b)) * F + whole;
             for (int m = 1 - F; m <= F; ++m) {
                 const std::int64_t t = t0 + m;
                 if (t >= 0 && t < m_plan.T) out[t] += kernel[m + F - 1] * v;
             }
         }
+        return light;
     }
 
     const CapturePlan& m_plan;
@@ -340,10 +377,11 @@ CapturePlan make_plan(const Scene& scene, const PatchSet& patches, const Visibil
 // Laser points `lasers` solved together: their spots' pulses march through the links in one batch, and
 // every block is filmed at their sensor points, laser point k's into rows[k] (rows of T bins, one per
 // sensor point it is paired with).
+// `legs` (confocal, or null): each laser point's last legs with the later light received by way of each.
 void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std::size_t> lasers,
                  std::span<float* const> rows, const std::vector<std::vector<PatchView>>& laser_views,
                  const std::vector<std::vector<SensorTap>>& sensor_taps_all, const CaptureOptions& options,
-                 CaptureResult& result) {
+                 CaptureResult& result, std::vector<std::vector<PatchLeg>>* legs = nullptr) {
     const std::size_t K = lasers.size();
     std::vector<Illumination> illuminations(K);
     std::vector<std::vector<std::vector<SensorTap>>> taps(K);
@@ -367,6 +405,8 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std
     // A march bin's hat reaches F - 1 scene bins before its path: one march bin more.
     solver.first_bin = -bins_before_window(p.march, longest) - (p.capture.march_bin_factor > 1 ? 1 : 0);
     const CaptureFilm film(p);
+    std::vector<std::vector<double>> received(legs ? K : 0);
+    for (std::size_t k = 0; k < received.size(); ++k) received[k].assign(taps[k].front().size(), 0.0);
     double film_seconds = 0.0;
     const auto start = Clock::now();
     const SolveStats stats = solve_transient(p.patches, links, std::span<const Illumination* const>(batch), p.march,
@@ -374,10 +414,16 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std
         const auto t0 = Clock::now();
         parallel_for(K, {options.threads, 1, true}, [&](std::size_t k) {
             thread_local std::vector<float> indirect;
-            film.add(block, k, rows[k], illuminations[k], p.confocal ? taps[k] : sensor_taps_all, indirect);
+            film.add(block, k, rows[k], illuminations[k], p.confocal ? taps[k] : sensor_taps_all, indirect,
+                     legs ? received[k].data() : nullptr);
         });
         film_seconds += seconds_from(t0);
     });
+    if (legs) {
+        TPRF_CHECK(p.confocal);
+        legs->resize(K);
+        for (std::size_t k = 0; k < K; ++k) (*legs)[k] = patch_legs(taps[k].front(), received[k].data());
+    }
     result.seconds_solve += seconds_from(start) - film_seconds;
     result.seconds_gather += film_seconds;
     result.link_bin_updates += stats.link_bin_updates;
@@ -430,21 +476,33 @@ std::pair<std::size_t, float> bracket(const std::vector<int>& at, int a) {
     return {k, float(a - at[k]) / float(at[k + 1] - at[k])};
 }
 
+// A confocal scan's later bounces marched at a lattice of its points (march_grid_step): the marched
+// coordinates along each side, every lattice point's later light (T bins each, in lattice order: a
+// major) and its last legs, lattice point k's legs[start[k], start[k + 1]).
+struct LatticeLight {
+    std::vector<int> as, bs;
+    std::vector<float> later;
+    std::vector<std::uint64_t> start;
+    std::vector<PatchLeg> legs;
+};
+
 // march_grid_step S > 1 (confocal): the later bounces marched at the lattice of every S-th grid point
 // along each side (and the last), the ranks sharing the lattice by whole batches as they share the
-// laser points and every rank receiving every lattice point's rows; then added to this rank's rows of
-// H, laser points [first, last), each interpolated bilinearly between the four lattice points around
-// it (a lattice point takes its own rows, weight 1).
-void march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& ranks, std::size_t first,
-                   std::size_t last, const CaptureOptions& options, CaptureResult& result, CaptureShare& share) {
+// laser points, and every rank receiving all of it.
+LatticeLight march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& ranks, std::size_t batch,
+                           const CaptureOptions& options, CaptureResult& result, CaptureShare& share) {
     const CaptureGrid& g = p.capture.laser_grid;
-    const std::vector<int> as = lattice(g.nu, p.capture.march_grid_step), bs = lattice(g.nv, p.capture.march_grid_step);
+    LatticeLight out;
+    out.as = lattice(g.nu, p.capture.march_grid_step);
+    out.bs = lattice(g.nv, p.capture.march_grid_step);
     std::vector<std::size_t> marched;
-    for (int a : as)
-        for (int b : bs) marched.push_back(std::size_t(a) * std::size_t(g.nv) + std::size_t(b));
-    const std::size_t T = std::size_t(p.T), batch = std::size_t(result.batch);
+    for (int a : out.as)
+        for (int b : out.bs) marched.push_back(std::size_t(a) * std::size_t(g.nv) + std::size_t(b));
+    const std::size_t T = std::size_t(p.T);
     const auto [m0, m1] = share_of(marched.size(), batch, ranks.rank(), ranks.size());
     std::vector<float> mine((m1 - m0) * T, 0.0f);
+    std::vector<std::uint64_t> counts;
+    std::vector<PatchLeg> mine_legs;
     const std::vector<std::vector<SensorTap>> no_sensor_taps;  // confocal: each laser point's own
     for (std::size_t k0 = m0; k0 < m1; k0 += batch) {
         const std::size_t k1 = std::min(m1, k0 + batch);
@@ -455,53 +513,109 @@ void march_lattice(const CapturePlan& p, const LinkSet& links, const RankGroup& 
             points.push_back(p.points.laser[marched[k]]);
             rows.push_back(mine.data() + (k - m0) * T);
         }
-        // Viewed again (compute_share viewed them for their exact orders): keeping every point's views
-        // until here would hold hundreds of MB on a large scan, viewing them again costs a few percent.
+        // Viewed again when the scan comes to them: keeping every point's views from here would hold
+        // hundreds of MB on a large scan, viewing them again costs a few percent.
         const std::vector<std::vector<PatchView>> views = view_all(p, points, 0, points.size(), options.threads);
         share.seconds_views += seconds_from(t0);
+        std::vector<std::vector<PatchLeg>> legs;
         solve_batch(p, links, std::span<const std::size_t>(marched).subspan(k0, k1 - k0), rows, views, no_sensor_taps,
-                    options, result);
+                    options, result, &legs);
+        for (const auto& list : legs) {
+            counts.push_back(list.size());
+            mine_legs.insert(mine_legs.end(), list.begin(), list.end());
+        }
         if (options.progress) options.progress("march", double(k1 - m0) / double(m1 - m0));
     }
-    const std::vector<float> later = ranks.all_gather(std::span<const float>(mine));
-    TPRF_CHECK_EQ(later.size(), marched.size() * T);
-    const auto t1 = Clock::now();
-    parallel_for(last - first, {options.threads, 16, true}, [&](std::size_t k) {
-        const std::size_t l = first + k;
-        const auto [ia, wa] = bracket(as, int(l / std::size_t(g.nv)));
-        const auto [ib, wb] = bracket(bs, int(l % std::size_t(g.nv)));
-        float* out = p.rows_of(result.H, l);
-        const std::size_t corner[4] = {ia * bs.size() + ib, (ia + 1) * bs.size() + ib, ia * bs.size() + ib + 1,
-                                       (ia + 1) * bs.size() + ib + 1};
-        const float weight[4] = {(1.0f - wa) * (1.0f - wb), wa * (1.0f - wb), (1.0f - wa) * wb, wa * wb};
-        for (int c = 0; c < 4; ++c) {
-            if (weight[c] == 0.0f) continue;  // (and the corner may lie beyond the last marched one)
-            const float* from = later.data() + corner[c] * T;
-            for (std::size_t t = 0; t < T; ++t) out[t] += weight[c] * from[t];
+    out.later = ranks.all_gather(std::span<const float>(mine));
+    out.legs = ranks.all_gather(std::span<const PatchLeg>(mine_legs));
+    const std::vector<std::uint64_t> all_counts = ranks.all_gather(std::span<const std::uint64_t>(counts));
+    TPRF_CHECK_EQ(out.later.size(), marched.size() * T);
+    TPRF_CHECK_EQ(all_counts.size(), marched.size());
+    out.start.assign(marched.size() + 1, 0);
+    for (std::size_t k = 0; k < marched.size(); ++k) out.start[k + 1] = out.start[k] + all_counts[k];
+    TPRF_CHECK_EQ(out.start.back(), out.legs.size());
+    return out;
+}
+
+// Laser point l's later light from the lattice (march_grid_step), added to its row of H: the later
+// light of the (up to) four lattice points around it, each moved to l and the four blended bilinearly.
+// A later path leaves the point for a patch i and comes back from a patch j; only those two legs depend
+// on the point. So a lattice point q's light moves to l by the change of its last legs, weighted as q
+// received its later light from each patch, and the first legs change likewise (the scan is confocal:
+// the first legs' light is the last legs' by reciprocity): its paths lengthen by twice the change of
+// the mean last leg (less the sensor's device leg, plus the laser's), and its light scales by the square
+// of the change of the last legs' factors. With the patches' light at q fixed this is exact to first
+// order in the step from q to l. A lattice point takes its own light (weight 1, moved by nothing).
+void add_moved(const CapturePlan& p, const LatticeLight& lattice_light, std::size_t l, const std::vector<PatchLeg>& here,
+               float* out) {
+    const CaptureGrid& g = p.capture.laser_grid;
+    const auto [ia, wa] = bracket(lattice_light.as, int(l / std::size_t(g.nv)));
+    const auto [ib, wb] = bracket(lattice_light.bs, int(l % std::size_t(g.nv)));
+    const std::size_t nb = lattice_light.bs.size(), T = std::size_t(p.T);
+    const std::size_t corner[4] = {ia * nb + ib, (ia + 1) * nb + ib, ia * nb + ib + 1, (ia + 1) * nb + ib + 1};
+    const double weight[4] = {(1.0 - wa) * (1.0 - wb), wa * (1.0 - wb), (1.0 - wa) * wb, wa * wb};
+    for (int c = 0; c < 4; ++c) {
+        if (weight[c] == 0.0) continue;  // (and the corner may lie beyond the last marched one)
+        const std::size_t q = corner[c];
+        TPRF_CHECK_LT(q / nb, lattice_light.as.size());
+        const std::size_t ql = std::size_t(lattice_light.as[q / nb]) * std::size_t(g.nv) + std::size_t(lattice_light.bs[q % nb]);
+        // The sums over q's patches, and over those l sees too with their factors' ratio.
+        double light = 0.0, moment = 0.0, moved = 0.0, moved_moment = 0.0;
+        auto h = here.begin();
+        for (std::uint64_t i = lattice_light.start[q]; i < lattice_light.start[q + 1]; ++i) {
+            const PatchLeg& from = lattice_light.legs[i];
+            light += double(from.light);
+            moment += double(from.light) * double(from.leg);
+            while (h != here.end() && h->patch < from.patch) ++h;
+            if (h == here.end() || h->patch != from.patch) continue;
+            const double share = double(from.light) * (double(h->factor) / double(from.factor));
+            moved += share;
+            moved_moment += share * double(h->leg);
         }
-    });
-    share.seconds_gather += seconds_from(t1);
+        if (!(moved > 0.0)) continue;  // l sees none of the patches q's later light came from
+        const double ratio = moved / light;
+        const double lag = (2.0 * (moved_moment / moved - moment / light) - (p.sensor_leg(l) - p.sensor_leg(ql)) +
+                            (p.laser_leg(l) - p.laser_leg(ql))) * p.inv_bin;
+        const std::int64_t whole = std::int64_t(std::floor(lag));
+        const float f = float(lag - double(whole)), w = float(weight[c] * ratio * ratio);
+        const float* from = lattice_light.later.data() + q * T;
+        const float split[2] = {w * (1.0f - f), w * f};
+        for (int side = 0; side < 2; ++side) {
+            if (split[side] == 0.0f) continue;
+            const std::int64_t shift = whole + side;  // out[t] takes from[t - shift]
+            const std::int64_t begin = std::max<std::int64_t>(0, shift);
+            const std::int64_t end = std::min<std::int64_t>(std::int64_t(T), std::int64_t(T) + shift);
+            for (std::int64_t t = begin; t < end; ++t) out[t] += split[side] * from[t - shift];
+        }
+    }
 }
 
 // Laser points [first, last) into this rank's rows of H: views, the exact orders and, batch by batch,
-// the march (or, with march_grid_step > 1, march_lattice after them). `sensor_views` and `taps_all`: the
-// sensor side of an exhaustive capture.
+// the march (or, with march_grid_step > 1, the lattice marched first and its light moved to each point).
+// `sensor_views` and `taps_all`: the sensor side of an exhaustive capture.
 void compute_share(const CapturePlan& p, const LinkSet* links, const RankGroup& ranks, std::size_t first, std::size_t last,
                    const std::vector<std::vector<PatchView>>& sensor_views,
                    const std::vector<std::vector<SensorTap>>& taps_all, const CaptureOptions& options,
                    CaptureResult& result, CaptureShare& share) {
     const std::size_t step = p.solve ? std::size_t(result.batch) : std::size_t(64);
+    const bool moved = p.solve && p.capture.march_grid_step > 1;
+    LatticeLight lattice_light;
+    if (moved) lattice_light = march_lattice(p, *links, ranks, step, options, result, share);
     for (std::size_t l0 = first; l0 < last; l0 += step) {
         const std::size_t l1 = std::min(last, l0 + step);
         const auto t0 = Clock::now();
         const std::vector<std::vector<PatchView>> laser_views = view_all(p, p.points.laser, l0, l1, options.threads);
         share.seconds_views += seconds_from(t0);
         const auto t1 = Clock::now();
-        parallel_for(l1 - l0, {options.threads, 1, true},
-                     [&](std::size_t k) { add_exact(p, l0 + k, laser_views[k], sensor_views, result.H); });
+        parallel_for(l1 - l0, {options.threads, 1, true}, [&](std::size_t k) {
+            add_exact(p, l0 + k, laser_views[k], sensor_views, result.H);
+            if (moved)
+                add_moved(p, lattice_light, l0 + k, patch_legs(sensor_taps(p, l0 + k, laser_views[k]), nullptr),
+                          p.rows_of(result.H, l0 + k));
+        });
         for (std::size_t k = 0; k < l1 - l0 && p.confocal; ++k) share.view_pairs += laser_views[k].size();
         share.seconds_gather += seconds_from(t1);
-        if (p.solve && p.capture.march_grid_step == 1) {
+        if (p.solve && !moved) {
             std::vector<std::size_t> lasers(l1 - l0);
             std::vector<float*> rows(l1 - l0);
             for (std::size_t k = 0; k < l1 - l0; ++k) {
@@ -512,7 +626,6 @@ void compute_share(const CapturePlan& p, const LinkSet* links, const RankGroup& 
         }
         if (options.progress) options.progress("capture", double(l1 - first) / double(last - first));
     }
-    if (p.solve && p.capture.march_grid_step > 1) march_lattice(p, *links, ranks, first, last, options, result, share);
     share.marches = result.marches;
     share.link_bin_updates = result.link_bin_updates;
     share.seconds_solve = result.seconds_solve;

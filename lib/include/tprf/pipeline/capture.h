@@ -83,7 +83,7 @@ bool render_needs_links(const Scene& scene);
 TimeAxis march_time(const Scene& scene);
 
 /// The laser points whose later bounces are marched: every one, or with march_grid_step S > 1 the
-/// lattice of every S-th grid point along each side and the last (the others are interpolated).
+/// lattice of every S-th grid point along each side and the last (the others take their light, moved).
 std::size_t marched_laser_points(const Capture& capture);
 
 }  // namespace tprf

@@ -171,7 +171,8 @@ struct Capture {
     int march_bin_factor = 1;
     static constexpr int kMaxMarchBinFactor = 64;
     /// Confocal only: the later bounces are marched at every S-th grid point along each side (and the
-    /// last), and interpolated bilinearly between them; >= 1, at most kMaxMarchGridStep. docs/capture.md.
+    /// last), and their light moved to the points between them; >= 1, at most kMaxMarchGridStep.
+    /// docs/capture.md.
     int march_grid_step = 1;
     static constexpr int kMaxMarchGridStep = 64;
     std::string json_path = "capture";     ///< for error messages
