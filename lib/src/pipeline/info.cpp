@@ -500,13 +500,17 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
         return;
     }
     if (scene.camera) return;  // the camera's render is estimated; the capture's marches come on top
+    const std::size_t lasers = marched_laser_points(*scene.capture);
+    // A marched lattice (march_grid_step) keeps every lattice point's later light and a 16-byte record
+    // per patch that light came back from (at most every patch) until the scan's points take it.
+    if (scene.capture->march_grid_step > 1)
+        e.solver_bytes += to_size(double(lasers) * (double(scene.time.bins) * 4.0 + double(e.patches) * 16.0));
     const std::size_t limit = memory_limit_bytes(options);
     const double fixed = double(e.solver_bytes) - per_illumination;  // what does not grow with the batch
     const double held =
         double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes + e.solver_bytes);
     const double room = limit > 0 ? double(limit) - held : INFINITY;
     const int batch = int(std::clamp(1.0 + std::floor(room / std::max(per_illumination, 1.0)), 1.0, double(kMaxBatch)));
-    const std::size_t lasers = marched_laser_points(*scene.capture);
     e.capture_batch = batch;
     e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
     e.solver_bytes = to_size(fixed + batch * per_illumination);
