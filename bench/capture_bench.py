@@ -12,7 +12,7 @@ Runs, each a separate `tprf render` process:
   3. one laser point with every bounce: what each of GRID x GRID separate renders would cost, for the ratio.
 With --launcher, run 2 is started through it (MPI ranks sharing the laser points, docs/mpi.md).
 With --march-bin-factor, runs 2 and 3 march the later bounces on bins F times wider, and with
---march-grid-step run 2 marches them at every S-th grid point only, interpolating the others
+--march-grid-step run 2 marches them at every S-th grid point only, moving their light to the others
 (docs/capture.md; bench/capture_march_factor.py measures what both cost in accuracy).
 Prints the seconds, render.json's phases and peak memory, and writes OUT/capture_bench.json (or NAME.json).
 The hidden mesh is scripts/make_statue_mesh.py's bust at --cell (0.0165: about 12k triangles).

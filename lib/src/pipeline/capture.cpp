@@ -404,6 +404,7 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std
         for (const SensorTap& tap : list) longest = std::max(longest, tap.leg);
     // A march bin's hat reaches F - 1 scene bins before its path: one march bin more.
     solver.first_bin = -bins_before_window(p.march, longest) - (p.capture.march_bin_factor > 1 ? 1 : 0);
+    if (legs) TPRF_CHECK(p.confocal);
     const CaptureFilm film(p);
     std::vector<std::vector<double>> received(legs ? K : 0);
     for (std::size_t k = 0; k < received.size(); ++k) received[k].assign(taps[k].front().size(), 0.0);
@@ -420,7 +421,6 @@ void solve_batch(const CapturePlan& p, const LinkSet& links, std::span<const std
         film_seconds += seconds_from(t0);
     });
     if (legs) {
-        TPRF_CHECK(p.confocal);
         legs->resize(K);
         for (std::size_t k = 0; k < K; ++k) (*legs)[k] = patch_legs(taps[k].front(), received[k].data());
     }
@@ -545,7 +545,8 @@ LatticeLight march_lattice(const CapturePlan& p, const LinkSet& links, const Ran
 // the first legs' light is the last legs' by reciprocity): its paths lengthen by twice the change of
 // the mean last leg (less the sensor's device leg, plus the laser's), and its light scales by the square
 // of the change of the last legs' factors. With the patches' light at q fixed this is exact to first
-// order in the step from q to l. A lattice point takes its own light (weight 1, moved by nothing).
+// order in the step from q to l. Patches that l sees and q's later light did not come back from add
+// nothing. A lattice point takes its own light (weight 1, moved by nothing).
 void add_moved(const CapturePlan& p, const LatticeLight& lattice_light, std::size_t l, const std::vector<PatchLeg>& here,
                float* out) {
     const CaptureGrid& g = p.capture.laser_grid;
@@ -576,8 +577,10 @@ void add_moved(const CapturePlan& p, const LatticeLight& lattice_light, std::siz
         const double ratio = moved / light;
         const double lag = (2.0 * (moved_moment / moved - moment / light) - (p.sensor_leg(l) - p.sensor_leg(ql)) +
                             (p.laser_leg(l) - p.laser_leg(ql))) * p.inv_bin;
-        const std::int64_t whole = std::int64_t(std::floor(lag));
-        const float f = float(lag - double(whole)), w = float(weight[c] * ratio * ratio);
+        // Split between two bins as a tap splits its leg (or rounded, with solver.delay nearest).
+        const bool nearest = p.scene.solver.delay == DelayMode::Nearest;
+        const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
+        const float f = nearest ? 0.0f : float(lag - double(whole)), w = float(weight[c] * ratio * ratio);
         const float* from = lattice_light.later.data() + q * T;
         const float split[2] = {w * (1.0f - f), w * f};
         for (int side = 0; side < 2; ++side) {

@@ -384,7 +384,7 @@ void check_capture(const Capture& c, const At& at) {
         at.key("march_grid_step").fail("must be an integer in [1, " + std::to_string(Capture::kMaxMarchGridStep) +
                                        "] (1: the later bounces marched at every grid point)");
     if (c.march_grid_step > 1 && exhaustive)
-        at.key("march_grid_step").fail("must be 1 for an exhaustive capture (it interpolates a confocal scan's points)");
+        at.key("march_grid_step").fail("must be 1 for an exhaustive capture (it moves a confocal scan's later light between its points)");
 }
 
 void check_objects(const Scene& scene, const At& root) {

@@ -34,7 +34,7 @@ struct CaptureOptions {
     /// Illuminations solved together (1..kMaxBatch, transport/solver.h); 0: chosen from memory_bytes.
     int batch = 0;
     std::size_t memory_bytes = 0;  ///< the memory the batch may use (0: no limit but kMaxBatch)
-    ProgressFn progress;       ///< phase "capture"
+    ProgressFn progress;       ///< phase "capture" (with march_grid_step > 1, phase "march" first)
     /// The ranks that share the laser points (pipeline/ranks.h; null: this process alone). Every rank
     /// calls compute_capture with the same scene; each computes whole batches of laser points (the
     /// batch is rank 0's choice), rank 0 collects H. An exception on one rank leaves the others waiting
