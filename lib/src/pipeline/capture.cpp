@@ -477,13 +477,16 @@ std::pair<std::size_t, float> bracket(const std::vector<int>& at, int a) {
 }
 
 // A confocal scan's later bounces marched at a lattice of its points (march_grid_step): the marched
-// coordinates along each side, every lattice point's later light (T bins each, in lattice order: a
-// major) and its last legs, lattice point k's legs[start[k], start[k + 1]).
+// coordinates along each side, and in lattice order (a major) each lattice point's laser point, its
+// later light (T bins each) and its last legs, lattice point k's legs[start[k], start[k + 1]), with their
+// light's sum and light-weighted mean leg.
 struct LatticeLight {
     std::vector<int> as, bs;
+    std::vector<std::size_t> points;
     std::vector<float> later;
     std::vector<std::uint64_t> start;
     std::vector<PatchLeg> legs;
+    std::vector<double> light, mean_leg;
 };
 
 // march_grid_step S > 1 (confocal): the later bounces marched at the lattice of every S-th grid point
@@ -495,7 +498,7 @@ LatticeLight march_lattice(const CapturePlan& p, const LinkSet& links, const Ran
     LatticeLight out;
     out.as = lattice(g.nu, p.capture.march_grid_step);
     out.bs = lattice(g.nv, p.capture.march_grid_step);
-    std::vector<std::size_t> marched;
+    std::vector<std::size_t>& marched = out.points;
     for (int a : out.as)
         for (int b : out.bs) marched.push_back(std::size_t(a) * std::size_t(g.nv) + std::size_t(b));
     const std::size_t T = std::size_t(p.T);
@@ -534,6 +537,16 @@ LatticeLight march_lattice(const CapturePlan& p, const LinkSet& links, const Ran
     out.start.assign(marched.size() + 1, 0);
     for (std::size_t k = 0; k < marched.size(); ++k) out.start[k + 1] = out.start[k] + all_counts[k];
     TPRF_CHECK_EQ(out.start.back(), out.legs.size());
+    out.light.assign(marched.size(), 0.0);
+    out.mean_leg.assign(marched.size(), 0.0);
+    for (std::size_t k = 0; k < marched.size(); ++k) {
+        double moment = 0.0;
+        for (std::uint64_t i = out.start[k]; i < out.start[k + 1]; ++i) {
+            out.light[k] += double(out.legs[i].light);
+            moment += double(out.legs[i].light) * double(out.legs[i].leg);
+        }
+        if (out.light[k] > 0.0) out.mean_leg[k] = moment / out.light[k];
+    }
     return out;
 }
 
@@ -555,18 +568,17 @@ void add_moved(const CapturePlan& p, const LatticeLight& lattice_light, std::siz
     const std::size_t nb = lattice_light.bs.size(), T = std::size_t(p.T);
     const std::size_t corner[4] = {ia * nb + ib, (ia + 1) * nb + ib, ia * nb + ib + 1, (ia + 1) * nb + ib + 1};
     const double weight[4] = {(1.0 - wa) * (1.0 - wb), wa * (1.0 - wb), (1.0 - wa) * wb, wa * wb};
+    const bool nearest = p.scene.solver.delay == DelayMode::Nearest;
     for (int c = 0; c < 4; ++c) {
         if (weight[c] == 0.0) continue;  // (and the corner may lie beyond the last marched one)
         const std::size_t q = corner[c];
-        TPRF_CHECK_LT(q / nb, lattice_light.as.size());
-        const std::size_t ql = std::size_t(lattice_light.as[q / nb]) * std::size_t(g.nv) + std::size_t(lattice_light.bs[q % nb]);
-        // The sums over q's patches, and over those l sees too with their factors' ratio.
-        double light = 0.0, moment = 0.0, moved = 0.0, moved_moment = 0.0;
+        TPRF_CHECK_LT(q, lattice_light.points.size());
+        const std::size_t ql = lattice_light.points[q];
+        // The sums over q's patches that l sees too, with their factors' ratio.
+        double moved = 0.0, moved_moment = 0.0;
         auto h = here.begin();
         for (std::uint64_t i = lattice_light.start[q]; i < lattice_light.start[q + 1]; ++i) {
             const PatchLeg& from = lattice_light.legs[i];
-            light += double(from.light);
-            moment += double(from.light) * double(from.leg);
             while (h != here.end() && h->patch < from.patch) ++h;
             if (h == here.end() || h->patch != from.patch) continue;
             const double share = double(from.light) * (double(h->factor) / double(from.factor));
@@ -574,11 +586,10 @@ void add_moved(const CapturePlan& p, const LatticeLight& lattice_light, std::siz
             moved_moment += share * double(h->leg);
         }
         if (!(moved > 0.0)) continue;  // l sees none of the patches q's later light came from
-        const double ratio = moved / light;
-        const double lag = (2.0 * (moved_moment / moved - moment / light) - (p.sensor_leg(l) - p.sensor_leg(ql)) +
+        const double ratio = moved / lattice_light.light[q];
+        const double lag = (2.0 * (moved_moment / moved - lattice_light.mean_leg[q]) - (p.sensor_leg(l) - p.sensor_leg(ql)) +
                             (p.laser_leg(l) - p.laser_leg(ql))) * p.inv_bin;
         // Split between two bins as a tap splits its leg (or rounded, with solver.delay nearest).
-        const bool nearest = p.scene.solver.delay == DelayMode::Nearest;
         const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
         const float f = nearest ? 0.0f : float(lag - double(whole)), w = float(weight[c] * ratio * ratio);
         const float* from = lattice_light.later.data() + q * T;
