@@ -197,7 +197,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 float* a = m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
                 // The shortest window's links, from their own list, with the first source tile.
                 if (p.recent_kernel && s0 == 0)
-                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], p.inv_bin_f, p.delay, recent_src, b0,
+                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0,
                                     p.C, a, p.acc_stride());
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];

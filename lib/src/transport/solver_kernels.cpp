@@ -90,14 +90,12 @@ void gather_lanes(const Links& links, std::uint64_t& cursor, std::uint64_t end, 
 
 // The shortest window's links (SolvePlan::recent_kernel) of one receiver, [k0, k1) of the
 // near list, for CT lanes (0: C, counted at run time): as gather_long, each bin of a source's window read
-// from the recent bins instead of its ring.
+// from the recent bins instead of its ring, with the taps the plan made.
 template <int CT, int BT>
-void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, float inv_bin, DelayMode mode,
-                   const RecentView& recent, std::int64_t b0, int lanes, float* acc, std::size_t stride) {
+void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, const RecentView& recent,
+                   std::int64_t b0, int lanes, float* acc, std::size_t stride) {
     if (k0 == k1) return;
-    const std::uint32_t* __restrict slot = near.slot.data();
-    const float* __restrict distance = near.distance.data();
-    const float* __restrict ff = near.ff.data();
+    const NearLink* __restrict links = near.links.data();
     const int C = CT > 0 ? CT : lanes;
     float local[(CT > 0 ? CT : kMaxLanes) * BT];
     std::fill_n(local, C * BT, 0.0f);
@@ -106,14 +104,15 @@ void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, fl
     };
     for (std::uint64_t k = k0; k < k1; ++k) {
         if (k + kAhead < k1 && BT <= 2) {  // the window's bins kAhead links on, each in its own bin's slice
-            const std::int64_t first = b0 - int(distance[k + kAhead] * inv_bin) - 1;
-            for (int b = 0; b <= BT; ++b) __builtin_prefetch(at(first + b, slot[k + kAhead]));
+            const NearLink& ahead = links[k + kAhead];
+            const std::int64_t first = b0 - ahead.lag - 1;
+            for (int b = 0; b <= BT; ++b) __builtin_prefetch(at(first + b, ahead.slot));
         }
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const NearLink t = links[k];
         const std::int64_t first = b0 - t.lag - 1;
-        const float* __restrict h = at(first, slot[k]);
+        const float* __restrict h = at(first, t.slot);
         for (int b = 0; b < BT; ++b) {
-            const float* __restrict next = at(first + b + 1, slot[k]);
+            const float* __restrict next = at(first + b + 1, t.slot);
             for (int c = 0; c < C; ++c) {  // two accumulations, as in gather_long
                 local[b * C + c] += t.w0 * next[c];
                 local[b * C + c] += t.w1 * h[c];

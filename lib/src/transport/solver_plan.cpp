@@ -366,12 +366,11 @@ void copy_near_links(SolvePlan& plan) {
         std::uint64_t k = plan.segments[i * (S + 1)];
         const std::uint64_t end = plan.segments[i * (S + 1) + 1];
         for (; k < end; ++k) {
-            near.slot.push_back(std::uint32_t(plan.node_slot(l.source[k])));
-            near.ff.push_back(l.ff[k]);
-            near.distance.push_back(l.distance[k]);
+            const Taps t = link_taps(l.distance[k], plan.inv_bin_f, plan.delay, l.ff[k]);
+            near.links.push_back({std::uint32_t(plan.node_slot(l.source[k])), t.lag, t.w0, t.w1});
         }
         plan.segments[i * (S + 1)] = k;
-        near.row[i + 1] = near.slot.size();
+        near.row[i + 1] = near.links.size();
     }
 }
 

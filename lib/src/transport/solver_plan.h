@@ -114,19 +114,23 @@ struct RecentView {
     std::size_t slice;
     int mask;
 };
-// The shortest window's links, copied out of the rows into one contiguous list (a window's links are
-// short runs between the other windows' in a row): per receiver node, sources as node slots.
-struct NearLinks {
-    std::vector<std::uint64_t> row;   // m + 1
-    std::vector<std::uint32_t> slot;  // the source's node slot (SolvePlan::node_slot)
-    std::vector<float> ff, distance;
-    std::size_t bytes() const {
-        return row.size() * sizeof(std::uint64_t) + slot.size() * sizeof(std::uint32_t) +
-               (ff.size() + distance.size()) * sizeof(float);
-    }
+// One of the shortest window's links with its taps (link_taps), made once when the plan is: its kernel
+// visits each at every block, where the taps' arithmetic would sit between the link and its loads.
+struct NearLink {
+    std::uint32_t slot;  // the source's node slot (SolvePlan::node_slot)
+    std::int32_t lag;
+    float w0;
+    float w1;
 };
-using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, float, DelayMode, const RecentView&,
-                              std::int64_t, int, float*, std::size_t);
+// The shortest window's links, copied out of the rows into one contiguous list (a window's links are
+// short runs between the other windows' in a row): per receiver node.
+struct NearLinks {
+    std::vector<std::uint64_t> row;  // m + 1
+    std::vector<NearLink> links;
+    std::size_t bytes() const { return row.size() * sizeof(std::uint64_t) + links.size() * sizeof(NearLink); }
+};
+using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, const RecentView&, std::int64_t, int,
+                              float*, std::size_t);
 using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                             const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
 
