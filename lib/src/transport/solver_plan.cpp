@@ -362,6 +362,9 @@ void copy_near_links(SolvePlan& plan) {
     const std::size_t S = std::size_t(plan.windows);
     NearLinks& near = plan.near;
     near.row.assign(plan.m + 1, 0);
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < plan.m; ++i) count += plan.segments[i * (S + 1) + 1] - plan.segments[i * (S + 1)];
+    near.links.reserve(count);
     for (std::size_t i = 0; i < plan.m; ++i) {
         std::uint64_t k = plan.segments[i * (S + 1)];
         const std::uint64_t end = plan.segments[i * (S + 1) + 1];
