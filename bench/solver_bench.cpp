@@ -241,16 +241,9 @@ BENCHMARK(BM_TransientSolveBatch)
 // the solve alone, three times in a row, so that a change to the march is measured without the link
 // stage's spread. Its near field (1.9M links under two bins, a same-bin system of 43k patches) is what
 // the Cornell box above does not have. `fastest` is the least of the three.
-struct MeshProblem {
-    tprf::Scene scene;
-    tprf::PatchSet patches;
-    tprf::LinkSet links;
-    tprf::Illumination emission;
-};
-
-const MeshProblem& mesh_problem() {
-    static const std::unique_ptr<MeshProblem> p = [] {
-        auto out = std::make_unique<MeshProblem>();
+const Problem& mesh_problem() {
+    static const std::unique_ptr<Problem> p = [] {
+        auto out = std::make_unique<Problem>();
         out->scene = tprf::load_scene(std::string(TPRF_SOURCE_DIR) + "/meshes/statue-on-floor.json");
         out->scene.links.tolerance = 0.01;
         out->patches = tprf::build_patches(out->scene);
@@ -270,7 +263,7 @@ const MeshProblem& mesh_problem() {
 }
 
 void BM_MeshSceneSolve(benchmark::State& state) {
-    const MeshProblem& p = mesh_problem();
+    const Problem& p = mesh_problem();
     tprf::SolverOptions options;
     options.threads = kThreads;
     options.delay = p.scene.solver.delay;

@@ -437,8 +437,8 @@ void expect_lattice_moves(const std::string& devices, double start) {
         EXPECT_LT(e.l1, e.blend_l1 / 3.0);
         EXPECT_LT(e.light, 0.03);
     }
-    EXPECT_LT(fine.l1, 0.6 * coarse.l1);
-    EXPECT_LT(fine.light, 0.6 * coarse.light);
+    EXPECT_LT(fine.l1, 0.55 * coarse.l1);
+    EXPECT_LT(fine.light, 0.55 * coarse.light);
 }
 
 TEST(Capture, AMarchedLatticeGivesItsPointsTheirOwnLightAndMovesItToTheOthers) {

@@ -259,7 +259,7 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
     float sum[CT > 0 ? CT : kMaxLanes];
     std::fill_n(sum, C, 0.0f);
     for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
-        const ShortLink& s = p.short_links[k];
+        const TapLink& s = p.short_links[k];
         const float* h1 = recent(src, s.source, bin - s.lag - 1);
         if (s.lag > 0) {
             const float* h0 = recent(src, s.source, bin - s.lag);

@@ -95,7 +95,7 @@ template <int CT, int BT>
 void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, const RecentView& recent,
                    std::int64_t b0, int lanes, float* acc, std::size_t stride) {
     if (k0 == k1) return;
-    const NearLink* __restrict links = near.links.data();
+    const TapLink* __restrict links = near.links.data();
     const int C = CT > 0 ? CT : lanes;
     float local[(CT > 0 ? CT : kMaxLanes) * BT];
     std::fill_n(local, C * BT, 0.0f);
@@ -104,15 +104,15 @@ void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, co
     };
     for (std::uint64_t k = k0; k < k1; ++k) {
         if (k + kAhead < k1 && BT <= 2) {  // the window's bins kAhead links on, each in its own bin's slice
-            const NearLink& ahead = links[k + kAhead];
+            const TapLink& ahead = links[k + kAhead];
             const std::int64_t first = b0 - ahead.lag - 1;
-            for (int b = 0; b <= BT; ++b) __builtin_prefetch(at(first + b, ahead.slot));
+            for (int b = 0; b <= BT; ++b) __builtin_prefetch(at(first + b, ahead.source));
         }
-        const NearLink t = links[k];
+        const TapLink t = links[k];
         const std::int64_t first = b0 - t.lag - 1;
-        const float* __restrict h = at(first, t.slot);
+        const float* __restrict h = at(first, t.source);
         for (int b = 0; b < BT; ++b) {
-            const float* __restrict next = at(first + b + 1, t.slot);
+            const float* __restrict next = at(first + b + 1, t.source);
             for (int c = 0; c < C; ++c) {  // two accumulations, as in gather_long
                 local[b * C + c] += t.w0 * next[c];
                 local[b * C + c] += t.w1 * h[c];

@@ -65,7 +65,7 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
 // The links that have to be applied bin by bin (lag < bt), as lists by receiver patch; the tinted
 // ones (sized only when some link is tinted), long ones included.
 struct BinLinks {
-    std::vector<std::vector<ShortLink>> shorts;
+    std::vector<std::vector<TapLink>> shorts;
     std::vector<std::vector<SameBinLink>> same;
     std::vector<std::vector<TintedLink>> tinted_long, tinted_shorts;
     std::vector<std::vector<TintedSameLink>> tinted_same;
@@ -170,7 +170,7 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     plan.position.assign(plan.n, 0);
     for (std::size_t q = 0; q < plan.n; ++q) plan.position[plan.order[q]] = std::uint32_t(q);
     for (std::size_t i = 0; i < plan.n; ++i) {
-        for (ShortLink& l : bins.shorts[i]) l.source = plan.position[l.source];
+        for (TapLink& l : bins.shorts[i]) l.source = plan.position[l.source];
         for (SameBinLink& l : bins.same[i]) l.source = plan.position[l.source];
     }
     plan.short_row.assign(plan.n + 1, 0);
@@ -180,7 +180,7 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         const std::size_t i = plan.order[q];
         plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
         plan.same_links.insert(plan.same_links.end(), bins.same[i].begin(), bins.same[i].end());
-        std::vector<ShortLink>().swap(bins.shorts[i]);
+        std::vector<TapLink>().swap(bins.shorts[i]);
         std::vector<SameBinLink>().swap(bins.same[i]);
         plan.short_row[q + 1] = plan.short_links.size();
         plan.same_row[q + 1] = plan.same_links.size();
@@ -461,7 +461,7 @@ std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
                                L * std::size_t(p.recent_bins) * p.m * C + state + sweeps +
                                (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
-    return floats * sizeof(float) + p.short_links.size() * sizeof(ShortLink) +
+    return floats * sizeof(float) + p.short_links.size() * sizeof(TapLink) +
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
            p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() + p.near.bytes() +

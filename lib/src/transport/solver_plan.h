@@ -47,9 +47,13 @@ inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
     return {lag, ff * (1.0f - frac), ff * frac};
 }
 
-struct ShortLink {
-    std::uint32_t source;  // the source patch's position (SolvePlan::order)
-    int lag;     // < block length; lag 0 keeps only its w1 tap here (w0 is in the same-bin list)
+// A grey link with its taps (link_taps), made once when the plan is, for the lists the march visits at
+// every bin or block: the bin-by-bin pass's links shorter than a block (lag < block length; lag 0 keeps
+// only its w1 tap there, w0 is in the same-bin list), and the shortest window's (SolvePlan::near: lags
+// of one to two blocks), whose taps' arithmetic would otherwise sit between each link and its loads.
+struct TapLink {
+    std::uint32_t source;  // the source's node slot (SolvePlan::node_slot: a patch's position)
+    int lag;
     float w0;
     float w1;
 };
@@ -64,7 +68,7 @@ struct SameBinLink {
 // to grey links, whose one weight serves every lane; the few tinted ones have lists of their own.
 struct TintedLink {
     std::uint32_t source;  // long list: the source patch; bin-by-bin list: its position
-    int lag;               // as ShortLink's (lag 0: the w1 taps only, w0 is in the same-bin list)
+    int lag;               // as TapLink's (lag 0: the w1 taps only, w0 is in the same-bin list)
     float w0[3];
     float w1[3];
 };
@@ -114,20 +118,12 @@ struct RecentView {
     std::size_t slice;
     int mask;
 };
-// One of the shortest window's links with its taps (link_taps), made once when the plan is: its kernel
-// visits each at every block, where the taps' arithmetic would sit between the link and its loads.
-struct NearLink {
-    std::uint32_t slot;  // the source's node slot (SolvePlan::node_slot)
-    std::int32_t lag;
-    float w0;
-    float w1;
-};
 // The shortest window's links, copied out of the rows into one contiguous list (a window's links are
 // short runs between the other windows' in a row): per receiver node.
 struct NearLinks {
     std::vector<std::uint64_t> row;  // m + 1
-    std::vector<NearLink> links;
-    std::size_t bytes() const { return row.size() * sizeof(std::uint64_t) + links.size() * sizeof(NearLink); }
+    std::vector<TapLink> links;
+    std::size_t bytes() const { return row.size() * sizeof(std::uint64_t) + links.size() * sizeof(TapLink); }
 };
 using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, const RecentView&, std::int64_t, int,
                               float*, std::size_t);
@@ -204,7 +200,7 @@ struct SolvePlan {
     int L = 0;                      // layers
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
-    std::vector<ShortLink> short_links;
+    std::vector<TapLink> short_links;
     std::vector<SameBinLink> same_links;
     // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
     // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
