@@ -623,6 +623,73 @@ void expect_batches_match_singles(const Prepared& p, const std::vector<Illuminat
     }
 }
 
+TEST(Solver, ShortBlocksReachTheSinkTogetherAndEveryBinOnce) {
+    // Blocks of 2 bins hand their bins over 32 at a time (SolveBlock), from the first bin asked for
+    // (7 before the window) to the last (a partial block of 301): contiguous, each bin once, with the
+    // per-order terms and a spot that is seen but not propagated, as blocks of 32 bins give them.
+    Scene scene;
+    scene.max_edge = 0.2;
+    test::add_closed_cube(scene, 1.0, 0.7);
+    Prepared p = prepare(scene);
+    const std::size_t n = p.patches.size();
+    p.emission = by_hand(n, {{3, 0.05, Rgb(1.0, 0.5, 0.25), 0, true}, {40, 0.3, Rgb::Constant(0.7), 1, true},
+                             {17, 1.234, Rgb::Constant(0.8), 1, false}});
+    const TimeAxis time = time_axis(301, 0.02);
+    auto run = [&](int block_bins, std::vector<std::pair<int, int>>* blocks) {
+        SolverOptions options;
+        options.block_bins = block_bins;
+        options.bounce_terms = 3;
+        options.first_bin = -7;
+        Profiles out;
+        out.n = n;
+        out.bins = time.bins;
+        out.total.assign(n * std::size_t(time.bins) * 3, 0.0f);
+        out.terms.assign(3 * out.total.size(), 0.0f);
+        out.stats = solve_transient(p.patches, p.links, p.emission, time, options, [&](const SolveBlock& b) {
+            if (blocks) blocks->push_back({b.first_bin, b.bins});
+            ASSERT_EQ(b.terms, 3);
+            for (std::size_t i = 0; i < n; ++i)
+                for (int t = std::max(0, -b.first_bin); t < b.bins; ++t)
+                    for (std::size_t c = 0; c < 3; ++c) {
+                        const std::size_t src = (i * std::size_t(b.bins) + std::size_t(t)) * 3 + c;
+                        const std::size_t dst = (i * std::size_t(time.bins) + std::size_t(b.first_bin + t)) * 3 + c;
+                        out.total[dst] = b.radiosity[src];
+                        for (std::size_t k = 0; k < 3; ++k)
+                            out.terms[k * out.total.size() + dst] = b.per_order[k * n * std::size_t(b.bins) * 3 + src];
+                    }
+        });
+        return out;
+    };
+    std::vector<std::pair<int, int>> blocks;
+    const Profiles short_blocks = run(2, &blocks);
+    const Profiles reference = run(32, nullptr);
+    ASSERT_EQ(short_blocks.stats.block_bins, 2);
+    ASSERT_FALSE(blocks.empty());
+    EXPECT_EQ(blocks.front().first, -7);
+    for (std::size_t k = 0; k < blocks.size(); ++k) {
+        EXPECT_LE(blocks[k].second, 32);
+        if (k + 1 < blocks.size()) {
+            EXPECT_EQ(blocks[k].first + blocks[k].second, blocks[k + 1].first);
+            EXPECT_EQ(blocks[k].second % 2 == 0 || k == 0, true) << "only the first block starts mid-block";
+        }
+    }
+    EXPECT_EQ(blocks.back().first + blocks.back().second, 301);
+    EXPECT_LE(blocks.size(), std::size_t(308 / 32 + 2));  // not one per block of 2 bins
+    float peak = 0.0f;
+    for (float v : reference.total) peak = std::max(peak, v);
+    ASSERT_GT(peak, 0.0f);
+    float worst = 0.0f;
+    for (std::size_t k = 0; k < reference.total.size(); ++k)
+        worst = std::max(worst, std::abs(short_blocks.total[k] - reference.total[k]));
+    for (std::size_t k = 0; k < reference.terms.size(); ++k)
+        worst = std::max(worst, std::abs(short_blocks.terms[k] - reference.terms[k]));
+    EXPECT_LE(worst, 1e-5f * peak);
+    // The spot (its energy is the patch's radiosity in that bin) is in its bin's order-1 term.
+    const int spot_bin = int(1.234 / 0.02);
+    EXPECT_GE(short_blocks.term(1, 17, spot_bin, 0), 0.8 * (1 - 1e-6));
+    EXPECT_GE(short_blocks.at(17, spot_bin, 0), 0.8 * (1 - 1e-6));
+}
+
 TEST(SolverBatch, GreyBatchesMatchSingleSolves) {
     // K = 1 and 3 (no specialisation for 3 grey lanes: the generic kernels), 5, 8 and 16 (their own).
     const Prepared p = corner();

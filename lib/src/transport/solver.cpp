@@ -41,8 +41,9 @@ public:
           m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
           m_same(plan.same_bin() ? std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C) : 0, 0.0f),
           m_same_before(m_same.size(), 0.0f),
-          m_out_total(plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3),
-          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.bt) * std::size_t(plan.K) * 3) {
+          m_kept(plan.emit_blocks > 1 ? (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3 : 0),
+          m_out_total(plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3),
+          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3) {
         if (plan.same_bin())
             for (int k = 0; k < plan.sweep_buffers(); ++k)
                 m_sweep[k].assign(std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C), 0.0f);
@@ -60,7 +61,8 @@ public:
     }
     // Step 2b (in a region, clusters only): every cluster's radiosity over the block from its children's.
     void pull_block(std::int64_t b0);
-    // Step 3: the block's bins inside the window, handed to the sink.
+    // Step 3: the block's bins inside the window, kept for the sink, which takes them when
+    // SolvePlan::emit_blocks blocks are kept or at the last block.
     void emit_block(std::int64_t b0, const BlockSink& sink);
     int worst_jacobi_iterations() const { return m_worst_iterations.load(); }
     std::uint64_t jacobi_sweeps() const { return m_sweeps; }
@@ -112,8 +114,9 @@ private:
     void sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega, float* change,
                    float* largest);
     bool sweeps_converged(int parity) const;
-    void block_totals(std::size_t i, std::int64_t lo, int count);
-    void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
+    template <int CT>
+    void block_totals(std::size_t q, std::int64_t lo, int count, int offset);
+    void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi, int stride);
 
     const Links& m_links;
     std::span<const Illumination* const> m_batch;
@@ -132,7 +135,14 @@ private:
     // (k - 1) % B, writes k % B and with Chebyshev reads the one before from (k + 1) % B, B being
     // SolvePlan::sweep_buffers. Sweep 1 starts from buffer 0, filled as each bin's values are made.
     std::vector<float> m_sweep[3];
+    // The bins kept for the sink, [m_out_lo, m_out_lo + m_out_bins): with SolvePlan::emit_blocks > 1 in
+    // m_kept, the total and then each term, N x emit_bins x K x 3 by position (the order in which the
+    // recent bins are read, so that both sides of the copy are streams), handed over by patch as
+    // N x m_out_bins x K x 3 (SolveBlock); with one block, written there directly.
+    std::vector<float> m_kept;
     std::vector<float> m_out_total, m_out_terms;
+    std::int64_t m_out_lo = 0;
+    int m_out_bins = 0;
     // The Jacobi sweep's max-reductions per lane, by the sweep's parity (a thread still reading one
     // sweep's result while another resets the next's): the largest change and the largest value;
     // and the bin's largest value outside the system (final before the sweeps).
@@ -537,26 +547,34 @@ void March::short_pass_lanes(std::int64_t b0) {
             for (std::int64_t bin = b0; bin < b0 + p.bt; ++bin) store(l, p.order[q], bin, recent(l, q, bin));
 }
 
-// Patch i's total and per-order terms for the bins [lo, lo + count) of the output block, every
-// illumination's (N x count x K x 3; a grey lane fills all three colours).
-void March::block_totals(std::size_t i, std::int64_t lo, int count) {
+// The total and per-order terms of the patch at position q for the bins [lo, lo + count), into its
+// rows from bin `offset` on, every illumination's (a grey lane fills all three colours); CT lanes (0: C,
+// at run time).
+template <int CT>
+void March::block_totals(std::size_t q, std::int64_t lo, int count, int offset) {
     const SolvePlan& p = m_plan;
-    const int C = p.C, L = p.L, K = p.K;
+    const int C = CT > 0 ? CT : p.C, L = p.L, K = p.K;
     const LayerPlan& plan = p.layers;
+    // Kept rows (by position) are emit_bins long; rows written for the sink directly (one block per
+    // hand-over, offset 0) `count`.
+    const bool kept = !m_kept.empty();
+    const std::size_t row = std::size_t(kept ? p.emit_bins() : count) * std::size_t(K) * 3, part = p.n * row;
     // Short blocks from the recent bins (which hold the whole block; compact, and in cache), long ones
     // from the ring, where a patch's bins are contiguous.
-    const std::size_t q = p.position[i];
+    const std::size_t i = p.order[q];
     auto value = [&](int layer, std::int64_t bin) -> const float* {
         return count <= 4 ? recent(layer, q, bin) : ring_at(layer, i, bin);
     };
+    float* const total_out = kept ? m_kept.data() : m_out_total.data();
+    float* const terms_out = kept ? m_kept.data() + part : m_out_terms.data();
     auto put = [&](float* out, int o, const float* lanes) {
-        float* at = out + (i * std::size_t(count) + std::size_t(o)) * std::size_t(K) * 3;
+        float* at = out + (kept ? q : i) * row + std::size_t(offset + o) * std::size_t(K) * 3;
         for (int k = 0; k < K; ++k)
             for (int c = 0; c < 3; ++c) at[k * 3 + c] = lanes[p.lane(k, c)];
     };
     for (int o = 0; o < count; ++o) {
         const std::int64_t bin = lo + o;
-        float total[kMaxLanes];
+        float total[kMaxLanes];  // put() reads lanes by illumination and colour: sized for any
         std::fill_n(total, C, 0.0f);
         if (plan.total >= 0) {
             const float* v = value(plan.total, bin);
@@ -567,9 +585,8 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
                 for (int c = 0; c < C; ++c) total[c] += v[c];
             }
         }
-        put(m_out_total.data(), o, total);
+        put(total_out, o, total);
         for (int k = 0; k < plan.terms; ++k) {
-            float* term = m_out_terms.data() + std::size_t(k) * p.n * std::size_t(count) * std::size_t(K) * 3;
             float v[kMaxLanes];
             if (k < plan.exact) {
                 const float* r = value(k, bin);
@@ -581,16 +598,17 @@ void March::block_totals(std::size_t i, std::int64_t lo, int count) {
                     for (int c = 0; c < C; ++c) v[c] -= r[c];
                 }
             }
-            put(term, o, v);
+            put(terms_out + std::size_t(k) * part, o, v);
         }
     }
 }
 
-// Pulses seen but not propagated (the laser spot) join the output only, each its illumination's.
-void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
+// Pulses seen but not propagated (the laser spot) join the output only, each its illumination's: those
+// of the kept bins [lo, hi), patch i's row `stride` bins long.
+void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi, int stride) {
     const SolvePlan& p = m_plan;
     const LayerPlan& plan = p.layers;
-    const std::size_t count = std::size_t(hi - lo), K = std::size_t(p.K);
+    const std::size_t K = std::size_t(p.K);
     for (std::size_t e = 0; e < m_batch.size(); ++e) {
         const Illumination& illumination = *m_batch[e];
         for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
@@ -598,12 +616,12 @@ void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
             const std::int64_t b = p.pulse_bin(pulse);
             if (pulse.propagates || b < lo || b >= hi) continue;
             if (plan.total < 0 && pulse.order >= plan.exact) continue;  // beyond max_bounces
-            const std::size_t at = ((i * count + std::size_t(b - lo)) * K + e) * 3;
+            const std::size_t at = ((i * std::size_t(stride) + std::size_t(b - lo)) * K + e) * 3;
             for (int c = 0; c < 3; ++c) {
                 m_out_total[at + std::size_t(c)] += float(pulse.energy[c]);
                 if (plan.terms > 0) {
                     const std::size_t term = std::size_t(std::min<int>(pulse.order, plan.terms - 1));
-                    m_out_terms[term * p.n * count * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
+                    m_out_terms[term * p.n * std::size_t(stride) * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
                 }
             }
         }
@@ -611,23 +629,47 @@ void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
 }
 
 void March::emit_block(std::int64_t b0, const BlockSink& sink) {
-    const std::int64_t lo = std::max<std::int64_t>(b0, m_plan.first_emitted);
-    const std::int64_t hi = std::min<std::int64_t>(b0 + m_plan.bt, m_plan.T);
-    if (lo >= hi) return;
-    const int count = int(hi - lo);
-    parallel_for(m_plan.n, {m_plan.threads, 1, false}, [&](std::size_t i) {
-        block_totals(i, lo, count);
-        block_spots(i, lo, hi);
+    const SolvePlan& p = m_plan;
+    const int stride = p.emit_bins();
+    const std::int64_t lo = std::max<std::int64_t>(b0, p.first_emitted);
+    const std::int64_t hi = std::min<std::int64_t>(b0 + p.bt, p.T);
+    if (lo < hi) {
+        if (m_out_bins == 0) m_out_lo = lo;
+        TPRF_CHECK_EQ(lo, m_out_lo + m_out_bins);
+        const int offset = m_out_bins, count = int(hi - lo);
+        // By position, the order of the recent bins, the rings and the kept rows.
+        with_lanes(p.C, [&](auto lanes) {
+            parallel_for(p.n, {p.threads, 1, false},
+                         [&](std::size_t q) { block_totals<decltype(lanes)::value>(q, lo, count, offset); });
+        });
+        m_out_bins += count;
+    }
+    // The kept bins go when the next block's would not fit, and at the last block: each patch's rows
+    // (total, then terms) where SolveBlock has them, with the spots.
+    if (m_out_bins == 0 || (m_out_bins + p.bt <= stride && b0 + p.bt < p.T)) return;
+    const int count = m_out_bins;
+    const std::size_t lanes = std::size_t(p.K) * 3, kept_row = std::size_t(stride) * lanes;
+    const std::size_t row = std::size_t(count) * lanes;
+    parallel_for(p.n, {p.threads, 1, false}, [&](std::size_t i) {
+        if (!m_kept.empty()) {
+            const std::size_t q = p.position[i];
+            std::copy_n(m_kept.data() + q * kept_row, row, m_out_total.data() + i * row);
+            for (int k = 0; k < p.layers.terms; ++k)
+                std::copy_n(m_kept.data() + (std::size_t(1 + k) * p.n + q) * kept_row, row,
+                            m_out_terms.data() + (std::size_t(k) * p.n + i) * row);
+        }
+        block_spots(i, m_out_lo, m_out_lo + count, count);
     });
     SolveBlock block;
-    block.first_bin = int(lo);
+    block.first_bin = int(m_out_lo);
     block.bins = count;
-    block.patches = m_plan.n;
-    block.illuminations = m_plan.K;
+    block.patches = p.n;
+    block.illuminations = p.K;
     block.radiosity = m_out_total.data();
-    block.terms = m_plan.layers.terms;
-    block.per_order = m_plan.layers.terms > 0 ? m_out_terms.data() : nullptr;
+    block.terms = p.layers.terms;
+    block.per_order = p.layers.terms > 0 ? m_out_terms.data() : nullptr;
     if (sink) sink(block);
+    m_out_bins = 0;
 }
 
 double lap(std::chrono::steady_clock::time_point& since) {

@@ -421,6 +421,9 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.inv_bin_f = float(plan.inv_bin);
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
+    const std::size_t out_per_bin = (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.K) * 3 * sizeof(float);
+    while (plan.emit_bins() * 2 <= kEmitBins && out_per_bin * std::size_t(plan.emit_bins() * 2) <= kEmitBytes)
+        plan.emit_blocks *= 2;
     plan_windows(links, plan);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
@@ -460,7 +463,8 @@ std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers() + 2) * L * p.sweep_rows.size() * C : 0;
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
                                L * std::size_t(p.recent_bins) * p.m * C + state + sweeps +
-                               (1 + std::size_t(p.layers.terms)) * p.n * bt * std::size_t(p.K) * 3;
+                               (p.emit_blocks > 1 ? 2 : 1) * (1 + std::size_t(p.layers.terms)) * p.n *
+                                   std::size_t(p.emit_bins()) * std::size_t(p.K) * 3;
     return floats * sizeof(float) + p.short_links.size() * sizeof(TapLink) +
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +

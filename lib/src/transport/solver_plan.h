@@ -154,6 +154,12 @@ constexpr std::size_t kSourceTile = 64;
 constexpr std::size_t kDenseRow = 256;
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
+// The sink takes the march's bins this many at a time when blocks are shorter (SolvePlan::emit_blocks),
+// in an output of at most kEmitBytes (or one block's, if that is more; kept twice then, by position as
+// the blocks come and by patch for the sink): each hand-over passes over every patch (the spots, and
+// the sink's own copy), which for the statue's 57k patches in blocks of two bins cost its film 0.4 s.
+constexpr int kEmitBins = 32;
+constexpr std::size_t kEmitBytes = std::size_t(16) << 20;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;
@@ -176,6 +182,8 @@ struct SolvePlan {
     std::size_t source_tile = kSourceTile;
     int threads = 1;
     int bt = 0;                     // block length, bins (a power of two)
+    int emit_blocks = 1;            // blocks per SolveBlock handed to the sink (a power of two)
+    int emit_bins() const { return bt * emit_blocks; }
     // Windows of the long pass: window s is bt << s bins long and is applied at the blocks that
     // start at its multiples, to the links of delay >= its length (and below the next window's;
     // the last takes every longer one). The accumulators hold the next `acc_bins` bins.

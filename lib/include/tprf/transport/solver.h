@@ -63,7 +63,10 @@ struct SolveBlock {
     const float* per_order = nullptr;
 };
 
-/// Called once per block, in time order, from one thread.
+/// Called once per block of final bins, in time order, from one thread; the blocks follow one another
+/// without gaps from SolverOptions::first_bin to the last bin. The march's own blocks, when shorter than
+/// 32 bins, come together (SolveStats::block_bins is the march's; a block here holds up to 32 bins, or
+/// fewer when N x 32 bins of output would pass 16 MiB).
 using BlockSink = std::function<void(const SolveBlock&)>;
 
 /// What the solve measured.
