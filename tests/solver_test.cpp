@@ -667,7 +667,7 @@ TEST(Solver, ShortBlocksReachTheSinkTogetherAndEveryBinOnce) {
     ASSERT_FALSE(blocks.empty());
     EXPECT_EQ(blocks.front().first, -7);
     for (std::size_t k = 0; k < blocks.size(); ++k) {
-        EXPECT_LE(blocks[k].second, 32);
+        EXPECT_LE(blocks[k].second, kSinkBins);
         if (k + 1 < blocks.size()) {
             EXPECT_EQ(blocks[k].first + blocks[k].second, blocks[k + 1].first);
             EXPECT_EQ(blocks[k].second % 2 == 0 || k == 0, true) << "only the first block starts mid-block";

@@ -445,7 +445,9 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     // The solver's blocks and the films' kept profiles (film_buffer_bytes).
     // A film that reads the second bounce apart keeps it in rows of its own.
     const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
-    const double outputs = (1.0 + terms) * n * kBlockBins * 3 * 4 +
+    // Short blocks (hierarchical sets) are kept a second time until the sink takes them (kSinkBins).
+    const double handed = (1.0 + terms) * n * kSinkBins * 3 * 4;
+    const double outputs = handed + std::min(handed, double(kSinkBytes)) +
                            (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kBlockBins);
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;

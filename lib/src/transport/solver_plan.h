@@ -154,12 +154,7 @@ constexpr std::size_t kSourceTile = 64;
 constexpr std::size_t kDenseRow = 256;
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
-// The sink takes the march's bins this many at a time when blocks are shorter (SolvePlan::emit_blocks),
-// in an output of at most kEmitBytes (or one block's, if that is more; kept twice then, by position as
-// the blocks come and by patch for the sink): each hand-over passes over every patch (the spots, and
-// the sink's own copy), which for the statue's 57k patches in blocks of two bins cost its film 0.4 s.
-constexpr int kEmitBins = 32;
-constexpr std::size_t kEmitBytes = std::size_t(16) << 20;
+
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;

@@ -63,10 +63,15 @@ struct SolveBlock {
     const float* per_order = nullptr;
 };
 
+/// The march's own blocks, when shorter, reach the sink together: up to kSinkBins bins in one SolveBlock,
+/// fewer when that output (N x bins x K x 3 floats, and as much per term) would pass kSinkBytes. Until
+/// then they are kept a second time (by patch position, as the march reads them).
+inline constexpr int kSinkBins = 32;
+inline constexpr std::size_t kSinkBytes = std::size_t(16) << 20;
+
 /// Called once per block of final bins, in time order, from one thread; the blocks follow one another
-/// without gaps from SolverOptions::first_bin to the last bin. The march's own blocks, when shorter than
-/// 32 bins, come together (SolveStats::block_bins is the march's; a block here holds up to 32 bins, or
-/// fewer when N x 32 bins of output would pass 16 MiB).
+/// without gaps from SolverOptions::first_bin to the last bin (SolveStats::block_bins is the march's
+/// block; a SolveBlock may hold several, see kSinkBins).
 using BlockSink = std::function<void(const SolveBlock&)>;
 
 /// What the solve measured.
