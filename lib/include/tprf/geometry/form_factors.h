@@ -20,26 +20,30 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
 
 /// atan2(s, c) for s >= 0 (the angle between two vectors, from |a x b| and a . b), to within a few
 /// units in the last place; inline and without libm's slow paths (atan2 was a third of the link stage).
-inline double angle_between(double s, double c) {
+/// T is double, or a GCC/Clang vector of doubles, each lane on its own (the contour integral's edges
+/// four at a time): every step is a select, not a branch.
+template <class T>
+inline T angle_between(T s, T c) {
     // Reduced to atan(t), 0 <= t <= 1, then to |u| <= tan(pi / 12) by
     // atan(t) = pi / 6 + atan((t sqrt3 - 1) / (t + sqrt3)), where the Taylor series of atan reaches
     // double precision within 14 terms (0.268^29 / 29 < 1e-18), summed as two interleaved halves.
-    const double ac = c < 0.0 ? -c : c;
-    const double hi = s > ac ? s : ac, lo = s > ac ? ac : s;
-    if (!(hi > 0.0)) return 0.0;
-    const double t = lo / hi;
     constexpr double kSqrt3 = 1.7320508075688772935;
     constexpr double kTanPi12 = 0.26794919243112270647;
     constexpr double kPi = 3.14159265358979323846;
-    const bool reduced = t > kTanPi12;
-    const double u = reduced ? (t * kSqrt3 - 1.0) / (t + kSqrt3) : t;
-    const double u2 = u * u, u4 = u2 * u2;
+    const T zero{}, one = zero + 1.0;
+    const T ac = c < zero ? -c : c;
+    const T hi = s > ac ? s : ac, lo = s > ac ? ac : s;
+    const T t = lo / (hi > zero ? hi : one);
+    const auto reduced = t > kTanPi12;
+    const T u = reduced ? (t * kSqrt3 - 1.0) / (t + kSqrt3) : t;
+    const T u2 = u * u, u4 = u2 * u2;
     // (-1)^k / (2k + 1): the even k in `even`, the odd in `odd`.
-    const double even = 1.0 + u4 * (1.0 / 5 + u4 * (1.0 / 9 + u4 * (1.0 / 13 + u4 * (1.0 / 17 + u4 * (1.0 / 21 + u4 * (1.0 / 25))))));
-    const double odd = -1.0 / 3 + u4 * (-1.0 / 7 + u4 * (-1.0 / 11 + u4 * (-1.0 / 15 + u4 * (-1.0 / 19 + u4 * (-1.0 / 23 + u4 * (-1.0 / 27))))));
-    double a = u * (even + u2 * odd) + (reduced ? kPi / 6.0 : 0.0);
-    if (s > ac) a = kPi / 2.0 - a;
-    return c < 0.0 ? kPi - a : a;
+    const T even = 1.0 + u4 * (1.0 / 5 + u4 * (1.0 / 9 + u4 * (1.0 / 13 + u4 * (1.0 / 17 + u4 * (1.0 / 21 + u4 * (1.0 / 25))))));
+    const T odd = -1.0 / 3 + u4 * (-1.0 / 7 + u4 * (-1.0 / 11 + u4 * (-1.0 / 15 + u4 * (-1.0 / 19 + u4 * (-1.0 / 23 + u4 * (-1.0 / 27))))));
+    T a = u * (even + u2 * odd) + (reduced ? zero + kPi / 6.0 : zero);
+    a = s > ac ? kPi / 2.0 - a : a;
+    a = c < zero ? kPi - a : a;
+    return hi > zero ? a : zero;  // 0 for s = c = 0 (and NaN)
 }
 
 /// Options of polygon_form_factor's adaptive quadrature.
