@@ -84,6 +84,8 @@ public:
           m_samples(std::clamp(h.samples, 4, kMaxSamples)), m_pieces(std::clamp(h.kernel_pieces, 1, kMaxPieces)) {
         // Every node's points for the oracle's first look, drawn once: a node is judged against hundreds
         // of others, and drawing its points anew for each was a quarter of the link stage.
+        m_cone_angle.resize(tree.nodes());
+        for (std::size_t m = 0; m < tree.nodes(); ++m) m_cone_angle[m] = std::acos(std::clamp(tree.cone_cos[m], -1.0, 1.0));
         m_points.resize(tree.nodes() * std::size_t(m_samples));
         parallel_for(tree.nodes(), {options.threads, 256, true}, [&](std::size_t m) {
             for (int k = 0; k < m_samples; ++k) {
@@ -142,7 +144,7 @@ private:
         const double dist = d.norm(), reach = m_tree.radius[from] + m_tree.radius[to];
         if (dist <= reach || m_tree.cone_cos[from] <= -1.0) return {0.0, M_PI};
         const double off_axis = std::acos(std::clamp(m_tree.cone_axis[from].dot(d) / dist, -1.0, 1.0));
-        const double spread = std::acos(std::clamp(m_tree.cone_cos[from], -1.0, 1.0)) + std::asin(reach / dist);
+        const double spread = m_cone_angle[from] + std::asin(reach / dist);
         return {off_axis - spread - 1e-9, off_axis + spread};
     }
 
@@ -213,6 +215,7 @@ private:
     const HierarchyOptions& m_h;
     const ClusterTree& m_tree;
     std::vector<double> m_radius;
+    std::vector<double> m_cone_angle;  // per node: its normal cone's half-angle (facing, millions of times)
     int m_samples;
     int m_pieces;
     struct StoredPoint {
