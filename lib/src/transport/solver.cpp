@@ -79,10 +79,15 @@ private:
         const RingSlot& slot = m_plan.slots[patch];
         return m_rings[std::size_t(layer)].data() + slot.offset + std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.C);
     }
-    // Node `node`'s value at `bin` into its ring.
+    // Node `node`'s value at `bin` into its ring; CT lanes (0: m_plan.C, counted at run time), as the
+    // bin-by-bin steps below: a copy of a run-time count of floats is a library call (memmove), made
+    // for every node and bin.
+    template <int CT>
     void store(int layer, std::size_t node, std::int64_t bin, const float* v);
-    // The value at `bin` of the patch at position q (its C lanes) into the recent bins.
-    void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v, int C) {
+    // The value at `bin` of the node at slot q (its lanes) into the recent bins.
+    template <int CT>
+    void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v) {
+        const int C = CT > 0 ? CT : m_plan.C;
         float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
         for (int c = 0; c < C; ++c) r[c] = v[c];
     }
@@ -104,7 +109,9 @@ private:
     // g += the same-bin links of the system's row r from layer src of the iterate `x` (SolvePlan::sweep_at).
     template <int CT>
     void add_same_links(const float* x, int src, std::size_t r, float* g) const;
+    template <int CT>
     void push_node(std::uint32_t i, std::int64_t b0);
+    template <int CT>
     void pull_node(std::uint32_t c, std::int64_t b0);
     template <class NodeFn>
     void over_tree(bool down, NodeFn visit);
@@ -152,8 +159,9 @@ private:
     bool m_stop = false;                        // a cancelled run, as read by one thread (omp single)
 };
 
+template <int CT>
 void March::store(int layer, std::size_t node, std::int64_t bin, const float* v) {
-    const int C = m_plan.C;
+    const int C = CT > 0 ? CT : m_plan.C;
     const RingSlot& slot = m_plan.slots[node];
     const int pos = int(bin & slot.mask);
     float* r = m_rings[std::size_t(layer)].data() + slot.offset;
@@ -338,31 +346,35 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
         // Outside the system the value is final.
         if (same)
             for (int c = 0; c < C; ++c) fixed[c] = std::max(fixed[c], std::abs(b[c]));
-        store_recent(l, q, bin, b, C);
+        store_recent<CT>(l, q, bin, b);
     }
 }
 
 // Node i's long-link sums over the block plus its parent's (after the parent's own push).
+template <int CT>
 void March::push_node(std::uint32_t i, std::int64_t b0) {
+    const int C = CT > 0 ? CT : m_plan.C;
     const std::uint32_t up = m_plan.tree->parent[i];
     if (up == kNoNode) return;
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
             float* own = m_acc[std::size_t(l)].data() + m_plan.acc_at(i, bin);
             const float* from = m_acc[std::size_t(l)].data() + m_plan.acc_at(up, bin);
-            for (int c = 0; c < m_plan.C; ++c) own[c] += from[c];
+            for (int c = 0; c < C; ++c) own[c] += from[c];
         }
 }
 
 // Cluster c's radiosity over the block's bins: the area-weighted mean of its children's. Its long-link
 // sums for the block, pushed to its children by now, are cleared.
+template <int CT>
 void March::pull_node(std::uint32_t c, std::int64_t b0) {
+    const int C = CT > 0 ? CT : m_plan.C;
     const ClusterTree& t = *m_plan.tree;
     const auto [a, b] = t.children[c - t.leaves];
     const float wa = float(t.area[a] / t.area[c]), wb = float(t.area[b] / t.area[c]);
     for (int l = 0; l < m_plan.L; ++l)
         for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin)
-            std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), m_plan.C, 0.0f);
+            std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), C, 0.0f);
     // The children's bins from the recent bins (by node slot: a cluster's children are near there).
     auto value = [&](int l, std::uint32_t node, std::int64_t bin) { return recent(l, m_plan.node_slot(node), bin); };
     for (int l = 0; l < m_plan.L; ++l)
@@ -370,9 +382,9 @@ void March::pull_node(std::uint32_t c, std::int64_t b0) {
             const float* va = value(l, a, bin);
             const float* vb = value(l, b, bin);
             float v[kMaxLanes];
-            for (int ch = 0; ch < m_plan.C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
-            store(l, c, bin, v);
-            store_recent(l, c, bin, v, m_plan.C);
+            for (int ch = 0; ch < C; ++ch) v[ch] = wa * va[ch] + wb * vb[ch];
+            store<CT>(l, c, bin, v);
+            store_recent<CT>(l, c, bin, v);
         }
 }
 
@@ -405,11 +417,15 @@ void March::over_tree(bool down, NodeFn visit) {
 }
 
 void March::push_block(std::int64_t b0) {
-    over_tree(true, [&](std::uint32_t i) { push_node(i, b0); });
+    with_lanes(m_plan.C, [&](auto lanes) {
+        over_tree(true, [&](std::uint32_t i) { push_node<decltype(lanes)::value>(i, b0); });
+    });
 }
 
 void March::pull_block(std::int64_t b0) {
-    over_tree(false, [&](std::uint32_t c) { pull_node(c, b0); });
+    with_lanes(m_plan.C, [&](auto lanes) {
+        over_tree(false, [&](std::uint32_t c) { pull_node<decltype(lanes)::value>(c, b0); });
+    });
 }
 
 // One Jacobi sweep of the same-bin system (in a region), sweep `iteration` (from 1) of this bin; true
@@ -530,9 +546,9 @@ void March::short_pass_lanes(std::int64_t b0) {
             for (int l = 0; l < p.L; ++l) {
                 const std::size_t q = p.sweep_rows[r], s = p.sweep_at(l, r);
                 const float* v = converged + s;
-                store_recent(l, q, b0 + o, v, p.C);
+                store_recent<CT>(l, q, b0 + o, v);
                 const float* base = m_base.data() + state_at(l, q);
-                for (int c = 0; c < p.C; ++c) {
+                for (int c = 0; c < (CT > 0 ? CT : p.C); ++c) {
                     m_same_before[s + std::size_t(c)] = m_same[s + std::size_t(c)];
                     m_same[s + std::size_t(c)] = v[c] - base[c];
                 }
@@ -544,7 +560,7 @@ void March::short_pass_lanes(std::int64_t b0) {
 #pragma omp for schedule(static)
     for (std::size_t q = 0; q < p.n; ++q)
         for (int l = 0; l < p.L; ++l)
-            for (std::int64_t bin = b0; bin < b0 + p.bt; ++bin) store(l, p.order[q], bin, recent(l, q, bin));
+            for (std::int64_t bin = b0; bin < b0 + p.bt; ++bin) store<CT>(l, p.order[q], bin, recent(l, q, bin));
 }
 
 // The total and per-order terms of the patch at position q for the bins [lo, lo + count), into its
