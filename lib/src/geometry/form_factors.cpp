@@ -151,43 +151,47 @@ Clipped clip_to_front(const Vec3* p, std::size_t count, const Vec3& origin, cons
     return out;
 }
 
-// Four doubles (GCC's and Clang's vector extension: one AVX register under -march=x86-64-v3, two SSE
-// registers without): the contour integral takes four edges at a time. Internal linkage only, so the
-// ABI note GCC gives for 32-byte vectors without AVX does not concern any caller.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi"
-typedef double Quad __attribute__((vector_size(32)));
+// Doubles in one register (GCC's and Clang's vector extension): four under AVX (-march=x86-64-v3),
+// two with SSE2 only, where a 32-byte vector would change how functions pass it.
+#ifdef __AVX__
+constexpr std::size_t kLanes = 4;
+typedef double Lanes __attribute__((vector_size(32)));
+#else
+constexpr std::size_t kLanes = 2;
+typedef double Lanes __attribute__((vector_size(16)));
+#endif
 
 // Lambert's contour sum, sum_k theta_k n . (b_k x a_k) / |b_k x a_k| over the edges (a_k, b_k) =
-// (d[k], d[k + 1]) of a closed polygon given relative to the point, four edges at a time. An edge whose
-// line passes through the point (|b x a| <= 1e-300) subtends no angle and adds nothing.
+// (d[k], d[k + 1]) of a closed polygon given relative to the point, kLanes edges at a time. An edge
+// whose line passes through the point (|b x a| <= 1e-300) subtends no angle and adds nothing.
 double contour_sum(const Vec3* d, std::size_t count, const Vec3& n) {
-    const Quad zero = {0.0, 0.0, 0.0, 0.0}, one = zero + 1.0;
-    Quad sum = zero;
-    for (std::size_t k0 = 0; k0 < count; k0 += 4) {
-        Quad ax = zero, ay = zero, az = zero, bx = zero, by = zero, bz = zero;
-        for (std::size_t l = 0; l < 4 && k0 + l < count; ++l) {
+    const Lanes zero{}, one = zero + 1.0;
+    Lanes sum = zero;
+    for (std::size_t k0 = 0; k0 < count; k0 += kLanes) {
+        Lanes ax = zero, ay = zero, az = zero, bx = zero, by = zero, bz = zero;
+        for (std::size_t l = 0; l < kLanes && k0 + l < count; ++l) {
             const Vec3& a = d[k0 + l];
             const Vec3& b = d[k0 + l + 1 < count ? k0 + l + 1 : 0];
             ax[l] = a.x(), ay[l] = a.y(), az[l] = a.z();
             bx[l] = b.x(), by[l] = b.y(), bz[l] = b.z();
         }
-        const Quad cx = by * az - bz * ay, cy = bz * ax - bx * az, cz = bx * ay - by * ax;
-        const Quad s2 = cx * cx + cy * cy + cz * cz;
+        const Lanes cx = by * az - bz * ay, cy = bz * ax - bx * az, cz = bx * ay - by * ax;
+        const Lanes s2 = cx * cx + cy * cy + cz * cz;
 #ifdef __AVX__
-        const Quad s = _mm256_sqrt_pd(s2);  // one instruction, where std::sqrt per lane is four and errno's check
+        const Lanes s = _mm256_sqrt_pd(s2);  // one instruction, where std::sqrt per lane is four and errno's check
 #else
-        Quad s;
-        for (int l = 0; l < 4; ++l) s[l] = std::sqrt(s2[l]);
+        Lanes s;
+        for (std::size_t l = 0; l < kLanes; ++l) s[l] = std::sqrt(s2[l]);
 #endif
         const auto lit = s > 1e-300;
-        const Quad theta = angle_between(s, ax * bx + ay * by + az * bz);
-        const Quad term = theta * (n.x() * cx + n.y() * cy + n.z() * cz) / (lit ? s : one);
+        const Lanes theta = angle_between(s, ax * bx + ay * by + az * bz);
+        const Lanes term = theta * (n.x() * cx + n.y() * cy + n.z() * cz) / (lit ? s : one);
         sum += lit ? term : zero;
     }
-    return (sum[0] + sum[1]) + (sum[2] + sum[3]);
+    double total = 0.0;
+    for (std::size_t l = 0; l < kLanes; l += 2) total += sum[l] + sum[l + 1];
+    return total;
 }
-#pragma GCC diagnostic pop
 
 }  // namespace
 

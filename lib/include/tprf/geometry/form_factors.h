@@ -21,7 +21,7 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
 /// atan2(s, c) for s >= 0 (the angle between two vectors, from |a x b| and a . b), to within a few
 /// units in the last place; inline and without libm's slow paths (atan2 was a third of the link stage).
 /// T is double, or a GCC/Clang vector of doubles, each lane on its own (the contour integral's edges
-/// four at a time): every step is a select, not a branch.
+/// several at a time): every step is a select, not a branch.
 template <class T>
 inline T angle_between(T s, T c) {
     // Reduced to atan(t), 0 <= t <= 1, then to |u| <= tan(pi / 12) by
