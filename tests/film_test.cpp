@@ -105,7 +105,8 @@ struct Filmed {
     int first_bin = -240, bins = kBins + 240;
 };
 
-Filmed film_of(const Gather& g, const tprf::TimeAxis& time, DelayMode delay) {
+// `lengths`: the blocks' lengths in turn (repeated), or solver blocks of kBlock bins.
+Filmed film_of(const Gather& g, const tprf::TimeAxis& time, DelayMode delay, const std::vector<int>& lengths = {}) {
     Filmed f;
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> unit(0.0f, 1.0f);
@@ -116,8 +117,9 @@ Filmed film_of(const Gather& g, const tprf::TimeAxis& time, DelayMode delay) {
     f.cube.assign(std::size_t(kWidth) * kBins * 3, 0.0f);
     tprf::TransientFilm film(g, none, time, delay, f.cube.data(), -1, false, 2);
     std::vector<float> block;
-    for (int b0 = 0; b0 < f.bins; b0 += kBlock) {
-        const int n = std::min(kBlock, f.bins - b0);
+    std::size_t turn = 0;
+    for (int b0 = 0, n = 0; b0 < f.bins; b0 += n) {
+        n = std::min(lengths.empty() ? kBlock : lengths[turn++ % lengths.size()], f.bins - b0);
         block.assign(std::size_t(kPatches) * std::size_t(n) * 3, 0.0f);
         for (int i = 0; i < kPatches; ++i)
             std::copy_n(f.profile.begin() + std::ptrdiff_t((std::size_t(i) * std::size_t(f.bins) + std::size_t(b0)) * 3),
@@ -140,13 +142,13 @@ tprf::TimeAxis window() {
     return time;
 }
 
-void check_film(DelayMode delay) {
+void check_film(DelayMode delay, const std::vector<int>& lengths = {}) {
     const Gather g = made_up_gather();
     const tprf::TimeAxis time = window();
     const tprf::FilmTaps taps = tprf::film_taps(g, time, delay, 1);
     EXPECT_GT(taps.longest, tprf::kFilmPadBins + 1);  // pixel 4 takes the general path
     ASSERT_LT(taps.taps.size(), g.taps.size());       // merged
-    const Filmed f = film_of(g, time, delay);
+    const Filmed f = film_of(g, time, delay, lengths);
     const std::vector<float>& cube = f.cube;
     const std::vector<double> expected = by_definition(g, f.profile, f.first_bin, f.bins, time, delay);
     double peak = 0.0, worst = 0.0;
@@ -169,6 +171,14 @@ void check_film(DelayMode delay) {
 TEST(Film, KernelsApplyEachSamplesLegSplitBetweenTwoBins) { check_film(DelayMode::Linear); }
 
 TEST(Film, KernelsApplyEachSamplesLegInTheNearestBin) { check_film(DelayMode::Nearest); }
+
+// The solver hands over a short first block and then up to kSinkBins bins (blocks of short solver
+// blocks together), longer ones when asked: a film keeps and films any sequence of lengths, filming
+// early when the next block would not fit, growing when one is longer than it was sized for.
+TEST(Film, BlocksOfChangingLengthsFilmTheSameCube) {
+    check_film(DelayMode::Linear, {15, 16, 16, 32, 7, 32, 1, 31, 32, 32, 2});
+    check_film(DelayMode::Linear, {3, 32, 32, 300});
+}
 
 // gather_points merges a pixel's taps that the film cannot tell apart (merge_taps): the cube must not
 // change beyond a float leg's precision (a leg of 2 m is a float to 1.2e-7 m, 1.2e-5 of a 1 cm bin).

@@ -626,12 +626,21 @@ void expect_batches_match_singles(const Prepared& p, const std::vector<Illuminat
 TEST(Solver, ShortBlocksReachTheSinkTogetherAndEveryBinOnce) {
     // Blocks of 2 bins hand their bins over 32 at a time (SolveBlock), from the first bin asked for
     // (7 before the window) to the last (a partial block of 301): contiguous, each bin once, with the
-    // per-order terms and a spot that is seen but not propagated, as blocks of 32 bins give them.
+    // per-order terms and a spot that is seen but not propagated, as longer blocks give them. Links of
+    // a cluster tree, so that the march's patch positions are not the patches' ids.
     Scene scene;
     scene.max_edge = 0.2;
     test::add_closed_cube(scene, 1.0, 0.7);
     Prepared p = prepare(scene);
     const std::size_t n = p.patches.size();
+    HierarchyOptions h;
+    h.tolerance = 0.05;
+    h.bin_width_m = 0.02;
+    p.links = hierarchical_link_set(p.patches, Visibility(p.patches), {}, h);
+    ASSERT_GT(p.links.nodes(), n);
+    bool identity = true;
+    for (std::size_t k = 0; k < n; ++k) identity = identity && p.links.tree.leaf_order[k] == k;
+    ASSERT_FALSE(identity);
     p.emission = by_hand(n, {{3, 0.05, Rgb(1.0, 0.5, 0.25), 0, true}, {40, 0.3, Rgb::Constant(0.7), 1, true},
                              {17, 1.234, Rgb::Constant(0.8), 1, false}});
     const TimeAxis time = time_axis(301, 0.02);
@@ -662,8 +671,9 @@ TEST(Solver, ShortBlocksReachTheSinkTogetherAndEveryBinOnce) {
     };
     std::vector<std::pair<int, int>> blocks;
     const Profiles short_blocks = run(2, &blocks);
-    const Profiles reference = run(32, nullptr);
+    const Profiles reference = run(32, nullptr);  // the set's longest blocks
     ASSERT_EQ(short_blocks.stats.block_bins, 2);
+    ASSERT_GT(reference.stats.block_bins, 2);
     ASSERT_FALSE(blocks.empty());
     EXPECT_EQ(blocks.front().first, -7);
     for (std::size_t k = 0; k < blocks.size(); ++k) {
@@ -684,7 +694,14 @@ TEST(Solver, ShortBlocksReachTheSinkTogetherAndEveryBinOnce) {
     for (std::size_t k = 0; k < reference.terms.size(); ++k)
         worst = std::max(worst, std::abs(short_blocks.terms[k] - reference.terms[k]));
     EXPECT_LE(worst, 1e-5f * peak);
-    // The spot (its energy is the patch's radiosity in that bin) is in its bin's order-1 term.
+    // Each patch's own row: the pulse of patch 3 is its order-0 light in bin 2, the spot (its energy
+    // is the patch's radiosity in that bin) patch 17's order-1 light in its bin.
+    EXPECT_FLOAT_EQ(float(short_blocks.term(0, 3, 2, 0)), 1.0f);
+    EXPECT_FLOAT_EQ(float(short_blocks.term(0, 3, 2, 2)), 0.25f);
+    for (std::size_t i = 0; i < n; ++i)
+        if (i != 3) {
+            EXPECT_EQ(short_blocks.term(0, i, 2, 0), 0.0) << i;
+        }
     const int spot_bin = int(1.234 / 0.02);
     EXPECT_GE(short_blocks.term(1, 17, spot_bin, 0), 0.8 * (1 - 1e-6));
     EXPECT_GE(short_blocks.at(17, spot_bin, 0), 0.8 * (1 - 1e-6));

@@ -147,8 +147,11 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         source = block.per_order + std::size_t(m_order) * n * bins * 3;
     }
     const std::size_t pad = std::size_t(m_pad);
-    if (m_capacity == 0) {  // the rows, zero: the padding is never written, the kept bins always are
-        m_capacity = film_buffer_bins(n, bins);
+    // The rows, zero: the padding is never written, the kept bins always are. Sized for the solver's
+    // largest block (kSinkBins bins; its first can be shorter), or for a larger one when it comes.
+    if (m_capacity == 0 || bins > m_capacity) {
+        TPRF_CHECK_EQ(m_kept, std::size_t(0));  // add_block has filmed what it kept
+        m_capacity = film_buffer_bins(n, std::max(bins, std::size_t(kSinkBins)));
         m_indirect.assign(n * (m_capacity + 2 * pad) * 3 + kSlack, 0.0f);
         if (m_first_link) m_first.assign(m_indirect.size(), 0.0f);
     }
@@ -299,8 +302,11 @@ void TransientFilm::add_taps(const FilmTaps& taps, const std::vector<float>& row
 }
 
 void TransientFilm::add_block(const SolveBlock& block) {
+    // Blocks differ in length (a short first one, then kSinkBins): film what is kept when this one
+    // does not fit, and after it when another as long would not.
+    if (m_kept > 0 && m_kept + std::size_t(block.bins) > m_capacity) finish();
     copy_indirect(block);
-    if (m_kept + std::size_t(block.bins) > m_capacity) finish();  // the next block would not fit
+    if (m_kept + std::size_t(block.bins) > m_capacity) finish();
 }
 
 void TransientFilm::finish() {

@@ -430,7 +430,7 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
 
 // The march: rings of every node that sends (the largest delay is the scene's diagonal), block buffers,
 // the lists of links shorter than a block and the films' block scratch. Returns the part that grows
-// with the lanes (rings and blocks): the bytes of one illumination's C lanes.
+// with the lanes (rings, blocks, the blocks handed over): the bytes of one illumination's lanes.
 double estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
     const auto [layers, terms, cubes] = bounce_layout(scene.solver);
     const double bin_m = scene.time.bin_width_m();
@@ -445,7 +445,8 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     // The solver's blocks and the films' kept profiles (film_buffer_bytes).
     // A film that reads the second bounce apart keeps it in rows of its own.
     const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
-    // Short blocks (hierarchical sets) are kept a second time until the sink takes them (kSinkBins).
+    // The blocks handed to the sink, each illumination's (kSinkBins bins at most); short blocks
+    // (hierarchical sets) are kept a second time until the sink takes them, at most kSinkBytes.
     const double handed = (1.0 + terms) * n * kSinkBins * 3 * 4;
     const double outputs = handed + std::min(handed, double(kSinkBytes)) +
                            (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kBlockBins);
@@ -462,7 +463,7 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
     if (scene.links.method == LinkMethod::Hierarchical)
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * n * scene.time.bins);
-    return rings + blocks;
+    return rings + blocks + handed;
 }
 
 // The memory-mapped cubes the solve fills (the transient cube, per-bounce cubes, patch profiles), and

@@ -55,8 +55,9 @@ inline constexpr std::size_t kFilmBufferBins = 256;
 /// this many zero bins on each side); longer ones, rare, a bin of the kernel at a time.
 inline constexpr std::size_t kFilmPadBins = 31;
 
-/// Bins of the solve's output a film keeps for `patches` patches and solver blocks of `block_bins`:
-/// as many whole blocks as kFilmBufferBytes hold, up to kFilmBufferBins, at least one.
+/// Bins of the solve's output a film keeps for `patches` patches and solver blocks of up to `block_bins`
+/// (TransientFilm asks for kSinkBins, the solver's longest): as many whole blocks as kFilmBufferBytes
+/// hold, up to kFilmBufferBins, at least one.
 inline std::size_t film_buffer_bins(std::size_t patches, std::size_t block_bins) {
     const std::size_t fit = kFilmBufferBytes / std::max<std::size_t>(1, patches * 3 * sizeof(float));
     return std::max(block_bins, std::min(fit, kFilmBufferBins) / block_bins * block_bins);
