@@ -303,10 +303,9 @@ void TransientFilm::add_taps(const FilmTaps& taps, const std::vector<float>& row
 
 void TransientFilm::add_block(const SolveBlock& block) {
     // Blocks differ in length (a short first one, then kSinkBins): film what is kept when this one
-    // does not fit, and after it when another as long would not.
+    // does not fit.
     if (m_kept > 0 && m_kept + std::size_t(block.bins) > m_capacity) finish();
     copy_indirect(block);
-    if (m_kept + std::size_t(block.bins) > m_capacity) finish();
 }
 
 void TransientFilm::finish() {

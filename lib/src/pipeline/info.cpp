@@ -449,7 +449,7 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     // (hierarchical sets) are kept a second time until the sink takes them, at most kSinkBytes.
     const double handed = (1.0 + terms) * n * kSinkBins * 3 * 4;
     const double outputs = handed + std::min(handed, double(kSinkBytes)) +
-                           (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kBlockBins);
+                           (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kSinkBins);
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
     // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).

@@ -123,7 +123,7 @@ private:
     bool sweeps_converged(int parity) const;
     template <int CT>
     void block_totals(std::size_t q, std::int64_t lo, int count, int offset);
-    void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi, int stride);
+    void block_spots(std::size_t i, std::int64_t lo, std::int64_t hi);
 
     const Links& m_links;
     std::span<const Illumination* const> m_batch;
@@ -507,6 +507,7 @@ bool March::sweeps_converged(int parity) const {
 template <int CT>
 void March::short_pass_lanes(std::int64_t b0) {
     const SolvePlan& p = m_plan;
+    const int C = CT > 0 ? CT : p.C;
     const bool same = p.same_bin();
     for (int o = 0; o < p.bt; ++o) {
         // A cancelled run leaves the block here (solve_transient throws after the region): every
@@ -548,7 +549,7 @@ void March::short_pass_lanes(std::int64_t b0) {
                 const float* v = converged + s;
                 store_recent<CT>(l, q, b0 + o, v);
                 const float* base = m_base.data() + state_at(l, q);
-                for (int c = 0; c < (CT > 0 ? CT : p.C); ++c) {
+                for (int c = 0; c < C; ++c) {
                     m_same_before[s + std::size_t(c)] = m_same[s + std::size_t(c)];
                     m_same[s + std::size_t(c)] = v[c] - base[c];
                 }
@@ -620,11 +621,11 @@ void March::block_totals(std::size_t q, std::int64_t lo, int count, int offset) 
 }
 
 // Pulses seen but not propagated (the laser spot) join the output only, each its illumination's: those
-// of the kept bins [lo, hi), patch i's row `stride` bins long.
-void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi, int stride) {
+// of the bins [lo, hi) handed over.
+void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
     const SolvePlan& p = m_plan;
     const LayerPlan& plan = p.layers;
-    const std::size_t K = std::size_t(p.K);
+    const std::size_t count = std::size_t(hi - lo), K = std::size_t(p.K);
     for (std::size_t e = 0; e < m_batch.size(); ++e) {
         const Illumination& illumination = *m_batch[e];
         for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
@@ -632,12 +633,12 @@ void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi, int str
             const std::int64_t b = p.pulse_bin(pulse);
             if (pulse.propagates || b < lo || b >= hi) continue;
             if (plan.total < 0 && pulse.order >= plan.exact) continue;  // beyond max_bounces
-            const std::size_t at = ((i * std::size_t(stride) + std::size_t(b - lo)) * K + e) * 3;
+            const std::size_t at = ((i * count + std::size_t(b - lo)) * K + e) * 3;
             for (int c = 0; c < 3; ++c) {
                 m_out_total[at + std::size_t(c)] += float(pulse.energy[c]);
                 if (plan.terms > 0) {
                     const std::size_t term = std::size_t(std::min<int>(pulse.order, plan.terms - 1));
-                    m_out_terms[term * p.n * std::size_t(stride) * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
+                    m_out_terms[term * p.n * count * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
                 }
             }
         }
@@ -674,7 +675,7 @@ void March::emit_block(std::int64_t b0, const BlockSink& sink) {
                 std::copy_n(m_kept.data() + (std::size_t(1 + k) * p.n + q) * kept_row, row,
                             m_out_terms.data() + (std::size_t(k) * p.n + i) * row);
         }
-        block_spots(i, m_out_lo, m_out_lo + count, count);
+        block_spots(i, m_out_lo, m_out_lo + count);
     });
     SolveBlock block;
     block.first_bin = int(m_out_lo);

@@ -422,8 +422,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
     // Short blocks reach the sink together (kSinkBins): each hand-over passes over every patch (the
-    // spots, the sink's own copy), which for the statue's 57k patches in blocks of two bins cost 1.3% of
-    // the render's CPU.
+    // spots, the sink's own copy); for the statue's 57k patches in blocks of two bins the output's work
+    // fell from 4.0% to 2.7% of the render's CPU.
     const std::size_t out_per_bin = (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.K) * 3 * sizeof(float);
     while (plan.emit_bins() * 2 <= kSinkBins && out_per_bin * std::size_t(plan.emit_bins() * 2) <= kSinkBytes)
         plan.emit_blocks *= 2;

@@ -154,7 +154,6 @@ constexpr std::size_t kSourceTile = 64;
 constexpr std::size_t kDenseRow = 256;
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
-
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
 // time; shorter ones (down to the block) in the longest power-of-two window their delay allows.
 constexpr int kLongestWindow = 32;
