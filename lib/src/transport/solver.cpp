@@ -737,6 +737,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
     March march(batch, plan);
     SolveStats stats;
     stats.block_bins = plan.bt;
+    stats.wide_kernels = plan.wide;
     stats.ring_bins = plan.ring;
     stats.channels = plan.channels;
     stats.illuminations = plan.K;

@@ -196,6 +196,7 @@ struct SolvePlan {
     // The lane that holds illumination k's colour c (a grey lane serves all three).
     int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
+    bool wide = false;              // the long-link kernels for AVX-512 (SolverOptions::wide_vectors)
     double start_m = 0.0, inv_bin = 0.0;
     float inv_bin_f = 0.0f;
     LayerPlan layers;
@@ -291,14 +292,17 @@ std::size_t working_bytes(const SolvePlan& p);
 /// Whether the march can run on one channel: every albedo, link tint and pulse grey.
 bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch);
 
-/// The long-link kernel for C lanes and windows of `bins` bins, or null (solver_kernels.cpp).
-GatherKernel pick_kernel(int C, int bins);
+/// Whether this build has the kernels compiled for AVX-512 (512-bit vectors) and this CPU runs them.
+bool cpu_has_wide_kernels();
+/// The long-link kernel for C lanes and windows of `bins` bins, or null (solver_kernels.cpp); `wide`:
+/// the AVX-512 one where cpu_has_wide_kernels() (the results are bit-identical).
+GatherKernel pick_kernel(int C, int bins, bool wide);
 /// The generic kernel for windows of `bins` bins, up to kLongestWindow; null beyond (gather_long_any).
-LaneKernel lane_kernel_for(int bins);
+LaneKernel lane_kernel_for(int bins, bool wide);
 /// The kernel of the shortest window's links (SolvePlan::near) for C lanes and blocks of `bins` bins, reading
 /// the recent bins (specialised for the lane counts gather_long has, any other count at run time), or
 /// null for blocks of more than 16 bins.
-RecentKernel recent_kernel_for(int C, int bins);
+RecentKernel recent_kernel_for(int C, int bins, bool wide);
 /// Any lane count and window length, summed straight into the accumulators.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
                      float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,

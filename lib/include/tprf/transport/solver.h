@@ -41,6 +41,9 @@ struct SolverOptions {
     int bounce_terms = 0;                 ///< > 0: also report per-order terms (see SolveBlock)
     int block_bins = 32;                  ///< time-block length, bins
     int threads = 0;                      ///< 0: all cores
+    /// Run the long-link kernels with 512-bit vectors where the CPU has AVX-512 (and the compiler
+    /// built them: GCC on x86-64). The results are bit-identical either way; false is for comparing.
+    bool wide_vectors = true;
     ProgressFn progress;                  ///< phase "solve"
     /// The first bin handed to the sink, <= 0: bins before the window (negative SolveBlock::first_bin),
     /// for a camera whose leg brings the light that left the patches then into the window.
@@ -90,6 +93,7 @@ struct SolveStats {
     double seconds_long = 0.0;          ///< wall time in the blocked long-link pass
     double seconds_short = 0.0;         ///< wall time in the bin-by-bin pass (short and same-bin links)
     double seconds_sink = 0.0;          ///< wall time in output assembly and the sink
+    bool wide_kernels = false;          ///< the long-link kernels ran with AVX-512 (SolverOptions::wide_vectors)
 };
 
 /// Marches over the scene's time axis and hands every block of final bins to `sink`.
