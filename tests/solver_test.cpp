@@ -189,6 +189,26 @@ TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
     }
 }
 
+TEST(Solver, TiledSourcesKeepEveryProfilesIntegral) {
+    // 600 patches that all see most of the others: dense rows, so the long pass walks its receivers
+    // in tiles of 256 and their sources in tiles of 64 (each tile's sums added up apart, then into
+    // the accumulators), on windows of 8, 16 and 32 bins (blocks of 8; lags of 2 to 35 bins).
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);
+    scene.lights.push_back(PointLight{Vec3(0.3, 0.6, 0.7), Rgb(1.0, 2.0, 3.0)});
+    const Prepared p = prepare(scene);
+    ASSERT_EQ(p.patches.size(), 600u);
+    ASSERT_GE(p.links.links.size(), 256 * p.patches.size());  // solver_plan.h: kDenseRow
+    const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
+    SolverOptions options;
+    options.block_bins = 8;
+    const Profiles pr = solve(p, time_axis(800, 0.05), options);
+    EXPECT_EQ(pr.stats.block_bins, 8);
+    expect_integrals_are_steady(pr, steady, 3, 1e-9);
+}
+
 TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
     // Bins of 10 m: every link of a 1 m cube has delay 0, so all the light lands in bin 0.
     const Prepared p = lit_cube(0.25, Vec3(0.3, 0.4, 0.5));
@@ -849,6 +869,19 @@ TEST(Solver, WideKernelsGiveBitIdenticalProfiles) {
         const Profiles hn = solve(fine.patches, set, fine_light, schedule.time, narrow);
         EXPECT_EQ(ha.total, hn.total) << schedule.name << ", hierarchical links";
     }
+    // Dense rows: the kernels add into a receiver tile's own sums (contiguous) instead.
+    Scene scene;
+    scene.max_edge = 0.1;
+    test::add_closed_cube(scene, 1.0, 0.5);
+    scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);
+    scene.lights.push_back(PointLight{Vec3(0.3, 0.6, 0.7), Rgb(1.0, 2.0, 3.0)});
+    const Prepared dense = prepare(scene);
+    ASSERT_GE(dense.links.links.size(), 256 * dense.patches.size());
+    SolverOptions wide, narrow;
+    wide.block_bins = narrow.block_bins = 8;
+    narrow.wide_vectors = false;
+    EXPECT_EQ(solve(dense, time_axis(300, 0.02), wide).total, solve(dense, time_axis(300, 0.02), narrow).total)
+        << "dense rows";
 }
 
 TEST(SolverBatch, RejectsEmptyAndOversizedBatches) {

@@ -34,7 +34,8 @@ nlohmann::json solver_json(const RenderRecord& r) {
             {"link_bin_updates", r.stats.link_bin_updates},
             {"short_links", r.stats.short_links},
             {"max_jacobi_iterations", r.stats.max_jacobi_iterations},
-            {"jacobi_sweeps", r.stats.jacobi_sweeps}};
+            {"jacobi_sweeps", r.stats.jacobi_sweeps},
+            {"wide_kernels", r.stats.wide_kernels}};
 }
 
 nlohmann::json seconds_json(const PhaseSeconds& s) {

@@ -43,7 +43,8 @@ public:
           m_same_before(m_same.size(), 0.0f),
           m_kept(plan.emit_blocks > 1 ? (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3 : 0),
           m_out_total(plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3),
-          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3) {
+          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3),
+          m_tile_sums(std::size_t(plan.threads), std::vector<float>(plan.tile_sum_floats())) {
         if (plan.same_bin())
             for (int k = 0; k < plan.sweep_buffers(); ++k)
                 m_sweep[k].assign(std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C), 0.0f);
@@ -148,6 +149,8 @@ private:
     // N x m_out_bins x K x 3 (SolveBlock); with one block, written there directly.
     std::vector<float> m_kept;
     std::vector<float> m_out_total, m_out_terms;
+    // Per thread: a receiver tile's sums over its source tiles (SolvePlan::tile_sum_floats).
+    std::vector<std::vector<float>> m_tile_sums;
     std::int64_t m_out_lo = 0;
     int m_out_bins = 0;
     // The Jacobi sweep's max-reductions per lane, by the sweep's parity (a thread still reading one
@@ -202,9 +205,15 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
     for (int s = 0; s < p.windows; ++s)
         if ((b0 & std::int64_t(p.window_bins(s) - 1)) == 0) due[count++] = s;
     std::uint64_t cursor[kReceiverTile][kMaxWindows];
+    // The due windows' bins: the longest one's (windows are due from the shortest up).
+    const int span = count > 0 ? p.window_bins(due[count - 1]) : 0;
+    const bool tiled = p.source_tile < p.m && count > 0;
+    const std::size_t row = std::size_t(span) * std::size_t(p.C);
+    float* sums = tiled ? m_tile_sums[std::size_t(omp_get_thread_num())].data() : nullptr;
     for (int l = 0; l < p.L; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         if (src < 0) continue;
+        if (tiled) std::fill_n(sums, (i1 - i0) * row, 0.0f);
         const float* ring_src = m_rings[std::size_t(src)].data();
         const RecentView recent_src{m_recent[std::size_t(src)].data(), p.m * std::size_t(p.C), p.recent_bins - 1};
         for (std::size_t i = i0; i < i1; ++i)
@@ -212,27 +221,37 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
         for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
             const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
             for (std::size_t i = i0; i < i1; ++i) {
-                float* a = m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
+                // Tiled sources add into the tile's own sums (receiver-major, so a kernel's sums add
+                // as one contiguous stream), which go to the accumulators once, after the last tile.
+                float* a = tiled ? sums + (i - i0) * row : m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
+                const std::size_t stride = tiled ? std::size_t(p.C) : p.acc_stride();
                 // The shortest window's links, from their own list, with the first source tile.
                 if (p.recent_kernel && s0 == 0)
-                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0,
-                                    p.C, a, p.acc_stride());
+                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0, p.C, a, stride);
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
                     if (cursor[i - i0][d] >= end) continue;
                     if (p.kernel[s])
                         p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                    p.slots.data(), b0, a, p.acc_stride());
+                                    p.slots.data(), b0, a, stride);
                     else if (p.lane_kernel[s])
                         p.lane_kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                         p.slots.data(), b0, p.C, a, p.acc_stride());
+                                         p.slots.data(), b0, p.C, a, stride);
                     else
                         gather_long_any(m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                        p.slots.data(), b0, p.C, p.window_bins(s), a, p.acc_stride());
+                                        p.slots.data(), b0, p.C, p.window_bins(s), a, stride);
                 }
             }
         }
+        if (tiled)
+            for (std::size_t i = i0; i < i1; ++i) {
+                const float* from = sums + (i - i0) * row;
+                for (int b = 0; b < span; ++b) {
+                    float* to = m_acc[std::size_t(l)].data() + p.acc_at(i, b0 + b);
+                    for (int c = 0; c < p.C; ++c) to[c] += from[b * p.C + c];
+                }
+            }
         if (!p.tinted_long.empty())
             for (std::size_t i = i0; i < std::min(i1, p.n); ++i)
                 gather_tinted(i, ring_src, b0, m_acc[std::size_t(l)].data() + p.acc_at(i, b0));

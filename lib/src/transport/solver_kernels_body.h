@@ -6,6 +6,18 @@
 
 namespace {
 
+// A kernel's sums into the accumulators: bin b's C lanes at acc + b * stride, one stream where the
+// bins are contiguous (a receiver tile's own sums).
+inline TPRF_KERNEL_TARGET void add_sums(float* __restrict acc, std::size_t stride, const float* __restrict local, int C,
+                                        int BT) {
+    if (stride == std::size_t(C)) {
+        for (int e = 0; e < C * BT; ++e) acc[e] += local[e];
+        return;
+    }
+    for (int b = 0; b < BT; ++b)
+        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+}
+
 // Links ahead whose source history the long-link kernel prefetches.
 constexpr std::uint64_t kAhead = 8;
 
@@ -46,8 +58,7 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
     }
     if (k == cursor) return;  // no link of this window in this source tile: nothing to add
     cursor = k;
-    for (int b = 0; b < BT; ++b)
-        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+    add_sums(acc, stride, local, C, BT);
 }
 
 // The same for any lane count C and windows of BT bins: the sums (C * BT floats) in a local array,
@@ -82,8 +93,7 @@ TPRF_KERNEL_TARGET void gather_lanes(const Links& links, std::uint64_t& cursor, 
     }
     if (k == cursor) return;
     cursor = k;
-    for (int b = 0; b < BT; ++b)
-        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+    add_sums(acc, stride, local, C, BT);
 }
 
 // The shortest window's links (SolvePlan::recent_kernel) of one receiver, [k0, k1) of the
@@ -118,8 +128,7 @@ TPRF_KERNEL_TARGET void gather_recent(const NearLinks& near, std::uint64_t k0, s
             h = next;
         }
     }
-    for (int b = 0; b < BT; ++b)
-        for (int c = 0; c < C; ++c) acc[std::size_t(b) * stride + std::size_t(c)] += local[b * C + c];
+    add_sums(acc, stride, local, C, BT);
 }
 
 template <int BT>

@@ -468,7 +468,8 @@ std::size_t working_bytes(const SolvePlan& p) {
     const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
                                L * std::size_t(p.recent_bins) * p.m * C + state + sweeps +
                                (p.emit_blocks > 1 ? 2 : 1) * (1 + std::size_t(p.layers.terms)) * p.n *
-                                   std::size_t(p.emit_bins()) * std::size_t(p.K) * 3;
+                                   std::size_t(p.emit_bins()) * std::size_t(p.K) * 3 +
+                               std::size_t(p.threads) * p.tile_sum_floats();
     return floats * sizeof(float) + p.short_links.size() * sizeof(TapLink) +
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +

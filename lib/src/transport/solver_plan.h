@@ -264,6 +264,11 @@ struct SolvePlan {
         return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
     }
     std::size_t acc_stride() const { return m * std::size_t(C); }
+    // Floats of a thread's receiver-tile sums in the long pass: a tile's receivers x the longest window
+    // x lanes, where the sources are tiled (dense rows); none otherwise.
+    std::size_t tile_sum_floats() const {
+        return source_tile < m ? std::min(m, kReceiverTile) * std::size_t(acc_bins) * std::size_t(C) : 0;
+    }
     // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
     // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
     // shortest window read (a few bins of near nodes together), besides the rings.
