@@ -7,6 +7,8 @@
 #include "solver_plan.h"
 
 #include <algorithm>
+#include <cstdlib>
+#include <string_view>
 
 namespace tprf::solver_detail {
 
@@ -26,11 +28,17 @@ namespace wide {
 }  // namespace wide
 #endif
 
+// TPRF_NO_AVX512 (set, not empty, not "0") keeps every run on the library's own kernels: for CPUs that
+// slow their clock for 512-bit work, and for comparing the two from the command line.
 bool cpu_has_wide_kernels() {
 #ifdef TPRF_WIDE_KERNELS
-    static const bool has = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
-                            __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") &&
-                            __builtin_cpu_supports("avx512vl");
+    static const bool has = [] {
+        const char* off = std::getenv("TPRF_NO_AVX512");
+        if (off && *off && std::string_view(off) != "0") return false;
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+               __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") &&
+               __builtin_cpu_supports("avx512vl");
+    }();
     return has;
 #else
     return false;
