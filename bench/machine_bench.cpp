@@ -74,6 +74,7 @@ volatile double g_stream_sink = 0.0;
 double measure_fma_peak_gflops(int threads, int vector_bits) {
     if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return 0.0;
     if (vector_bits == 0) vector_bits = __builtin_cpu_supports("avx512f") ? 512 : 256;
+    if (vector_bits != 256 && vector_bits != 512) return 0.0;
     if (vector_bits == 512 && !__builtin_cpu_supports("avx512f")) return 0.0;
     const int lanes = vector_bits / 32;
     threads = std::max(threads, 1);

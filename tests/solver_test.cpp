@@ -189,24 +189,54 @@ TEST(Solver, TimeIntegralOfEveryProfileIsTheSteadyState) {
     }
 }
 
-TEST(Solver, TiledSourcesKeepEveryProfilesIntegral) {
-    // 600 patches that all see most of the others: dense rows, so the long pass walks its receivers
-    // in tiles of 256 and their sources in tiles of 64 (each tile's sums added up apart, then into
-    // the accumulators), on windows of 8, 16 and 32 bins (blocks of 8; lags of 2 to 35 bins).
+// A closed cube of 600 patches (0.1 m) lit inside: all see most of the others, so the long pass tiles
+// its sources (solver_plan.h: kDenseRow) and adds each receiver tile's sums up apart. With
+// `unlinked_patches`, a plane below the cube facing away from it adds that many patches that link to
+// nothing, so that the same links are too sparse to tile.
+Scene dense_cube(bool unlinked_patches) {
     Scene scene;
     scene.max_edge = 0.1;
     test::add_closed_cube(scene, 1.0, 0.5);
     scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);
     scene.lights.push_back(PointLight{Vec3(0.3, 0.6, 0.7), Rgb(1.0, 2.0, 3.0)});
-    const Prepared p = prepare(scene);
+    if (unlinked_patches)  // 4 m x 4 m at z = -0.5, normal -z: 1,600 patches
+        scene.objects.push_back(test::rectangle(Vec3(-1.5, -1.5, -0.5), Vec3(0, 4, 0), Vec3(4, 0, 0), 0.5));
+    return scene;
+}
+
+TEST(Solver, TiledSourcesKeepEveryProfilesIntegral) {
+    // Windows of 8, 16 and 32 bins (blocks of 8; lags of 2 to 35 bins): each window's sums reach their
+    // own bins.
+    const Prepared p = prepare(dense_cube(false));
     ASSERT_EQ(p.patches.size(), 600u);
-    ASSERT_GE(p.links.links.size(), 256 * p.patches.size());  // solver_plan.h: kDenseRow
+    ASSERT_GE(p.links.links.size(), 256 * p.patches.size());
     const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
     SolverOptions options;
     options.block_bins = 8;
     const Profiles pr = solve(p, time_axis(800, 0.05), options);
     EXPECT_EQ(pr.stats.block_bins, 8);
     expect_integrals_are_steady(pr, steady, 3, 1e-9);
+}
+
+TEST(Solver, TiledAndUntiledSourcesGiveTheSameProfiles) {
+    // The cube alone (tiled sources) against the cube with 1,600 unlinked patches beside it (the same
+    // links, untiled): the same sums in another order, bin by bin, for blocks of 8 and 32 bins.
+    const Prepared tiled = prepare(dense_cube(false)), untiled = prepare(dense_cube(true));
+    ASSERT_EQ(untiled.patches.size(), 2200u);
+    ASSERT_EQ(untiled.links.links.size(), tiled.links.links.size());
+    ASSERT_LT(untiled.links.links.size(), 256 * untiled.patches.size());
+    for (int b : {8, 32}) {
+        SolverOptions options;
+        options.block_bins = b;
+        const Profiles t = solve(tiled, time_axis(300, 0.02), options), u = solve(untiled, time_axis(300, 0.02), options);
+        float peak = 0.0f;
+        for (float v : t.total) peak = std::max(peak, v);
+        ASSERT_GT(peak, 0.0f);
+        float worst = 0.0f;
+        for (std::size_t k = 0; k < t.total.size(); ++k) worst = std::max(worst, std::abs(t.total[k] - u.total[k]));
+        EXPECT_LE(worst, 1e-5f * peak) << "blocks of " << b << " bins";
+        for (std::size_t k = t.total.size(); k < u.total.size(); ++k) ASSERT_EQ(u.total[k], 0.0f);
+    }
 }
 
 TEST(Solver, ZeroDelayLinksNeitherLoseNorInventEnergy) {
@@ -391,6 +421,9 @@ TEST(Solver, OneAndTwoThreadsGiveIdenticalProfiles) {
     EXPECT_GT(c.stats.max_jacobi_iterations, 1);
     EXPECT_EQ(c.stats.max_jacobi_iterations, d.stats.max_jacobi_iterations);
     EXPECT_EQ(c.total, d.total);
+    // Dense rows: tiles of receivers and of sources, each receiver tile's sums in a thread's own array.
+    const Prepared dense = prepare(dense_cube(false));
+    EXPECT_EQ(solve(dense, time_axis(300, 0.02), one).total, solve(dense, time_axis(300, 0.02), two).total);
 }
 
 TEST(Solver, EveryBlockLengthGivesTheSameProfiles) {
@@ -870,12 +903,7 @@ TEST(Solver, WideKernelsGiveBitIdenticalProfiles) {
         EXPECT_EQ(ha.total, hn.total) << schedule.name << ", hierarchical links";
     }
     // Dense rows: the kernels add into a receiver tile's own sums (contiguous) instead.
-    Scene scene;
-    scene.max_edge = 0.1;
-    test::add_closed_cube(scene, 1.0, 0.5);
-    scene.objects[2].albedo = Rgb(0.7, 0.2, 0.2);
-    scene.lights.push_back(PointLight{Vec3(0.3, 0.6, 0.7), Rgb(1.0, 2.0, 3.0)});
-    const Prepared dense = prepare(scene);
+    const Prepared dense = prepare(dense_cube(false));
     ASSERT_GE(dense.links.links.size(), 256 * dense.patches.size());
     SolverOptions wide, narrow;
     wide.block_bins = narrow.block_bins = 8;

@@ -18,7 +18,9 @@ namespace base {
 #undef TPRF_KERNEL_TARGET
 }  // namespace base
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+// Only over a base with FMA: GCC contracts a * b + c into one FMA wherever the target has it, so a base
+// without it (TPRF_ARCH empty or x86-64-v2) would round the same sums differently.
+#if defined(__GNUC__) && !defined(__clang__) && !defined(__INTEL_COMPILER) && defined(__x86_64__) && defined(__FMA__)
 #define TPRF_WIDE_KERNELS 1
 // x86-64-v4 is AVX-512 F, BW, CD, DQ and VL; GCC otherwise prefers 256-bit vectors even there.
 namespace wide {

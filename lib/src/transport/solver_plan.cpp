@@ -445,6 +445,11 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
         plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), plan.wide);
         if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), plan.wide);
     }
+    // Wide only where a wide kernel runs: windows longer than kLongestWindow without a kernel of their
+    // own take gather_long_any, which has no wide copy.
+    bool any_kernel = plan.recent_kernel != nullptr;
+    for (int s = 0; s < plan.windows; ++s) any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
+    plan.wide = plan.wide && any_kernel;
     return plan;
 }
 

@@ -152,6 +152,10 @@ constexpr std::size_t kReceiverTile = 256;
 constexpr std::size_t kSourceTile = 64;
 // Links per receiver below which the sources are not tiled.
 constexpr std::size_t kDenseRow = 256;
+// The most bytes of a thread's receiver-tile sums (SolvePlan::tile_sum_floats): in a core's L2 with the
+// source tile's rings. Three lanes in windows of 32 bins take 96 KiB; a batch of 48 lanes would take
+// 1.5 MiB, where they measured no faster than adding into the accumulators (bench/RESULTS.md).
+constexpr std::size_t kTileSumBytes = std::size_t(512) << 10;
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
@@ -265,9 +269,11 @@ struct SolvePlan {
     }
     std::size_t acc_stride() const { return m * std::size_t(C); }
     // Floats of a thread's receiver-tile sums in the long pass: a tile's receivers x the longest window
-    // x lanes, where the sources are tiled (dense rows); none otherwise.
+    // x lanes, where the sources are tiled (dense rows) and that fits in kTileSumBytes; none otherwise
+    // (the kernels then add into the accumulators directly).
     std::size_t tile_sum_floats() const {
-        return source_tile < m ? std::min(m, kReceiverTile) * std::size_t(acc_bins) * std::size_t(C) : 0;
+        const std::size_t floats = std::min(m, kReceiverTile) * std::size_t(acc_bins) * std::size_t(C);
+        return source_tile < m && floats * sizeof(float) <= kTileSumBytes ? floats : 0;
     }
     // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
     // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
