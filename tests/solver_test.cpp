@@ -783,14 +783,20 @@ TEST(SolverBatch, OneColouredIlluminationColoursTheWholeBatch) {
     expect_batches_match_singles(p, all, {4}, {}, 3);
 }
 
-TEST(SolverBatch, HierarchicalLinksBatchesMatchSingleSolves) {
-    // 512 patches with cluster links (pushed to and pulled from their patches at every bin), K = 4.
-    const Prepared flat = corner(Rgb::Constant(0.6), 0.0625);
-    const Visibility vis(flat.patches);
+// Cluster links over a corner's patches (tolerance 0.05, for bins of 2 cm): the march pushes their
+// light to the patches and pulls the patches' radiosity up at every bin.
+LinkSet corner_clusters(const PatchSet& patches) {
+    const Visibility vis(patches);
     HierarchyOptions h;
     h.tolerance = 0.05;
     h.bin_width_m = 0.02;
-    const LinkSet set = hierarchical_link_set(flat.patches, vis, {}, h);
+    return hierarchical_link_set(patches, vis, {}, h);
+}
+
+TEST(SolverBatch, HierarchicalLinksBatchesMatchSingleSolves) {
+    // 512 patches with cluster links, K = 4.
+    const Prepared flat = corner(Rgb::Constant(0.6), 0.0625);
+    const LinkSet set = corner_clusters(flat.patches);
     ASSERT_GT(set.nodes(), set.patches());
     const TimeAxis time = time_axis(200, 0.02);
     const std::vector<Illumination> all = batch_of(4, flat.patches.size(), false);
@@ -874,11 +880,7 @@ TEST(Solver, WideKernelsGiveBitIdenticalProfiles) {
     const Illumination coloured = pulses_for(1, flat.patches.size(), true);
     const Illumination fine_light = pulses_for(1, fine.patches.size(), true);
     const std::vector<Illumination> grey = batch_of(16, flat.patches.size(), false);
-    const Visibility vis(fine.patches);
-    HierarchyOptions h;
-    h.tolerance = 0.05;
-    h.bin_width_m = 0.02;
-    const LinkSet set = hierarchical_link_set(fine.patches, vis, {}, h);
+    const LinkSet set = corner_clusters(fine.patches);
     ASSERT_GT(set.nodes(), set.patches());
     if (!solve(flat.patches, flat.links, coloured, time_axis(10, 0.1)).stats.wide_kernels)
         GTEST_SKIP() << "this build or CPU has no AVX-512 kernels";

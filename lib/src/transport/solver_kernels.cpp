@@ -47,31 +47,22 @@ bool cpu_has_wide_kernels() {
 #endif
 }
 
-RecentKernel recent_kernel_for(int C, int bins, bool wide) {
+// A table's kernel: the wide copy's where it runs, else the library's own.
 #ifdef TPRF_WIDE_KERNELS
-    if (wide && cpu_has_wide_kernels()) return wide::recent_table(C, bins);
+#define TPRF_FROM_TABLE(table, ...) (wide && cpu_has_wide_kernels() ? wide::table(__VA_ARGS__) : base::table(__VA_ARGS__))
+#else
+#define TPRF_FROM_TABLE(table, ...) ((void)wide, base::table(__VA_ARGS__))
 #endif
-    (void)wide;
-    return base::recent_table(C, bins);
-}
+
+RecentKernel recent_kernel_for(int C, int bins, bool wide) { return TPRF_FROM_TABLE(recent_table, C, bins); }
 
 // Lane counts with kernels of their own: one or three channels of one illumination, a grey batch of 8
 // or 16. Any other count takes the generic kernels (gather_lanes, a run-time lane loop).
-GatherKernel pick_kernel(int C, int bins, bool wide) {
-#ifdef TPRF_WIDE_KERNELS
-    if (wide && cpu_has_wide_kernels()) return wide::long_table(C, bins);
-#endif
-    (void)wide;
-    return base::long_table(C, bins);
-}
+GatherKernel pick_kernel(int C, int bins, bool wide) { return TPRF_FROM_TABLE(long_table, C, bins); }
 
-LaneKernel lane_kernel_for(int bins, bool wide) {
-#ifdef TPRF_WIDE_KERNELS
-    if (wide && cpu_has_wide_kernels()) return wide::lane_table(bins);
-#endif
-    (void)wide;
-    return base::lane_table(bins);
-}
+LaneKernel lane_kernel_for(int bins, bool wide) { return TPRF_FROM_TABLE(lane_table, bins); }
+
+#undef TPRF_FROM_TABLE
 
 // The same for windows longer than kLongestWindow without a specialisation (long blocks): summed
 // straight into the accumulators, a bin's lanes at a time.
