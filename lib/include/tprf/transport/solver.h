@@ -42,7 +42,8 @@ struct SolverOptions {
     int block_bins = 32;                  ///< time-block length, bins
     int threads = 0;                      ///< 0: all cores
     /// Run the long-link kernels with 512-bit vectors where the CPU has AVX-512 (and the compiler
-    /// built them: GCC on x86-64). The results are bit-identical either way; false is for comparing.
+    /// built them: GCC on x86-64 with FMA in the base instruction set, as the default x86-64-v3; the
+    /// environment variable TPRF_NO_AVX512=1 refuses them). The results are bit-identical either way.
     bool wide_vectors = true;
     ProgressFn progress;                  ///< phase "solve"
     /// The first bin handed to the sink, <= 0: bins before the window (negative SolveBlock::first_bin),
