@@ -205,9 +205,10 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
     for (int s = 0; s < p.windows; ++s)
         if ((b0 & std::int64_t(p.window_bins(s) - 1)) == 0) due[count++] = s;
     std::uint64_t cursor[kReceiverTile][kMaxWindows];
-    // The due windows' bins: the longest one's (windows are due from the shortest up).
-    const int span = count > 0 ? p.window_bins(due[count - 1]) : 0;
-    const bool tiled = p.tile_sum_floats() > 0 && count > 0;
+    // The due windows' bins: the longest one's (windows are due from the shortest up; the block's own,
+    // window 0, always is).
+    const int span = p.window_bins(due[count - 1]);
+    const bool tiled = p.tile_sum_floats() > 0;
     const std::size_t row = std::size_t(span) * std::size_t(p.C);
     float* sums = tiled ? m_tile_sums[std::size_t(omp_get_thread_num())].data() : nullptr;
     for (int l = 0; l < p.L; ++l) {

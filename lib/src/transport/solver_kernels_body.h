@@ -142,7 +142,6 @@ RecentKernel recent_for_lanes(int C) {
     }
 }
 
-
 RecentKernel recent_table(int C, int bins) {
     switch (bins) {
         case 1: return recent_for_lanes<1>(C);

@@ -416,7 +416,6 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.channels = channels;
     plan.C = illuminations * channels;
     plan.delay = options.delay;
-    plan.wide = options.wide_vectors && cpu_has_wide_kernels();
     plan.start_m = time.start_m();
     plan.inv_bin = 1.0 / time.bin_width_m();
     plan.inv_bin_f = float(plan.inv_bin);
@@ -439,17 +438,18 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
     // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
     // shortest window's links read.
-    if (plan.windows > 1 && plan.recent_bins >= 2 * plan.bt) plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, plan.wide);
+    const bool wide = options.wide_vectors && cpu_has_wide_kernels();
+    if (plan.windows > 1 && plan.recent_bins >= 2 * plan.bt) plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
     if (plan.recent_kernel) copy_near_links(plan);
-    for (int s = 0; s < plan.windows; ++s) {
-        plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), plan.wide);
-        if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), plan.wide);
-    }
-    // Wide only where a wide kernel runs: windows longer than kLongestWindow without a kernel of their
-    // own take gather_long_any, which has no wide copy.
     bool any_kernel = plan.recent_kernel != nullptr;
-    for (int s = 0; s < plan.windows; ++s) any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
-    plan.wide = plan.wide && any_kernel;
+    for (int s = 0; s < plan.windows; ++s) {
+        plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), wide);
+        if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), wide);
+        any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
+    }
+    // Wide where a wide kernel runs: windows longer than kLongestWindow without a kernel of their own
+    // take gather_long_any, which has no wide copy.
+    plan.wide = wide && any_kernel;
     return plan;
 }
 

@@ -200,7 +200,7 @@ struct SolvePlan {
     // The lane that holds illumination k's colour c (a grey lane serves all three).
     int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
-    bool wide = false;              // the long-link kernels for AVX-512 (SolverOptions::wide_vectors)
+    bool wide = false;              // a long-link kernel for AVX-512 runs (SolverOptions::wide_vectors)
     double start_m = 0.0, inv_bin = 0.0;
     float inv_bin_f = 0.0f;
     LayerPlan layers;
