@@ -110,6 +110,10 @@ constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lis
 constexpr double kGatherBytesPerPatch = 100;     // FLANN's index over the centroids
 constexpr double kShortLinkBytes = 16;           // a link shorter than a block, in the solver's own list
 constexpr double kSameBinLinkBytes = 8;          // a link within one bin
+constexpr double kPackedLinkBytes = 12;          // a flat set's link packed for the march (solver_plan.cpp
+                                                 // pack_links): source and lag u32, two taps f32
+constexpr double kDenseRowLinks = 256;           // links a receiver from which the march packs them (kDenseRow)
+constexpr int kDenseWindowBins = 64;             // the windows packed links are read in (kDenseLongestWindow)
 const int kBlockBins = SolverOptions{}.block_bins;  // the solver's block (hierarchical sets: shorter)
 constexpr int kPointSourcePulses = 2;            // pulses per patch and point source: its 16 samples' pulses are
                                                  // merged per bin (IlluminationOptions::merge_bins), 1-2 bins
@@ -440,8 +444,12 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     e.ring_bins = int(std::bit_ceil(unsigned(max_lag + kBlockBins + 2)));
     const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
     const double share = scene.links.method == LinkMethod::Hierarchical ? hierarchical_ring_share(n) : 1.0;
-    const double rings = L * nodes * (share * e.ring_bins + kBlockBins + 1) * C * 4;
-    const double blocks = 2 * L * nodes * kBlockBins * C * 4 + 2 * L * nodes * C * 4;
+    // Flat sets' dense rows: the march packs the links once more and reads them in longer windows,
+    // which the rings' mirrors and the accumulators hold. One illumination's lanes only (C <= 3).
+    const bool packed = scene.links.method == LinkMethod::Flat && double(e.links) >= kDenseRowLinks * n;
+    const int window = packed ? std::max(kBlockBins, kDenseWindowBins) : kBlockBins;
+    const double rings = L * nodes * (share * e.ring_bins + window + 1) * C * 4;
+    const double blocks = L * nodes * (kBlockBins + window) * C * 4 + 2 * L * nodes * C * 4;
     // The solver's blocks and the films' kept profiles (film_buffer_bytes).
     // A film that reads the second bounce apart keeps it in rows of its own.
     const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
@@ -454,6 +462,7 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
     // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).
     if (tinted_mirrors(scene)) lists += double(e.links) * kLinkBytes;
+    if (packed) lists += double(e.links) * kPackedLinkBytes;
     e.solver_bytes = to_size(rings + blocks + outputs + lists);
     // Layers that gather from links (solver_plan.cpp plan_layers): all but the first order's, or the one total.
     const double fed = (layers == 1 && scene.solver.max_bounces < 0) ? 1 : layers - 1;

@@ -4,6 +4,7 @@
 #include "tprf/transport/solver.h"
 
 #include "solver_plan.h"
+#include "tprf/core/huge_pages.h"
 
 #include "tprf/transport/illumination.h"
 #include "tprf/core/cancel.h"
@@ -33,7 +34,7 @@ class March {
 public:
     March(std::span<const Illumination* const> batch, const SolvePlan& plan)
         : m_links(*plan.links), m_batch(batch), m_plan(plan),
-          m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats, 0.0f)),
+          m_rings(std::size_t(plan.L), RingArray(plan.ring_floats + kRingSlackFloats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
           m_recent(std::size_t(plan.L),
                    std::vector<float>(std::size_t(plan.recent_bins) * plan.m * std::size_t(plan.C), 0.0f)),
@@ -129,7 +130,8 @@ private:
     const Links& m_links;
     std::span<const Illumination* const> m_batch;
     const SolvePlan& m_plan;
-    std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C
+    using RingArray = std::vector<float, detail::HugePageAllocator<float>>;
+    std::vector<RingArray> m_rings;    // per layer: M x (ring + mirror) x C
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
     std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x M x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
@@ -233,7 +235,13 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
                     if (cursor[i - i0][d] >= end) continue;
-                    if (p.kernel[s])
+                    if (p.packed_kernel[s]) {
+                        // Many pairs of a receiver and a source tile have no link (a wall and itself).
+                        const std::uint64_t key_end = std::uint64_t(s1) << p.lag_bits;
+                        if (p.packed[cursor[i - i0][d]].key >= key_end) continue;
+                        p.packed_kernel[s](p.packed.data(), cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
+                                           p.slots.data(), b0, a, stride);
+                    } else if (p.kernel[s])
                         p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
                                     p.slots.data(), b0, a, stride);
                     else if (p.lane_kernel[s])

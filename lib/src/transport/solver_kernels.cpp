@@ -25,7 +25,9 @@ namespace base {
 // x86-64-v4 is AVX-512 F, BW, CD, DQ and VL; GCC otherwise prefers 256-bit vectors even there.
 namespace wide {
 #define TPRF_KERNEL_TARGET __attribute__((target("arch=x86-64-v4,prefer-vector-width=512")))
+#define TPRF_KERNEL_WIDE 1
 #include "solver_kernels_body.h"
+#undef TPRF_KERNEL_WIDE
 #undef TPRF_KERNEL_TARGET
 }  // namespace wide
 #endif
@@ -55,6 +57,8 @@ bool cpu_has_wide_kernels() {
 #endif
 
 RecentKernel recent_kernel_for(int C, int bins, bool wide) { return TPRF_FROM_TABLE(recent_table, C, bins); }
+
+PackedKernel packed_kernel_for(int C, int bins, bool wide) { return TPRF_FROM_TABLE(packed_table, C, bins); }
 
 // Lane counts with kernels of their own: one or three channels of one illumination, a grey batch of 8
 // or 16. Any other count takes the generic kernels (gather_lanes, a run-time lane loop).

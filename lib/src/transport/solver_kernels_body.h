@@ -61,6 +61,126 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
     add_sums(acc, stride, local, C, BT);
 }
 
+// The packed kernel's vectors: 16 floats for AVX-512, 8 for the library's own set (AVX2). Each sum is
+// the same chain of operations on one float either way, so both give the same bits.
+#ifdef TPRF_KERNEL_WIDE
+constexpr int kPackedWidth = 16;
+constexpr int kPackedRegisters = 28;  // of 32: the sums, with two taps and a window vector beside them
+#else
+constexpr int kPackedWidth = 8;
+constexpr int kPackedRegisters = 13;  // of 16
+#endif
+
+// Parts of a window that the packed kernel sums one after the other (a power of two): the fewest whose
+// sums fit in registers, or 0 for no packed kernel. Which windows have one does not depend on the
+// instruction set (C x BT a multiple of 16 floats), so that a plan packs the same links either way.
+constexpr int packed_parts(int C, int BT) {
+    if ((C * BT) % 16 != 0) return 0;
+    for (int P = 1; P <= BT; P *= 2) {
+        const int floats = C * (BT / P);
+        if (floats % kPackedWidth != 0) return 0;
+        const int sums = floats / kPackedWidth + (floats + C + kPackedWidth - 1) / kPackedWidth;
+        if (sums <= kPackedRegisters) return P;
+    }
+    return 0;
+}
+
+// The packed kernel for one receiver, one source tile and windows of BT bins (dense rows: flat links).
+// Split taps: each vector of a source's window is loaded once and multiplied into two sets of sums,
+// A by w1 (the window as it is) and B by w0 (its bins one later: B is read C lanes on at the end), so a
+// link loads C (BT + 1) floats once where two shifted windows would load them twice, and nearly every
+// load of a window (at a lag times C floats) spans two cache lines. A window too long for the
+// registers is summed in parts, each over all the tile's links.
+template <int C, int BT>
+TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::uint64_t& cursor, std::uint64_t end,
+                                      std::uint64_t key_end, int lag_bits, const float* ring, const RingSlot* slots,
+                                      std::int64_t b0, float* acc, std::size_t stride) {
+    constexpr int W = kPackedWidth, P = packed_parts(C, BT), BP = BT / P;
+    static_assert(P > 0, "no packed kernel for these lanes and window");
+    static_assert(C < W, "B's shift by C lanes joins two neighbouring vectors");
+    constexpr int NA = C * BP / W, NB = (C * (BP + 1) + W - 1) / W;
+    typedef float vec __attribute__((vector_size(W * sizeof(float))));
+    // B's lanes C on, from two neighbouring vectors (GCC 12 and clang both have __builtin_shufflevector;
+    // a macro, not a lambda, which would not have the kernel's target).
+#ifdef TPRF_KERNEL_WIDE
+#define TPRF_SHIFTED(lo, hi)                                                                                   \
+    __builtin_shufflevector(lo, hi, C, C + 1, C + 2, C + 3, C + 4, C + 5, C + 6, C + 7, C + 8, C + 9, C + 10, \
+                            C + 11, C + 12, C + 13, C + 14, C + 15)
+#else
+#define TPRF_SHIFTED(lo, hi) __builtin_shufflevector(lo, hi, C, C + 1, C + 2, C + 3, C + 4, C + 5, C + 6, C + 7)
+#endif
+    const std::uint32_t lag_mask = (std::uint32_t(1) << lag_bits) - 1;
+    const std::uint64_t first = cursor;
+    std::uint64_t last = end;  // the tile's links: [first, last), found by the first part
+    for (int part = 0; part < P; ++part) {
+        vec A[NA], B[NB];
+        for (int j = 0; j < NA; ++j) A[j] = vec{};
+        for (int j = 0; j < NB; ++j) B[j] = vec{};
+        for (std::uint64_t k = first; k < last; ++k) {
+            const PackedLink l = links[k];
+            if (part == 0 && l.key >= key_end) {
+                last = k;
+                break;
+            }
+            const int lag = int(l.key & lag_mask);
+            if (lag < BT) continue;  // shorter than the window: applied bin by bin (one window only)
+            const RingSlot& slot = slots[l.key >> lag_bits];
+            const float* h = ring + slot.offset + std::size_t(int((b0 - lag - 1) & slot.mask)) * C + part * C * BP;
+            for (int j = 0; j < NB; ++j) {
+                vec v;
+                __builtin_memcpy(&v, h + W * j, sizeof v);
+#ifdef TPRF_KERNEL_WIDE
+                asm("" : "+v"(v));  // one load a vector: GCC would fold it into both multiply-adds
+#endif
+                if (j < NA) A[j] += l.w1 * v;
+                B[j] += l.w0 * v;
+            }
+        }
+        // Each sum's w0 part is B's lanes C on.
+        float* to = acc + std::size_t(part * BP) * (stride == std::size_t(C) ? std::size_t(C) : stride);
+        if (stride == std::size_t(C)) {  // a receiver tile's own sums: contiguous
+            for (int j = 0; j < NA; ++j) {
+                vec sum;
+                __builtin_memcpy(&sum, to + W * j, sizeof sum);
+                sum += A[j] + TPRF_SHIFTED(B[j], B[j + 1]);
+                __builtin_memcpy(to + W * j, &sum, sizeof sum);
+            }
+            continue;
+        }
+        float local[C * BP];
+        for (int j = 0; j < NA; ++j) {
+            const vec out = A[j] + TPRF_SHIFTED(B[j], B[j + 1]);
+            __builtin_memcpy(local + W * j, &out, sizeof out);
+        }
+        add_sums(to, stride, local, C, BP);
+    }
+    cursor = last;
+#undef TPRF_SHIFTED
+}
+
+template <int C>
+PackedKernel packed_for(int bins) {
+    auto pick = []<int BT>() -> PackedKernel {
+        if constexpr (packed_parts(C, BT) > 0) return gather_packed<C, BT>;
+        return nullptr;
+    };
+    switch (bins) {
+        case 8: return pick.template operator()<8>();
+        case 16: return pick.template operator()<16>();
+        case 32: return pick.template operator()<32>();
+        case 64: return pick.template operator()<64>();
+        default: return nullptr;
+    }
+}
+
+PackedKernel packed_table(int C, int bins) {
+    switch (C) {
+        case 1: return packed_for<1>(bins);
+        case 3: return packed_for<3>(bins);
+        default: return nullptr;
+    }
+}
+
 // The same for any lane count C and windows of BT bins: the sums (C * BT floats) in a local array,
 // each link one contiguous multiply-add over it, which vectorises over bins and lanes alike.
 template <int BT>

@@ -9,6 +9,8 @@
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -220,8 +222,58 @@ void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, Window
 // hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
 // other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
 // links only: a set with tinted links is copied without them.
-void plan_windows(const Links& links, SolvePlan& plan) {
-    plan.acc_bins = std::max(plan.bt, kLongestWindow);
+// Dense rows (sources in tiles) whose lane count has packed kernels: the bits of a packed key's lag
+// (SolvePlan::lag_bits), or 0 where a source and a lag do not fit one word or a window of
+// bt..kDenseLongestWindow bins has no packed kernel.
+int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
+    if (plan.source_tile >= plan.m || plan.bt > kDenseLongestWindow) return 0;
+    for (int bins = plan.bt; bins <= kDenseLongestWindow; bins *= 2)
+        if (!packed_kernel_for(plan.C, bins, wide)) return 0;
+    // A link's lag grows with its length: the longest link's is the largest.
+    float longest = 0.0f;
+    for (float d : links.distance) longest = std::max(longest, d);
+    const int max_lag = link_taps(longest, plan.inv_bin_f, plan.delay, 1.0f).lag;
+    const int bits = std::max(1, int(std::bit_width(unsigned(max_lag))));
+    return bits < 32 && (std::uint64_t(plan.m) << bits) <= (std::uint64_t(1) << 32) ? bits : 0;
+}
+
+// plan.packed: the grey links of every row (tinted ones have lists of their own) with their taps, each
+// row stably sorted by window (sources stay non-decreasing within one); and the segments. Rows in
+// parallel: each row's packed links start where its grey links do.
+void pack_links(const Links& links, SolvePlan& plan) {
+    const std::size_t S = std::size_t(plan.windows);
+    const bool tinted = any_tinted(links);
+    std::vector<std::uint64_t> start(plan.m + 1, 0);
+    for (std::size_t i = 0; i < plan.m; ++i) {
+        std::uint64_t grey = links.row[i + 1] - links.row[i];
+        if (tinted)
+            for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) grey -= tinted_link(links, k) ? 1 : 0;
+        start[i + 1] = start[i] + grey;
+    }
+    plan.packed.resize(start[plan.m]);
+    std::vector<std::vector<std::pair<int, PackedLink>>> rows(std::size_t(plan.threads));
+    parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
+        std::vector<std::pair<int, PackedLink>>& row = rows[std::size_t(omp_get_thread_num())];
+        row.clear();
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
+            if (tinted && tinted_link(links, k)) continue;
+            const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            row.push_back({plan.window_of(t.lag), {(links.source[k] << plan.lag_bits) | std::uint32_t(t.lag), t.w0, t.w1}});
+        }
+        // Windows -1 (links shorter than a block) to S - 1, one pass each: stable, and S is small.
+        std::uint64_t at = start[i];
+        for (int s = -1; s < int(S); ++s) {
+            if (s >= 0) plan.segments[i * (S + 1) + std::size_t(s)] = at;
+            for (const auto& [window, link] : row)
+                if (window == s) plan.packed[at++] = link;
+        }
+        plan.segments[i * (S + 1) + S] = at;
+    });
+}
+
+void plan_windows(const Links& links, SolvePlan& plan, bool wide) {
+    plan.lag_bits = packed_lag_bits(links, plan, wide);
+    plan.acc_bins = std::max(plan.bt, plan.lag_bits > 0 ? kDenseLongestWindow : kLongestWindow);
     plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
     TPRF_CHECK_LE(plan.windows, kMaxWindows);
     plan.links = &links;
@@ -230,6 +282,11 @@ void plan_windows(const Links& links, SolvePlan& plan) {
     auto window = [&](const Links& l, std::uint64_t k) {
         return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
+    if (plan.lag_bits > 0) {
+        pack_links(links, plan);
+        for (int s = 0; s < plan.windows; ++s) plan.packed_kernel[s] = packed_kernel_for(plan.C, plan.window_bins(s), wide);
+        return;
+    }
     const bool tinted = any_tinted(links);
     bool ordered = true;
     for (std::size_t i = 0; i < plan.m && ordered && S > 1; ++i)
@@ -427,7 +484,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     const std::size_t out_per_bin = (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.K) * 3 * sizeof(float);
     while (plan.emit_bins() * 2 <= kSinkBins && out_per_bin * std::size_t(plan.emit_bins() * 2) <= kSinkBytes)
         plan.emit_blocks *= 2;
-    plan_windows(links, plan);
+    const bool wide = options.wide_vectors && cpu_has_wide_kernels();
+    plan_windows(links, plan, wide);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
     plan_sweeps(patches, plan);
@@ -438,11 +496,12 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
     // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
     // shortest window's links read.
-    const bool wide = options.wide_vectors && cpu_has_wide_kernels();
-    if (plan.windows > 1 && plan.recent_bins >= 2 * plan.bt) plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
+    // Packed links have kernels for every window, the shortest's included (which reads the rings).
+    if (plan.packed.empty() && plan.windows > 1 && plan.recent_bins >= 2 * plan.bt)
+        plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
     if (plan.recent_kernel) copy_near_links(plan);
-    bool any_kernel = plan.recent_kernel != nullptr;
-    for (int s = 0; s < plan.windows; ++s) {
+    bool any_kernel = plan.recent_kernel != nullptr || !plan.packed.empty();
+    for (int s = 0; s < plan.windows && plan.packed.empty(); ++s) {
         plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), wide);
         if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), wide);
         any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
@@ -479,6 +538,7 @@ std::size_t working_bytes(const SolvePlan& p) {
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
            p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() + p.near.bytes() +
+           p.packed.size() * sizeof(PackedLink) +
            p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
            p.tinted_same.size() * sizeof(TintedSameLink) +
            (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);

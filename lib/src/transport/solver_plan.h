@@ -109,6 +109,17 @@ struct RingSlot {
     std::int32_t mirror;   // bins mirrored after the ring: the longest window a long link reads, plus one
 };
 
+// A long link of a dense row as the plan packs it for the tiled kernel (gather_packed): its source
+// node and lag in one word (source << lag_bits | lag: one compare finds a source tile's end) and its
+// taps, made once instead of once per block.
+struct PackedLink {
+    std::uint32_t key;
+    float w0;
+    float w1;
+};
+using PackedKernel = void (*)(const PackedLink*, std::uint64_t&, std::uint64_t, std::uint64_t, int, const float*,
+                              const RingSlot*, std::int64_t, float*, std::size_t);
+
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, const RingSlot*, std::int64_t, float*, std::size_t);
 // Where the shortest window's links read their sources' history: the recent bins, bin-major by node slot
@@ -163,6 +174,12 @@ constexpr int kMaxSweeps = 200;
 constexpr int kLongestWindow = 32;
 static_assert(1 << (kDelayOctaves - 2) == kLongestWindow, "a hierarchical row's last octave is the longest window");
 static_assert(HierarchyOptions::kLongestMinLag <= kLongestWindow, "blocks no longer than the longest window");
+// Dense rows with packed links (flat sets) take windows twice as long: each link's window is read from
+// its source's ring half as often, and its taps and address are worked out once for twice the bins.
+constexpr int kDenseLongestWindow = 64;
+// Floats after a layer's last ring: a packed kernel's last vector of a window reads up to 15 floats past
+// the window's end (into the next ring, or here), into sums that are never used.
+constexpr std::size_t kRingSlackFloats = 16;
 constexpr int kMaxWindows = 16;
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
@@ -253,6 +270,11 @@ struct SolvePlan {
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
+    // Dense rows whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey links packed,
+    // by row and window (`segments` index them, not `links`), and per window the kernel that reads them.
+    std::vector<PackedLink> packed;
+    int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
+    PackedKernel packed_kernel[kMaxWindows] = {};
     // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
     // recent bins hold then, instead of their rings: near links have near sources, whose values share
     // cache lines there, where each source's ring is a line of its own (bench/RESULTS.md, 2026-11-27).
@@ -314,6 +336,9 @@ LaneKernel lane_kernel_for(int bins, bool wide);
 /// the recent bins (specialised for the lane counts gather_long has, any other count at run time), or
 /// null for blocks of more than 16 bins.
 RecentKernel recent_kernel_for(int C, int bins, bool wide);
+/// The packed kernel (dense rows) for C lanes and windows of `bins` bins, or null; which (C, bins) have
+/// one does not depend on `wide`, and the wide one gives the same bits.
+PackedKernel packed_kernel_for(int C, int bins, bool wide);
 /// Any lane count and window length, summed straight into the accumulators.
 void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
                      float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
