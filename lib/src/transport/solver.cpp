@@ -240,7 +240,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                         const std::uint64_t key_end = std::uint64_t(s1) << p.lag_bits;
                         if (p.packed[cursor[i - i0][d]].key >= key_end) continue;
                         p.packed_kernel[s](p.packed.data(), cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
-                                           p.slots.data(), b0, a, stride);
+                                           p.packed_ring, p.ring - 1, b0, a, stride);
                     } else if (p.kernel[s])
                         p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
                                     p.slots.data(), b0, a, stride);

@@ -85,7 +85,8 @@ constexpr int packed_parts(int C, int BT) {
     return 0;
 }
 
-// The packed kernel for one receiver, one source tile and windows of BT bins (dense rows: flat links).
+// The packed kernel for one receiver, one source tile and windows of BT bins (dense rows: flat links),
+// every source's ring `ring_floats` floats long (SolvePlan::packed_ring) and `mask` + 1 bins before its mirror.
 // Split taps: each vector of a source's window is loaded once and multiplied into two sets of sums,
 // A by w1 (the window as it is) and B by w0 (its bins one later: B is read C lanes on at the end), so a
 // link loads C (BT + 1) floats once where two shifted windows would load them twice, and nearly every
@@ -93,8 +94,8 @@ constexpr int packed_parts(int C, int BT) {
 // registers is summed in parts, each over all the tile's links.
 template <int C, int BT>
 TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::uint64_t& cursor, std::uint64_t end,
-                                      std::uint64_t key_end, int lag_bits, const float* ring, const RingSlot* slots,
-                                      std::int64_t b0, float* acc, std::size_t stride) {
+                                      std::uint64_t key_end, int lag_bits, const float* ring, std::size_t ring_floats,
+                                      int mask, std::int64_t b0, float* acc, std::size_t stride) {
     constexpr int W = kPackedWidth, P = packed_parts(C, BT), BP = BT / P;
     static_assert(P > 0, "no packed kernel for these lanes and window");
     static_assert(C < W, "B's shift by C lanes joins two neighbouring vectors");
@@ -124,8 +125,8 @@ TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::u
             }
             const int lag = int(l.key & lag_mask);
             if (lag < BT) continue;  // shorter than the window: applied bin by bin (one window only)
-            const RingSlot& slot = slots[l.key >> lag_bits];
-            const float* h = ring + slot.offset + std::size_t(int((b0 - lag - 1) & slot.mask)) * C + part * C * BP;
+            const float* h = ring + std::size_t(l.key >> lag_bits) * ring_floats +
+                             std::size_t(int((b0 - lag - 1) & mask)) * C + part * C * BP;
             for (int j = 0; j < NB; ++j) {
                 vec v;
                 __builtin_memcpy(&v, h + W * j, sizeof v);

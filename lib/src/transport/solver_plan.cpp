@@ -438,14 +438,28 @@ void copy_near_links(SolvePlan& plan) {
 // in that order), then clusters'.
 void plan_rings(SolvePlan& plan) {
     plan.slots.resize(plan.m);
-    for (std::size_t at = 0; at < plan.m; ++at) {
-        const std::size_t k = at < plan.n ? plan.order[at] : at;
-        const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
-        const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
-        plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
-        plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
-        plan.ring = std::max(plan.ring, length);
-    }
+    if (!plan.packed.empty()) {
+        // Packed links find their source's ring from the source alone (SolvePlan::packed_ring): every
+        // ring as long as the longest, node k's k rings in. The short rings' unused bins are never read.
+        int longest = 0, window = 0;
+        for (std::size_t k = 0; k < plan.m; ++k) {
+            longest = std::max(longest, plan.send_lag[k]);
+            window = std::max(window, plan.send_window[k]);
+        }
+        plan.ring = int(std::bit_ceil(unsigned(longest + plan.bt + 2)));
+        const int mirror = window > 0 ? window + 1 : 0;
+        plan.packed_ring = std::size_t(plan.ring + mirror) * std::size_t(plan.C);
+        for (std::size_t k = 0; k < plan.m; ++k) plan.slots[k] = {k * plan.packed_ring, plan.ring - 1, plan.ring, mirror};
+        plan.ring_floats = plan.m * plan.packed_ring;
+    } else
+        for (std::size_t at = 0; at < plan.m; ++at) {
+            const std::size_t k = at < plan.n ? plan.order[at] : at;
+            const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
+            const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
+            plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
+            plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
+            plan.ring = std::max(plan.ring, length);
+        }
     std::vector<int>().swap(plan.send_lag);
     std::vector<int>().swap(plan.send_window);
 }

@@ -6,6 +6,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
+#include "tprf/core/huge_pages.h"
 #include "tprf/transport/links.h"
 #include "tprf/transport/solver.h"
 
@@ -118,7 +119,7 @@ struct PackedLink {
     float w1;
 };
 using PackedKernel = void (*)(const PackedLink*, std::uint64_t&, std::uint64_t, std::uint64_t, int, const float*,
-                              const RingSlot*, std::int64_t, float*, std::size_t);
+                              std::size_t, int, std::int64_t, float*, std::size_t);
 
 using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
                               const float*, const RingSlot*, std::int64_t, float*, std::size_t);
@@ -272,8 +273,9 @@ struct SolvePlan {
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
     // Dense rows whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey links packed,
     // by row and window (`segments` index them, not `links`), and per window the kernel that reads them.
-    std::vector<PackedLink> packed;
+    std::vector<PackedLink, detail::HugePageAllocator<PackedLink>> packed;
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
+    std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node
     PackedKernel packed_kernel[kMaxWindows] = {};
     // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
     // recent bins hold then, instead of their rings: near links have near sources, whose values share
@@ -307,8 +309,8 @@ struct SolvePlan {
     int window_bins(int s) const { return bt << s; }
     // The window of a link `lag` bins long: -1 below the block.
     int window_of(int lag) const {
-        if (lag < bt) return -1;
-        return std::min(int(std::bit_width(unsigned(lag / bt))) - 1, windows - 1);
+        if (lag < bt) return -1;  // bt is a power of two: a shift, not a division (once per link in the plan)
+        return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(bt)))) - 1, windows - 1);
     }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
     std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }

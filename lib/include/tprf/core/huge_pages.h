@@ -12,6 +12,8 @@
 #include <cstddef>
 #include <memory>
 #include <new>
+#include <type_traits>
+#include <utility>
 
 namespace tprf::detail {
 
@@ -23,7 +25,10 @@ constexpr std::size_t kHugePageMinBytes = std::size_t(4) << 20;
 void* allocate_huge(std::size_t bytes);
 void free_huge(void* p, std::size_t bytes) noexcept;
 
-/// A std::allocator that puts allocations of kHugePageMinBytes or more on huge pages.
+/// A std::allocator that puts allocations of kHugePageMinBytes or more on huge pages. Unlike
+/// std::allocator, a vector's resize(n) leaves trivial elements uninitialised (as new T[n] does): a
+/// large array that is filled in parallel right after is then first touched by the threads that fill
+/// it, not zeroed by one thread first. Pass a value (vector(n, value), resize(n, value)) to set them.
 template <class T>
 struct HugePageAllocator {
     using value_type = T;
@@ -38,6 +43,14 @@ struct HugePageAllocator {
     void deallocate(T* p, std::size_t n) noexcept {
         if (n * sizeof(T) < kHugePageMinBytes) return std::allocator<T>().deallocate(p, n);
         free_huge(p, n * sizeof(T));
+    }
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;  // default-initialised
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
     }
     template <class U>
     bool operator==(const HugePageAllocator<U>&) const noexcept { return true; }
