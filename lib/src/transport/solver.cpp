@@ -4,7 +4,6 @@
 #include "tprf/transport/solver.h"
 
 #include "solver_plan.h"
-#include "tprf/core/huge_pages.h"
 
 #include "tprf/transport/illumination.h"
 #include "tprf/core/cancel.h"
@@ -34,7 +33,7 @@ class March {
 public:
     March(std::span<const Illumination* const> batch, const SolvePlan& plan)
         : m_links(*plan.links), m_batch(batch), m_plan(plan),
-          m_rings(std::size_t(plan.L), RingArray(plan.ring_floats + kRingSlackFloats, 0.0f)),
+          m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats + kRingSlackFloats, 0.0f)),
           m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
           m_recent(std::size_t(plan.L),
                    std::vector<float>(std::size_t(plan.recent_bins) * plan.m * std::size_t(plan.C), 0.0f)),
@@ -130,8 +129,7 @@ private:
     const Links& m_links;
     std::span<const Illumination* const> m_batch;
     const SolvePlan& m_plan;
-    using RingArray = std::vector<float, detail::HugePageAllocator<float>>;
-    std::vector<RingArray> m_rings;    // per layer: M x (ring + mirror) x C
+    std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C, and kRingSlackFloats
     std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
     std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x M x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission

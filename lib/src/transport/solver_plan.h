@@ -6,7 +6,7 @@
 #include "tprf/core/time_axis.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
-#include "tprf/core/huge_pages.h"
+#include "tprf/core/default_init.h"
 #include "tprf/transport/links.h"
 #include "tprf/transport/solver.h"
 
@@ -273,7 +273,7 @@ struct SolvePlan {
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
     // Dense rows whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey links packed,
     // by row and window (`segments` index them, not `links`), and per window the kernel that reads them.
-    std::vector<PackedLink, detail::HugePageAllocator<PackedLink>> packed;
+    std::vector<PackedLink, DefaultInitAllocator<PackedLink>> packed;
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
     std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node
     PackedKernel packed_kernel[kMaxWindows] = {};
