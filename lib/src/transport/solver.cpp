@@ -546,8 +546,12 @@ void March::short_pass_lanes(std::int64_t b0) {
         if (m_stop) break;
         float fixed[kMaxLanes];
         std::fill_n(fixed, p.C, 0.0f);
-#pragma omp for schedule(static) nowait
-        for (std::size_t q = 0; q < p.n; ++q) short_links_of<CT>(q, b0, o, fixed);
+        // Each thread its share of the positions, balanced by their links (SolvePlan::short_split).
+        const std::size_t threads = std::size_t(omp_get_num_threads()), t = std::size_t(omp_get_thread_num());
+        const bool split = threads + 1 == p.short_split.size();
+        const std::size_t q0 = split ? p.short_split[t] : p.n * t / threads;
+        const std::size_t q1 = split ? p.short_split[t + 1] : p.n * (t + 1) / threads;
+        for (std::size_t q = q0; q < q1; ++q) short_links_of<CT>(q, b0, o, fixed);
         if (same) {
 #pragma omp critical(tprf_jacobi_reduction)
             for (int c = 0; c < p.C; ++c) m_fixed[c] = std::max(m_fixed[c], fixed[c]);

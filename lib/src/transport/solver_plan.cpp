@@ -381,6 +381,26 @@ void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
 
 // The same-bin system restricted to its rows (SolvePlan::sweep_rows): the patches that receive or send a
 // same-bin link, in position order, their link lists re-indexed by row.
+// SolvePlan::short_split: the positions cut into plan.threads ranges of about equal work.
+void split_positions(SolvePlan& plan) {
+    auto work = [&](std::size_t q) {
+        std::uint64_t w = kShortPatchLinks + (plan.short_row[q + 1] - plan.short_row[q]);
+        if (!plan.tinted_short_row.empty()) w += plan.tinted_short_row[q + 1] - plan.tinted_short_row[q];
+        return w;
+    };
+    std::uint64_t total = 0;
+    for (std::size_t q = 0; q < plan.n; ++q) total += work(q);
+    const std::size_t T = std::size_t(plan.threads);
+    plan.short_split.assign(T + 1, plan.n);
+    plan.short_split[0] = 0;
+    std::uint64_t done = 0;
+    std::size_t t = 1;
+    for (std::size_t q = 0; q < plan.n && t < T; ++q) {
+        done += work(q);
+        while (t < T && done * T >= total * t) plan.short_split[t++] = q + 1;
+    }
+}
+
 void compact_same_bin(SolvePlan& plan) {
     plan.sweep_row_of.assign(plan.n, -1);
     if (!plan.same_bin()) return;
@@ -502,6 +522,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan_windows(links, plan, wide);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
+    split_positions(plan);
     plan_sweeps(patches, plan);
     compact_same_bin(plan);
     plan_rings(plan);

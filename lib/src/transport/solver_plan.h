@@ -182,6 +182,8 @@ constexpr int kDenseLongestWindow = 64;
 // the window's end (into the next ring, or here), into sums that are never used.
 constexpr std::size_t kRingSlackFloats = 16;
 constexpr int kMaxWindows = 16;
+// A patch's own work in the bin-by-bin pass (its sums, emission, state), counted in short links.
+constexpr std::size_t kShortPatchLinks = 4;
 
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
@@ -226,6 +228,11 @@ struct SolvePlan {
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<TapLink> short_links;
+    // The bin-by-bin pass's positions by thread: thread t takes [short_split[t], short_split[t + 1]),
+    // about as many short, same-bin and tinted links and patches each (kShortPatchLinks a patch). Short
+    // links gather where surfaces meet, so an even split of the positions was not even: 61% of the flat
+    // 4k Cornell box's in the first half.
+    std::vector<std::size_t> short_split;
     std::vector<SameBinLink> same_links;
     // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
     // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
