@@ -232,6 +232,9 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
+                    // The next receivers' rows, each a line of its own far from this one: asked for
+                    // while this one is summed (the check below would otherwise wait on memory).
+                    if (!p.packed.empty() && i + 2 < i1) __builtin_prefetch(&p.packed[cursor[i + 2 - i0][d]]);
                     if (cursor[i - i0][d] >= end) continue;
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).
@@ -251,14 +254,14 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 }
             }
         }
+        // Bin by bin: a bin's accumulators of the tile's receivers are together (bin-major).
         if (tiled)
-            for (std::size_t i = i0; i < i1; ++i) {
-                const float* from = sums + (i - i0) * row;
-                for (int b = 0; b < span; ++b) {
+            for (int b = 0; b < span; ++b)
+                for (std::size_t i = i0; i < i1; ++i) {
+                    const float* from = sums + (i - i0) * row + std::size_t(b * p.C);
                     float* to = m_acc[std::size_t(l)].data() + p.acc_at(i, b0 + b);
-                    for (int c = 0; c < p.C; ++c) to[c] += from[b * p.C + c];
+                    for (int c = 0; c < p.C; ++c) to[c] += from[c];
                 }
-            }
         if (!p.tinted_long.empty())
             for (std::size_t i = i0; i < std::min(i1, p.n); ++i)
                 gather_tinted(i, ring_src, b0, m_acc[std::size_t(l)].data() + p.acc_at(i, b0));
