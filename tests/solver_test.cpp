@@ -205,30 +205,39 @@ Scene dense_cube(bool unlinked_patches) {
 }
 
 TEST(Solver, TiledSourcesKeepEveryProfilesIntegral) {
-    // Windows of 8, 16 and 32 bins (blocks of 8; lags of 2 to 35 bins): each window's sums reach their
-    // own bins.
+    // Blocks of 8 (windows of 8 to 32 bins, links as the set has them: 3 lanes x 8 bins make no whole
+    // 16-float vectors) and of 16 (packed links in windows of 16 to 64), at 5 cm (lags of 2 to 35 bins)
+    // and 2 cm (4 to 87, so that every window has links): each window's sums reach their own bins.
+    // Light loses half its energy per bounce of at most sqrt(3) m: after 40 m, below 1e-6.
     const Prepared p = prepare(dense_cube(false));
     ASSERT_EQ(p.patches.size(), 600u);
     ASSERT_GE(p.links.links.size(), 256 * p.patches.size());
     const std::vector<Rgb> steady = solve_steady(p.patches, p.links, p.emission);
-    SolverOptions options;
-    options.block_bins = 8;
-    const Profiles pr = solve(p, time_axis(800, 0.05), options);
-    EXPECT_EQ(pr.stats.block_bins, 8);
-    expect_integrals_are_steady(pr, steady, 3, 1e-9);
+    for (int block : {8, 16})
+        for (const TimeAxis& time : {time_axis(800, 0.05), time_axis(2000, 0.02)}) {
+            SolverOptions options;
+            options.block_bins = block;
+            const Profiles pr = solve(p, time, options);
+            EXPECT_EQ(pr.stats.block_bins, block);
+            EXPECT_EQ(pr.stats.packed_links > 0, block == 16);
+            expect_integrals_are_steady(pr, steady, 3, 1e-9);
+        }
 }
 
 TEST(Solver, TiledAndUntiledSourcesGiveTheSameProfiles) {
     // The cube alone (tiled sources) against the cube with 1,600 unlinked patches beside it (the same
-    // links, untiled): the same sums in another order, bin by bin, for blocks of 8 and 32 bins.
+    // links, untiled): the same sums in another order, bin by bin, for blocks of 8 bins (tiled links as
+    // the set has them) and of 16 and 32 (packed links, in windows up to 64 bins).
     const Prepared tiled = prepare(dense_cube(false)), untiled = prepare(dense_cube(true));
     ASSERT_EQ(untiled.patches.size(), 2200u);
     ASSERT_EQ(untiled.links.links.size(), tiled.links.links.size());
     ASSERT_LT(untiled.links.links.size(), 256 * untiled.patches.size());
-    for (int b : {8, 32}) {
+    for (int b : {8, 16, 32}) {
         SolverOptions options;
         options.block_bins = b;
         const Profiles t = solve(tiled, time_axis(300, 0.02), options), u = solve(untiled, time_axis(300, 0.02), options);
+        EXPECT_EQ(t.stats.packed_links > 0, b > 8);
+        EXPECT_EQ(u.stats.packed_links, 0u);
         float peak = 0.0f;
         for (float v : t.total) peak = std::max(peak, v);
         ASSERT_GT(peak, 0.0f);
@@ -904,14 +913,24 @@ TEST(Solver, WideKernelsGiveBitIdenticalProfiles) {
         const Profiles hn = solve(fine.patches, set, fine_light, schedule.time, narrow);
         EXPECT_EQ(ha.total, hn.total) << schedule.name << ", hierarchical links";
     }
-    // Dense rows: the kernels add into a receiver tile's own sums (contiguous) instead.
-    const Prepared dense = prepare(dense_cube(false));
-    ASSERT_GE(dense.links.links.size(), 256 * dense.patches.size());
-    SolverOptions wide, narrow;
-    wide.block_bins = narrow.block_bins = 8;
-    narrow.wide_vectors = false;
-    EXPECT_EQ(solve(dense, time_axis(300, 0.02), wide).total, solve(dense, time_axis(300, 0.02), narrow).total)
-        << "dense rows";
+    // Dense rows: the kernels add into a receiver tile's own sums (contiguous) instead; from blocks of
+    // 16 bins on, the packed kernels (whole 16-float vectors of sums), whose AVX2 copy sums 8-float vectors and
+    // long windows in parts: coloured and grey, windows of 16 to 64 bins.
+    Scene grey_cube = dense_cube(false);
+    for (Object& o : grey_cube.objects) o.albedo = Rgb::Constant(0.5);
+    grey_cube.lights[0] = PointLight{Vec3(0.3, 0.6, 0.7), Rgb::Constant(2.0)};
+    for (const Prepared& dense : {prepare(dense_cube(false)), prepare(grey_cube)}) {
+        ASSERT_GE(dense.links.links.size(), 256 * dense.patches.size());
+        for (int block : {8, 16, 32}) {
+            SolverOptions wide, narrow;
+            wide.block_bins = narrow.block_bins = block;
+            narrow.wide_vectors = false;
+            const Profiles a = solve(dense, time_axis(300, 0.02), wide), n = solve(dense, time_axis(300, 0.02), narrow);
+            EXPECT_EQ(a.stats.packed_links > 0, block > 8);
+            EXPECT_EQ(a.stats.packed_links, n.stats.packed_links);
+            EXPECT_EQ(a.total, n.total) << "dense rows, " << a.stats.channels << " channels, blocks of " << block;
+        }
+    }
 }
 
 TEST(SolverBatch, RejectsEmptyAndOversizedBatches) {

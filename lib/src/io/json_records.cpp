@@ -35,7 +35,8 @@ nlohmann::json solver_json(const RenderRecord& r) {
             {"short_links", r.stats.short_links},
             {"max_jacobi_iterations", r.stats.max_jacobi_iterations},
             {"jacobi_sweeps", r.stats.jacobi_sweeps},
-            {"wide_kernels", r.stats.wide_kernels}};
+            {"wide_kernels", r.stats.wide_kernels},
+            {"packed_links", r.stats.packed_links}};
 }
 
 nlohmann::json seconds_json(const PhaseSeconds& s) {

@@ -771,6 +771,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
     SolveStats stats;
     stats.block_bins = plan.bt;
     stats.wide_kernels = plan.wide;
+    stats.packed_links = plan.packed.size();
     stats.ring_bins = plan.ring;
     stats.channels = plan.channels;
     stats.illuminations = plan.K;
