@@ -460,8 +460,9 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
                            (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kSinkBins);
     double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
                                       shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
-    // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows).
-    if (tinted_mirrors(scene)) lists += double(e.links) * kLinkBytes;
+    // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows), the
+    // packed one where it packs them.
+    if (tinted_mirrors(scene) && !packed) lists += double(e.links) * kLinkBytes;
     if (packed) lists += double(e.links) * kPackedLinkBytes;
     e.solver_bytes = to_size(rings + blocks + outputs + lists);
     // Layers that gather from links (solver_plan.cpp plan_layers): all but the first order's, or the one total.

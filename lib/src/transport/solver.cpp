@@ -234,7 +234,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
                     // The next receivers' rows, each a line of its own far from this one: asked for
                     // while this one is summed (the check below would otherwise wait on memory).
-                    if (!p.packed.empty() && i + 2 < i1) __builtin_prefetch(&p.packed[cursor[i + 2 - i0][d]]);
+                    if (!p.packed.empty() && i + 2 < i1) __builtin_prefetch(p.packed.data() + cursor[i + 2 - i0][d]);
                     if (cursor[i - i0][d] >= end) continue;
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).

@@ -123,8 +123,7 @@ TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::u
                 last = k;
                 break;
             }
-            const int lag = int(l.key & lag_mask);
-            if (lag < BT) continue;  // shorter than the window: applied bin by bin (one window only)
+            const int lag = int(l.key & lag_mask);  // at least BT: pack_links sorts links by window
             const float* h = ring + std::size_t(l.key >> lag_bits) * ring_floats +
                              std::size_t(int((b0 - lag - 1) & mask)) * C + part * C * BP;
             for (int j = 0; j < NB; ++j) {

@@ -226,7 +226,9 @@ void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, Window
 // (SolvePlan::lag_bits), or 0 where a source and a lag do not fit one word or a window of
 // bt..kDenseLongestWindow bins has no packed kernel.
 int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
-    if (plan.source_tile >= plan.m || plan.bt > kDenseLongestWindow) return 0;
+    // Flat sets only: a dense hierarchical set would lose its per-node rings (every packed ring is as
+    // long as the longest).
+    if (plan.clusters || plan.source_tile >= plan.m || plan.bt > kDenseLongestWindow) return 0;
     for (int bins = plan.bt; bins <= kDenseLongestWindow; bins *= 2)
         if (!packed_kernel_for(plan.C, bins, wide)) return 0;
     // A link's lag grows with its length: the longest link's is the largest.
@@ -237,33 +239,37 @@ int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
     return bits < 32 && (std::uint64_t(plan.m) << bits) <= (std::uint64_t(1) << 32) ? bits : 0;
 }
 
-// plan.packed: the grey links of every row (tinted ones have lists of their own) with their taps, each
-// row stably sorted by window (sources stay non-decreasing within one); and the segments. Rows in
-// parallel: each row's packed links start where its grey links do.
+// plan.packed: the grey links of every row at least a block long (tinted ones have lists of their own,
+// shorter ones the bin-by-bin pass's) with their taps, each row stably sorted by window (sources stay
+// non-decreasing within one); and the segments. Rows in parallel, twice: their counts, then the links.
 void pack_links(const Links& links, SolvePlan& plan) {
     const std::size_t S = std::size_t(plan.windows);
     const bool tinted = any_tinted(links);
+    auto packs = [&](std::uint64_t k) {
+        return !(tinted && tinted_link(links, k)) &&
+               link_taps(links.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag >= plan.bt;
+    };
     std::vector<std::uint64_t> start(plan.m + 1, 0);
-    for (std::size_t i = 0; i < plan.m; ++i) {
-        std::uint64_t grey = links.row[i + 1] - links.row[i];
-        if (tinted)
-            for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) grey -= tinted_link(links, k) ? 1 : 0;
-        start[i + 1] = start[i] + grey;
-    }
+    parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
+        std::uint64_t count = 0;
+        for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) count += packs(k) ? 1 : 0;
+        start[i + 1] = count;
+    });
+    for (std::size_t i = 0; i < plan.m; ++i) start[i + 1] += start[i];
     plan.packed.resize(start[plan.m]);
     std::vector<std::vector<std::pair<int, PackedLink>>> rows(std::size_t(plan.threads));
     parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
         std::vector<std::pair<int, PackedLink>>& row = rows[std::size_t(omp_get_thread_num())];
         row.clear();
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-            if (tinted && tinted_link(links, k)) continue;
+            if (!packs(k)) continue;
             const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             row.push_back({plan.window_of(t.lag), {(links.source[k] << plan.lag_bits) | std::uint32_t(t.lag), t.w0, t.w1}});
         }
-        // Windows -1 (links shorter than a block) to S - 1, one pass each: stable, and S is small.
+        // Windows 0 to S - 1, one pass each: stable, and S is small.
         std::uint64_t at = start[i];
-        for (int s = -1; s < int(S); ++s) {
-            if (s >= 0) plan.segments[i * (S + 1) + std::size_t(s)] = at;
+        for (int s = 0; s < int(S); ++s) {
+            plan.segments[i * (S + 1) + std::size_t(s)] = at;
             for (const auto& [window, link] : row)
                 if (window == s) plan.packed[at++] = link;
         }
@@ -379,8 +385,6 @@ void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
     }
 }
 
-// The same-bin system restricted to its rows (SolvePlan::sweep_rows): the patches that receive or send a
-// same-bin link, in position order, their link lists re-indexed by row.
 // SolvePlan::short_split: the positions cut into plan.threads ranges of about equal work.
 void split_positions(SolvePlan& plan) {
     auto work = [&](std::size_t q) {
@@ -401,6 +405,8 @@ void split_positions(SolvePlan& plan) {
     }
 }
 
+// The same-bin system restricted to its rows (SolvePlan::sweep_rows): the patches that receive or send a
+// same-bin link, in position order, their link lists re-indexed by row.
 void compact_same_bin(SolvePlan& plan) {
     plan.sweep_row_of.assign(plan.n, -1);
     if (!plan.same_bin()) return;

@@ -229,7 +229,7 @@ struct SolvePlan {
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<TapLink> short_links;
     // The bin-by-bin pass's positions by thread: thread t takes [short_split[t], short_split[t + 1]),
-    // about as many short, same-bin and tinted links and patches each (kShortPatchLinks a patch). Short
+    // about as many short links (tinted ones too) and patches each (kShortPatchLinks a patch). Short
     // links gather where surfaces meet, so an even split of the positions was not even: 61% of the flat
     // 4k Cornell box's in the first half.
     std::vector<std::size_t> short_split;
@@ -278,8 +278,9 @@ struct SolvePlan {
     int fed_layers = 0;             // layers that gather from links
     GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
-    // Dense rows whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey links packed,
-    // by row and window (`segments` index them, not `links`), and per window the kernel that reads them.
+    // Dense rows of a flat set whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey
+    // links of at least a block packed, by row and window (`segments` index them, not `links`), and per
+    // window the kernel that reads them.
     std::vector<PackedLink, DefaultInitAllocator<PackedLink>> packed;
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
     std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node

@@ -95,7 +95,7 @@ struct SolveStats {
     double seconds_short = 0.0;         ///< wall time in the bin-by-bin pass (short and same-bin links)
     double seconds_sink = 0.0;          ///< wall time in output assembly and the sink
     bool wide_kernels = false;          ///< the long-link kernels ran with AVX-512 (SolverOptions::wide_vectors)
-    std::uint64_t packed_links = 0;     ///< links the plan packed for the dense-row kernels (flat sets), or 0
+    std::uint64_t packed_links = 0;     ///< links the plan packed for the dense-row kernels (flat sets; those of at least a block), or 0
 };
 
 /// Marches over the scene's time axis and hands every block of final bins to `sink`.
