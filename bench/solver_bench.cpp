@@ -134,6 +134,7 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options, cons
     state.counters["block_bins"] = double(stats.block_bins);
     state.counters["jacobi_max"] = double(stats.max_jacobi_iterations);
     state.counters["wide_kernels"] = stats.wide_kernels ? 1.0 : 0.0;
+    state.counters["packed_links"] = double(stats.packed_links);
     // The long-link pass alone (where the link kernel runs; links shorter than a block are applied
     // bin by bin in the short pass), against the same peak.
     const double long_gflops = double(stats.link_bin_updates) * (1.0 - double(short_links) / double(p.links.links.size())) *
