@@ -234,7 +234,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
                     // The next receivers' rows, each a line of its own far from this one: asked for
                     // while this one is summed (the check below would otherwise wait on memory).
-                    if (!p.packed.empty() && i + 2 < i1) __builtin_prefetch(p.packed.data() + cursor[i + 2 - i0][d]);
+                    if (p.packs() && i + 2 < i1) __builtin_prefetch(p.packed.data() + cursor[i + 2 - i0][d]);
                     if (cursor[i - i0][d] >= end) continue;
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).
@@ -747,7 +747,7 @@ std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, con
     TPRF_CHECK(channels == 1 || channels == 3);
     TPRF_CHECK_EQ(set.patches(), patches.size());
     check_tints(set.links);
-    return working_bytes(make_plan(patches, set, time, options, illuminations, channels));
+    return working_bytes(make_plan(patches, set, time, options, illuminations, channels, true));
 }
 
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
@@ -771,7 +771,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
     SolveStats stats;
     stats.block_bins = plan.bt;
     stats.wide_kernels = plan.wide;
-    stats.packed_links = plan.packed.size();
+    stats.packed_links = plan.packed_count;
     stats.ring_bins = plan.ring;
     stats.channels = plan.channels;
     stats.illuminations = plan.K;

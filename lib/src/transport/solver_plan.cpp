@@ -241,8 +241,9 @@ int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
 
 // plan.packed: the grey links of every row at least a block long (tinted ones have lists of their own,
 // shorter ones the bin-by-bin pass's) with their taps, each row stably sorted by window (sources stay
-// non-decreasing within one); and the segments. Rows in parallel, twice: their counts, then the links.
-void pack_links(const Links& links, SolvePlan& plan) {
+// non-decreasing within one); and the segments. Rows in parallel, twice: their counts, then the links
+// (not where the plan is only sized: SolvePlan::packed_count is all that solve_working_bytes needs).
+void pack_links(const Links& links, SolvePlan& plan, bool fill) {
     const std::size_t S = std::size_t(plan.windows);
     const bool tinted = any_tinted(links);
     auto packs = [&](std::uint64_t k) {
@@ -256,6 +257,8 @@ void pack_links(const Links& links, SolvePlan& plan) {
         start[i + 1] = count;
     });
     for (std::size_t i = 0; i < plan.m; ++i) start[i + 1] += start[i];
+    plan.packed_count = start[plan.m];
+    if (!fill) return;
     plan.packed.resize(start[plan.m]);
     std::vector<std::vector<std::pair<int, PackedLink>>> rows(std::size_t(plan.threads));
     parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
@@ -277,7 +280,7 @@ void pack_links(const Links& links, SolvePlan& plan) {
     });
 }
 
-void plan_windows(const Links& links, SolvePlan& plan, bool wide) {
+void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     plan.lag_bits = packed_lag_bits(links, plan, wide);
     plan.acc_bins = std::max(plan.bt, plan.lag_bits > 0 ? kDenseLongestWindow : kLongestWindow);
     plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
@@ -289,7 +292,7 @@ void plan_windows(const Links& links, SolvePlan& plan, bool wide) {
         return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
     if (plan.lag_bits > 0) {
-        pack_links(links, plan);
+        pack_links(links, plan, fill);
         for (int s = 0; s < plan.windows; ++s) plan.packed_kernel[s] = packed_kernel_for(plan.C, plan.window_bins(s), wide);
         return;
     }
@@ -464,7 +467,7 @@ void copy_near_links(SolvePlan& plan) {
 // in that order), then clusters'.
 void plan_rings(SolvePlan& plan) {
     plan.slots.resize(plan.m);
-    if (!plan.packed.empty()) {
+    if (plan.packs()) {
         // Packed links find their source's ring from the source alone (SolvePlan::packed_ring): every
         // ring as long as the longest, node k's k rings in. The short rings' unused bins are never read.
         int longest = 0, window = 0;
@@ -495,7 +498,7 @@ void plan_rings(SolvePlan& plan) {
 // The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
 // first block (plan_blocks moves the start to the batch's earliest pulse).
 SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
-                    int illuminations, int channels) {
+                    int illuminations, int channels, bool sizing_only) {
     const Links& links = set.links;
     SolvePlan plan;
     plan.n = patches.size();
@@ -525,7 +528,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     while (plan.emit_bins() * 2 <= kSinkBins && out_per_bin * std::size_t(plan.emit_bins() * 2) <= kSinkBytes)
         plan.emit_blocks *= 2;
     const bool wide = options.wide_vectors && cpu_has_wide_kernels();
-    plan_windows(links, plan, wide);
+    plan_windows(links, plan, wide, !sizing_only);
     plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
     split_positions(plan);
@@ -538,11 +541,11 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
     // shortest window's links read.
     // Packed links have kernels for every window, the shortest's included (which reads the rings).
-    if (plan.packed.empty() && plan.windows > 1 && plan.recent_bins >= 2 * plan.bt)
+    if (!plan.packs() && plan.windows > 1 && plan.recent_bins >= 2 * plan.bt)
         plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
     if (plan.recent_kernel) copy_near_links(plan);
-    bool any_kernel = plan.recent_kernel != nullptr || !plan.packed.empty();
-    for (int s = 0; s < plan.windows && plan.packed.empty(); ++s) {
+    bool any_kernel = plan.recent_kernel != nullptr || plan.packs();
+    for (int s = 0; s < plan.windows && !plan.packs(); ++s) {
         plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), wide);
         if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), wide);
         any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
@@ -579,7 +582,7 @@ std::size_t working_bytes(const SolvePlan& p) {
            p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
            p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
            p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() + p.near.bytes() +
-           p.packed.size() * sizeof(PackedLink) +
+           p.packed_count * sizeof(PackedLink) +
            p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
            p.tinted_same.size() * sizeof(TintedSameLink) +
            (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);

@@ -282,7 +282,9 @@ struct SolvePlan {
     // links of at least a block packed, by row and window (`segments` index them, not `links`), and per
     // window the kernel that reads them.
     std::vector<PackedLink, DefaultInitAllocator<PackedLink>> packed;
+    std::uint64_t packed_count = 0;  // their number (also in a plan made for sizing only, which has none)
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
+    bool packs() const { return lag_bits > 0; }
     std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node
     PackedKernel packed_kernel[kMaxWindows] = {};
     // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
@@ -325,9 +327,10 @@ struct SolvePlan {
 };
 
 /// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
-/// first block (plan_blocks moves the start to the batch's earliest pulse).
+/// first block (plan_blocks moves the start to the batch's earliest pulse). `sizing_only`: a plan for
+/// working_bytes alone, whose packed links are counted, not made.
 SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
-                    int illuminations, int channels);
+                    int illuminations, int channels, bool sizing_only = false);
 /// Moves the march's start to the batch's earliest pulse, aligned to the longest window.
 void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch);
 /// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
