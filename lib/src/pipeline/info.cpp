@@ -151,7 +151,10 @@ constexpr double kTapBinSeconds = 1.0 / 1.5e9;       // the film: one tap applie
 // camera.shift_second_bounce: the second bounce from the links, its shift and its own taps, per link
 // (measured on the Cornell box: 0.15 s for 2.9M links, 2.1 s for 46M).
 constexpr double kFirstLinkSecondsPerLink = 5e-8;
-constexpr double kLinkBinSeconds[2] = {1.0 / 8e9, 1.0 / 4e9};  // the solve: link-bin updates, grey / colour
+// The solve: link-bin updates a second, grey / colour. Flat 4k Cornell box, 2 Zen 5 cores, 2026-11-28:
+// colour 11.6e9 with AVX-512, 7.8e9 with AVX2 (packed links); grey 19-22e9 with AVX-512. The AVX2
+// rates, for machines without AVX-512 (grey: the colour one's 1.7x, as with AVX-512).
+constexpr double kLinkBinSeconds[2] = {1.0 / 13e9, 1.0 / 7.5e9};
 constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin by bin
 /// The hierarchical solve per patch and bin: 2.6e-7 to 1.4e-6 s on the Cornell box from 4k to 1M patches
 /// (3 channels), 4.3e-7 on the statue (1 channel).
