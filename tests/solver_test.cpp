@@ -935,6 +935,36 @@ TEST(Solver, WideKernelsGiveBitIdenticalProfiles) {
     }
 }
 
+TEST(SolverBatch, PackedBatchesMatchTheirSinglesWithEitherKernelCopy) {
+    // Dense rows with 8 grey lanes and with 24 (8 coloured illuminations) take packed kernels too, whose
+    // sums of a lane are those of its illumination alone (1 or 3 packed lanes): each illumination of the
+    // batch against its single solve, and the AVX-512 copy against the AVX2 one, bit for bit.
+    Scene grey_cube = dense_cube(false);
+    for (Object& o : grey_cube.objects) o.albedo = Rgb::Constant(0.5);
+    grey_cube.lights.clear();
+    Scene coloured_cube = dense_cube(false);
+    coloured_cube.lights.clear();
+    for (const bool coloured : {false, true}) {
+        const Prepared p = prepare(coloured ? coloured_cube : grey_cube);
+        ASSERT_GE(p.links.links.size(), 256 * p.patches.size());
+        const std::vector<Illumination> batch = batch_of(8, p.patches.size(), coloured);
+        SolverOptions wide, narrow;
+        narrow.wide_vectors = false;
+        const TimeAxis time = time_axis(300, 0.02);
+        const std::vector<Profiles> a = solve_batch(p.patches, p.links, batch, time, wide);
+        const std::vector<Profiles> n = solve_batch(p.patches, p.links, batch, time, narrow);
+        EXPECT_EQ(a[0].stats.lanes, coloured ? 24 : 8);
+        EXPECT_GT(a[0].stats.packed_links, 0u);
+        for (std::size_t k = 0; k < batch.size(); ++k) {
+            EXPECT_EQ(a[k].total, n[k].total) << (coloured ? "coloured" : "grey") << ", illumination " << k;
+            const Profiles single = solve(p.patches, p.links, batch[k], time, wide);
+            EXPECT_GT(single.stats.packed_links, 0u);
+            ASSERT_GT(*std::max_element(single.total.begin(), single.total.end()), 0.0f);
+            EXPECT_LE(worst_relative(a[k], single), kBatchTolerance) << (coloured ? "coloured" : "grey") << ", illumination " << k;
+        }
+    }
+}
+
 TEST(SolverBatch, RejectsEmptyAndOversizedBatches) {
     const Prepared p = corner();
     const Illumination e = pulses_for(1, p.patches.size(), false);

@@ -448,7 +448,7 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
     const double share = scene.links.method == LinkMethod::Hierarchical ? hierarchical_ring_share(n) : 1.0;
     // Flat sets' dense rows: the march packs the links once more and reads them in longer windows,
-    // which the rings' mirrors and the accumulators hold. One illumination's lanes only (C <= 3).
+    // which the rings' mirrors and the accumulators hold (a render's one illumination: 1 or 3 lanes).
     const bool packed = scene.links.method == LinkMethod::Flat && double(e.links) >= kDenseRowLinks * n;
     const int window = packed ? std::max(kBlockBins, kDenseWindowBins) : kBlockBins;
     const double rings = L * nodes * (share * e.ring_bins + window + 1) * C * 4;

@@ -65,24 +65,29 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
 // the same chain of operations on one float either way, so both give the same bits.
 #ifdef TPRF_KERNEL_WIDE
 constexpr int kPackedWidth = 16;
-constexpr int kPackedRegisters = 28;  // of 32: the sums, with two taps and a window vector beside them
 #else
 constexpr int kPackedWidth = 8;
-constexpr int kPackedRegisters = 13;  // of 16
 #endif
 
-// Parts of a window that the packed kernel sums one after the other (a power of two): the fewest whose
-// sums fit in registers, or 0 for no packed kernel. Which windows have one does not depend on the
-// instruction set (C x BT a multiple of 16 floats), so that a plan packs the same links either way.
-constexpr int packed_parts(int C, int BT) {
-    if ((C * BT) % 16 != 0) return 0;
+// Parts of a window of BT bins that a packed kernel of vectors of W floats with `registers` for its
+// sums sums one after the other (a power of two): the fewest whose sums fit, or 0.
+constexpr int parts_for(int C, int BT, int W, int registers) {
     for (int P = 1; P <= BT; P *= 2) {
         const int floats = C * (BT / P);
-        if (floats % kPackedWidth != 0) return 0;
-        const int sums = floats / kPackedWidth + (floats + C + kPackedWidth - 1) / kPackedWidth;
-        if (sums <= kPackedRegisters) return P;
+        if (floats % W != 0) continue;
+        const int sums = floats / W + (floats + C + W - 1) / W;
+        if (sums <= registers) return P;
     }
     return 0;
+}
+
+// The parts of this copy's kernel, or 0 for no packed kernel. Which (C, BT) have one does not depend on
+// the instruction set (C x BT a multiple of 16 floats, and both copies' sums fit: the AVX-512 one's in
+// 28 of its 32 registers, beside two taps and a window vector, the AVX2 one's in 13 of 16), so that a
+// plan packs the same links either way.
+constexpr int packed_parts(int C, int BT) {
+    if ((C * BT) % 16 != 0 || parts_for(C, BT, 16, 28) == 0 || parts_for(C, BT, 8, 13) == 0) return 0;
+    return kPackedWidth == 16 ? parts_for(C, BT, 16, 28) : parts_for(C, BT, 8, 13);
 }
 
 // The packed kernel for one receiver, one source tile and windows of BT bins (dense rows: flat links),
@@ -98,17 +103,22 @@ TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::u
                                       int mask, std::int64_t b0, float* acc, std::size_t stride) {
     constexpr int W = kPackedWidth, P = packed_parts(C, BT), BP = BT / P;
     static_assert(P > 0, "no packed kernel for these lanes and window");
-    static_assert(C < W, "B's shift by C lanes joins two neighbouring vectors");
     constexpr int NA = C * BP / W, NB = (C * (BP + 1) + W - 1) / W;
+    // B read C lanes on: vector j + C / W, lanes C % W on, joined with the next one where C % W > 0.
+    constexpr int Q = C / W, R = C % W;
     typedef float vec __attribute__((vector_size(W * sizeof(float))));
-    // B's lanes C on, from two neighbouring vectors (GCC 12 and clang both have __builtin_shufflevector;
-    // a macro, not a lambda, which would not have the kernel's target).
+    // (GCC 12 and clang both have __builtin_shufflevector; a macro, not a lambda, which would not have the
+    // kernel's target.)
 #ifdef TPRF_KERNEL_WIDE
-#define TPRF_SHIFTED(lo, hi)                                                                                   \
-    __builtin_shufflevector(lo, hi, C, C + 1, C + 2, C + 3, C + 4, C + 5, C + 6, C + 7, C + 8, C + 9, C + 10, \
-                            C + 11, C + 12, C + 13, C + 14, C + 15)
+#define TPRF_SHIFTED(j)                                                                                         \
+    (R == 0 ? B[(j) + Q]                                                                                        \
+            : __builtin_shufflevector(B[(j) + Q], B[(j) + Q + (R > 0)], R, R + 1, R + 2, R + 3, R + 4, R + 5, \
+                                      R + 6, R + 7, R + 8, R + 9, R + 10, R + 11, R + 12, R + 13, R + 14, R + 15))
 #else
-#define TPRF_SHIFTED(lo, hi) __builtin_shufflevector(lo, hi, C, C + 1, C + 2, C + 3, C + 4, C + 5, C + 6, C + 7)
+#define TPRF_SHIFTED(j)                                                                                      \
+    (R == 0 ? B[(j) + Q]                                                                                     \
+            : __builtin_shufflevector(B[(j) + Q], B[(j) + Q + (R > 0)], R, R + 1, R + 2, R + 3, R + 4, R + 5, \
+                                      R + 6, R + 7))
 #endif
     const std::uint32_t lag_mask = (std::uint32_t(1) << lag_bits) - 1;
     const std::uint64_t first = cursor;
@@ -142,14 +152,14 @@ TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::u
             for (int j = 0; j < NA; ++j) {
                 vec sum;
                 __builtin_memcpy(&sum, to + W * j, sizeof sum);
-                sum += A[j] + TPRF_SHIFTED(B[j], B[j + 1]);
+                sum += A[j] + TPRF_SHIFTED(j);
                 __builtin_memcpy(to + W * j, &sum, sizeof sum);
             }
             continue;
         }
         float local[C * BP];
         for (int j = 0; j < NA; ++j) {
-            const vec out = A[j] + TPRF_SHIFTED(B[j], B[j + 1]);
+            const vec out = A[j] + TPRF_SHIFTED(j);
             __builtin_memcpy(local + W * j, &out, sizeof out);
         }
         add_sums(to, stride, local, C, BP);
@@ -173,10 +183,15 @@ PackedKernel packed_for(int bins) {
     }
 }
 
+// One illumination grey or coloured, and batches of 8 or 16 grey lanes or 8 coloured illuminations (24
+// lanes). 48 lanes' sums fit no AVX2 registers (and run on gather_lanes).
 PackedKernel packed_table(int C, int bins) {
     switch (C) {
         case 1: return packed_for<1>(bins);
         case 3: return packed_for<3>(bins);
+        case 8: return packed_for<8>(bins);
+        case 16: return packed_for<16>(bins);
+        case 24: return packed_for<24>(bins);
         default: return nullptr;
     }
 }
