@@ -448,7 +448,13 @@ int choose_batch(const CapturePlan& p, const LinkSet& links, const CaptureOption
         throw Error("a capture's march needs about " + std::to_string(std::size_t(one / 1e6)) +
                     " MB for one illumination, over the memory left (" +
                     std::to_string(options.memory_bytes / 1000000) + " MB): raise --max-memory or patches.max_edge");
-    return per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
+    int batch = per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
+    // The lane count also picks the march's kernels (a flat set's links are packed for 1, 3, 8, 16 and 24
+    // lanes, not for 48), so the straight line is checked where it lands.
+    while (batch > 1 && double(solve_working_bytes(p.patches, links, p.march, solver, batch, grey ? 1 : 3)) >
+                            double(options.memory_bytes))
+        --batch;
+    return batch;
 }
 
 // Laser points [first, last) of `rank`: whole units of `unit` laser points (a batch, so that every rank
