@@ -221,6 +221,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
             for (int d = 0; d < count; ++d) cursor[i - i0][d] = p.segments[i * (S + 1) + std::size_t(due[d])];
         for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
             const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
+            const std::uint64_t key_end = std::uint64_t(s1) << p.lag_bits;  // packed links: the tile's end
             for (std::size_t i = i0; i < i1; ++i) {
                 // Tiled sources add into the tile's own sums (receiver-major, so a kernel's sums add
                 // as one contiguous stream), which go to the accumulators once, after the last tile.
@@ -238,7 +239,6 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     if (cursor[i - i0][d] >= end) continue;
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).
-                        const std::uint64_t key_end = std::uint64_t(s1) << p.lag_bits;
                         if (p.packed[cursor[i - i0][d]].key >= key_end) continue;
                         p.packed_kernel[s](p.packed.data(), cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
                                            p.packed_ring, p.ring - 1, b0, a, stride);

@@ -218,10 +218,6 @@ void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, Window
     }
 }
 
-// The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
-// hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
-// other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
-// links only: a set with tinted links is copied without them.
 // Dense rows (sources in tiles) whose lane count has packed kernels: the bits of a packed key's lag
 // (SolvePlan::lag_bits), or 0 where a source and a lag do not fit one word or a window of
 // bt..kDenseLongestWindow bins has no packed kernel.
@@ -265,8 +261,9 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
         std::vector<std::pair<int, PackedLink>>& row = rows[std::size_t(omp_get_thread_num())];
         row.clear();
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-            if (!packs(k)) continue;
+            if (tinted && tinted_link(links, k)) continue;
             const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            if (t.lag < plan.bt) continue;  // as packs(k): a lag does not depend on the form factor
             row.push_back({plan.window_of(t.lag), {(links.source[k] << plan.lag_bits) | std::uint32_t(t.lag), t.w0, t.w1}});
         }
         // Windows 0 to S - 1, one pass each: stable, and S is small.
@@ -280,9 +277,14 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
     });
 }
 
+// The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
+// hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
+// other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
+// links only: a set with tinted links is copied without them. Dense rows of a flat set are packed
+// instead (pack_links), where packed kernels serve their lanes; `fill`: with their links, not only counted.
 void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     plan.lag_bits = packed_lag_bits(links, plan, wide);
-    plan.acc_bins = std::max(plan.bt, plan.lag_bits > 0 ? kDenseLongestWindow : kLongestWindow);
+    plan.acc_bins = std::max(plan.bt, plan.packs() ? kDenseLongestWindow : kLongestWindow);
     plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
     TPRF_CHECK_LE(plan.windows, kMaxWindows);
     plan.links = &links;
@@ -291,7 +293,7 @@ void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     auto window = [&](const Links& l, std::uint64_t k) {
         return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
-    if (plan.lag_bits > 0) {
+    if (plan.packs()) {
         pack_links(links, plan, fill);
         for (int s = 0; s < plan.windows; ++s) plan.packed_kernel[s] = packed_kernel_for(plan.C, plan.window_bins(s), wide);
         return;
