@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-C_LIGHT = 299792458.0  # m/s (SPEC: in every medium)
+C_LIGHT = 299792458.0  # m/s: tprf takes light at this speed in every medium
 
 
 def unit(v):
