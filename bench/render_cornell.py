@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""End-to-end Cornell box renders for bench/RESULTS.md: 96 x 96 pixels, 2048 bins, all bounces, at
+"""End-to-end Cornell box renders: 96 x 96 pixels, 2048 bins, all bounces, at
 several patch sizes. Prints a Markdown table of each phase's seconds and the peak memory.
 
 usage: bench/render_cornell.py [BUILD_DIR] [MAX_EDGE ...]    (defaults: build, 0.1 0.05)
