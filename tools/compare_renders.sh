@@ -40,18 +40,19 @@ def capture_scene(name, capture, objects=None, links=None, time=None, max_edge=0
              "capture": dict(devices, **capture)}
     json.dump(scene, open(os.path.join(work, name + ".json"), "w"), indent=1)
 grid = lambda n: {"origin": [-0.4, -0.4, 0], "u": [0.8, 0, 0], "v": [0, 0.8, 0], "nu": n, "nv": n}
-capture_scene("capture-confocal", {"type": "confocal", "grid": grid(6), "max_bounces": None})
+capture_scene("capture-confocal", {"type": "confocal", "grid": grid(5), "max_bounces": None},
+              time={"bins": 100, "bin_width": 0.03})
 capture_scene("capture-march", {"type": "confocal", "grid": grid(7), "march_bin_factor": 4, "march_grid_step": 3,
                                 "account_first_and_last_bounces": True},
-              time={"bins": 200, "bin_width": 0.01, "start": 1.0})
+              time={"bins": 200, "bin_width": 0.01, "start": 3.0})
 capture_scene("capture-exhaustive", {"type": "exhaustive", "grid": grid(3), "sensor_grid": grid(2),
                                      "laser": {"position": [-0.3, -1.4, 0.35], "power": [1.0, 0.5, 0.25]},
                                      "account_first_and_last_bounces": True},
-              links={"method": "flat"})
+              links={"method": "flat"}, time={"bins": 150, "bin_width": 0.02, "start": 3.0})
 mirror = rect([1, -1.5, 0.2], [0, 0, 1.8], [0, 3, 0], material={"type": "mirror", "reflectance": [0.9, 0.6, 0.3]})
 plane = rect([0.5, -0.3, 0.5], [0, 0.6, 0], [0.2, 0, 0.4], 0.6)
 capture_scene("capture-mirror", {"type": "confocal", "grid": grid(4)}, objects=[plane, mirror],
-              time={"bins": 250, "bin_width": 0.02})
+              time={"bins": 160, "bin_width": 0.03}, max_edge=0.15)
 PY
 for tag in old new; do
     bin=$old; [ "$tag" = new ] && bin=$new
