@@ -151,16 +151,20 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
     const Camera& camera = *scene.camera;
     const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
     c.cube = arrays.open("transient", {H, W, T, 3});
-    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube, -1,
-                                             false, options.threads);
+    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, c.cube,
+                                             FilmOptions{.delay = scene.solver.delay, .threads = options.threads});
     c.film->read_first_link_apart(t.first_link.get());
     if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
     const int terms = bounce_terms(scene.solver);
     for (int k = 0; k < terms; ++k) {
         float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
         const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
-        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
-                                                               term, k, tail, options.threads, c.film->taps()));
+        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, term,
+                                                               FilmOptions{.delay = scene.solver.delay,
+                                                                           .order = k,
+                                                                           .last_is_tail = tail,
+                                                                           .threads = options.threads,
+                                                                           .taps = c.film->taps()}));
         c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
     }
 }
@@ -172,6 +176,24 @@ int lead_bins(const TimeAxis& time, const Gather& gather) {
     return bins_before_window(time, double(longest));
 }
 
+// The patch profiles themselves (--patch-profiles), as a film whose outputs are the patches: each
+// block's bins inside the window, as solved, into the (N, T, 3) cube.
+class PatchProfiles : public Film {
+public:
+    PatchProfiles(float* cube, std::size_t patches, std::size_t bins) : m_cube(cube), m_patches(patches), m_bins(bins) {}
+    void add_block(const SolveBlock& b) override {
+        const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written
+        for (std::size_t i = 0; i < m_patches; ++i)
+            std::copy_n(b.radiosity + (i * std::size_t(b.bins) + std::size_t(skip)) * 3, std::size_t(b.bins - skip) * 3,
+                        m_cube + (i * m_bins + std::size_t(b.first_bin + skip)) * 3);
+    }
+    void finish() override {}
+
+private:
+    float* m_cube;
+    std::size_t m_patches, m_bins;
+};
+
 // Solves and films every block; then the exact direct light. Records the solve and gather times.
 SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Cubes& c,
                             RenderReport& report) {
@@ -181,30 +203,21 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     solver_options.bounce_terms = bounce_terms(scene.solver);
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
-    const std::size_t N = t.patches.size(), T = std::size_t(scene.time.bins);
     // The patches' light from `lead` bins before the window on (the films read those bins too).
     const int lead = lead_bins(scene.time, t.gather);
     solver_options.first_bin = -lead;
+    std::vector<Film*> films{c.film.get()};
+    for (auto& f : c.term_films) films.push_back(f.get());
+    PatchProfiles profiles(c.patch_cube, t.patches.size(), std::size_t(scene.time.bins));
+    if (c.patch_cube) films.push_back(&profiles);
     auto start = Clock::now();
     double sink_seconds = 0.0;
     const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, scene.time, solver_options,
-                                             [&](const SolveBlock& b) {
-        const auto s0 = Clock::now();
-        c.film->add_block(b);
-        for (auto& f : c.term_films) f->add_block(b);
-        const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written
-        if (c.patch_cube)
-            for (std::size_t i = 0; i < N; ++i)
-                std::copy_n(b.radiosity + (i * std::size_t(b.bins) + std::size_t(skip)) * 3,
-                            std::size_t(b.bins - skip) * 3,
-                            c.patch_cube + (i * T + std::size_t(b.first_bin + skip)) * 3);
-        sink_seconds += seconds_since(s0);
-    });
+                                             film_sink(films, sink_seconds));
     report.link_bin_updates = stats.link_bin_updates;
     report.seconds.solve = seconds_since(start) - sink_seconds;
     start = Clock::now();
-    c.film->finish();
-    for (auto& f : c.term_films) f->finish();
+    for (Film* f : films) f->finish();
     c.film->add_direct();
     for (auto& f : c.term_films) f->add_direct();
     report.seconds.gather += sink_seconds + seconds_since(start);
