@@ -73,6 +73,9 @@ import json, sys
 j = json.load(open(sys.argv[1]))
 for k in ("seconds", "peak_rss_mb", "version", "scene"): j.pop(k, None)
 j.get("solver", {}).pop("working_mb", None)
+c = j.get("capture", {})
+c.pop("seconds", None)
+for share in c.get("shares", []): share.pop("seconds", None)
 print(json.dumps(j, sort_keys=True))' "$1"; }
 cd "$work/old"
 while IFS= read -r f; do
