@@ -331,7 +331,7 @@ void TransientFilm::finish() {
         if (m_first_link) std::fill_n(m_first.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
     }
     if (m_first_link) {  // the light one link after its pulse, apart from the rest, for all the kept bins
-        m_first_link->fill(m_first_bin, m_kept, [this](int order) { return takes_order(order); },
+        m_first_link->fill({m_first_bin, m_kept}, [this](int order) { return takes_order(order); },
                            m_first.data() + pad * 3, stride, m_first_lit, &m_first_read);
         parallel_for(rows, {m_threads, 64, true}, [&](std::size_t i) {
             if (!m_first_lit[i]) return;  // no second bounce read here: the rest is the whole profile

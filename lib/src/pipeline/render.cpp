@@ -9,6 +9,7 @@
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
 #include "tprf/imaging/film.h"
+#include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
 #include "tprf/io/hdf5_capture.h"
 #include "tprf/io/image_io.h"
@@ -124,8 +125,11 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
     if (scene.camera->shift_second_bounce) {
-        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time, scene.solver.delay,
-                                             scene.solver.max_bounces, !t.visibility->chains().empty(), options.threads);
+        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time,
+                                             {.delay = scene.solver.delay,
+                                              .max_bounces = scene.solver.max_bounces,
+                                              .threads = options.threads},
+                                             !t.visibility->chains().empty());
         gather_options.first_link = t.first_link.get();
     }
     report.second_bounce_shifted = t.first_link != nullptr;
@@ -253,20 +257,20 @@ void write_views(const Scene& scene, const RenderOptions& options, const float* 
     const int bins = scene.time.bins;
     Staging* staging = arrays.staging();
     if (!staging) {
-        if (scene.sensor) report.measurements = measure_cube(*scene.sensor, scene.time, cube, camera.height,
-                                                             camera.width, options.threads, arrays).K;
+        if (scene.sensor)
+            report.measurements =
+                measure_cube(*scene.sensor, {scene.time, cube, camera.height, camera.width}, options.threads, arrays).K;
         return;
     }
     if (options.frames) write_frames(staging->path("frames"), cube, camera.height, camera.width, bins);
     if (options.streaks) write_streaks(staging->path("streaks"), cube, camera.height, camera.width, bins);
     if (scene.sensor)
-        report.measurements = write_sensor_outputs(*staging, *scene.sensor, scene.time, cube, camera.height,
-                                                   camera.width, plot_pixel(options.plot_pixel, camera.width,
-                                                                            camera.height),
-                                                   options, report.warnings);
+        report.measurements = write_sensor_outputs(*staging, *scene.sensor, {scene.time, cube, camera.height, camera.width},
+                                                   plot_pixel(options.plot_pixel, camera.width, camera.height), options,
+                                                   report.warnings);
     if (options.video) {
         const std::filesystem::path mp4 = staging->path("light_in_flight.mp4");
-        write_video(mp4, mp4.parent_path() / ".video-frames", cube, camera.height, camera.width, bins);
+        write_video(mp4, cube, camera.height, camera.width, bins);
     }
 }
 
@@ -347,7 +351,7 @@ void render_share(const Scene& scene, RenderOptions options) {
     Transport t;
     RenderReport unused;
     build_geometry(scene, options, links, t, unused);
-    share_capture(scene, options, t.patches, *t.visibility, links ? &t.links : nullptr);
+    share_capture(scene, options, {t.patches, *t.visibility, links ? &t.links : nullptr});
 }
 
 // The camera's outputs: the cubes filled block by block, then the steady image and the views.
@@ -406,8 +410,9 @@ RenderRecord run_stages(const std::filesystem::path& scene_file, const Scene& sc
     if (scene.camera) stats = render_camera(scene, options, transport, arrays, report);
     std::optional<CaptureRecord> capture;
     if (scene.capture)
-        capture = render_capture(scene, options, transport.patches, *transport.visibility,
-                                 render_needs_links(scene) ? &transport.links : nullptr, arrays, report);
+        capture = render_capture(scene, options,
+                                 {transport.patches, *transport.visibility, render_needs_links(scene) ? &transport.links : nullptr},
+                                 arrays, report);
     report.seconds.total = seconds_since(start);
     report.peak_rss_mb = peak_rss_mb();
     RenderRecord record = render_record(scene_file, scene, stats, report);
@@ -482,7 +487,7 @@ std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const Re
     }
     RenderResult out;
     Arrays arrays(out);
-    measure_cube(sensor, result.time, cube, c.height, c.width, threads, arrays);
+    measure_cube(sensor, {result.time, cube, c.height, c.width}, threads, arrays);
     return std::move(out.arrays);
 }
 
