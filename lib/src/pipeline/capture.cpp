@@ -155,8 +155,8 @@ void solve_batch(const CaptureRun& run, const Batch& batch, CaptureResult& resul
     std::vector<std::vector<std::vector<SensorTap>>> taps(K);
     parallel_for(K, {run.options.threads, 1, true}, [&](std::size_t k) {
         const std::size_t l = batch.lasers[k];
-        const Rgb exitance = p.patches.albedo[p.points.laser[l].patch] * p.capture.laser_power / (M_PI * kViewSamples);
-        illuminations[k] = spot_pulses(p.patches, batch.laser_views[k], exitance, p.laser_leg(l), p.march);
+        illuminations[k] = spot_pulses(p.patches, wall_spot(p.points.laser[l], p.capture.laser_power, p.laser_leg(l)),
+                                       batch.laser_views[k], p.march);
         if (p.confocal) taps[k] = {sensor_taps(p.patches, p.points.sensor[l], p.sensor_leg(l), batch.laser_views[k])};
     });
     std::vector<const Illumination*> marched;

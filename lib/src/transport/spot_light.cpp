@@ -81,8 +81,10 @@ void third_bounce(const PatchSet& patches, const ThirdBounce& ends, std::vector<
     }
 }
 
-Illumination spot_pulses(const PatchSet& patches, const std::vector<PatchView>& views, const Rgb& exitance,
-                         double leg, const TimeAxis& time) {
+Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const std::vector<PatchView>& views,
+                         const TimeAxis& time) {
+    const Rgb exitance = patches.albedo[spot.patch] * spot.power / (M_PI * kViewSamples);
+    const double leg = spot.path;
     const double start = time.start_m(), inv_bin = 1.0 / time.bin_width_m();
     const double bin_width = 1.0 / inv_bin;
     Illumination out;

@@ -67,13 +67,13 @@ struct ThirdBounce {
 /// onsets are never late, and early only by the path's curvature across a cell (docs/capture.md).
 void third_bounce(const PatchSet& patches, const ThirdBounce& ends, std::vector<PathBox>& out);
 
-/// The pulses that a spot sends into the patch system for a march on `time` (CSR by patch): each patch's
-/// first-bounce exitance at its mean path (mean_view of `views`, what the spot sees) plus `leg`, split
-/// between the two bins of the march about it as a tap splits its leg, each piece in the middle of its
-/// bin; `exitance` is the spot's, albedo P / (pi kViewSamples). The pulses are order 2 and belong to
+/// The pulses that `spot` sends into the patch system for a march on `time` (CSR by patch): each patch's
+/// first-bounce exitance (the spot's albedo P / pi, over the samples) at its mean path (mean_view of
+/// `views`, what the spot sees) plus the spot's path, split between the two bins of the march about it
+/// as a tap splits its leg, each piece in the middle of its bin. The pulses are order 2 and belong to
 /// point source 0 (the spot): a film takes them out of the profiles again (their light is
 /// third_bounce's, exact per sample); they only feed the later reflections.
-Illumination spot_pulses(const PatchSet& patches, const std::vector<PatchView>& views, const Rgb& exitance,
-                         double leg, const TimeAxis& time);
+Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const std::vector<PatchView>& views,
+                         const TimeAxis& time);
 
 }  // namespace tprf
