@@ -88,7 +88,8 @@ void BM_FilmBlock(benchmark::State& state) {
     options.time = &s.scene.time;
     const tprf::Gather gather = tprf::prepare_camera(camera, s.patches, s.sources, *s.visibility, options);
     std::vector<float> cube(std::size_t(camera.width) * camera.height * kBins * 3, 0.0f);
-    tprf::TransientFilm film(gather, s.emission, s.scene.time, s.scene.solver.delay, cube.data(), -1, false, kThreads);
+    tprf::TransientFilm film(gather, s.emission, s.scene.time, cube.data(),
+                             {.delay = s.scene.solver.delay, .threads = kThreads});
     std::vector<float> radiosity(s.patches.size() * kBlockBins * 3, 1e-3f);
     tprf::SolveBlock block;
     block.first_bin = kBins / 2;

@@ -115,7 +115,7 @@ Filmed film_of(const Gather& g, const tprf::TimeAxis& time, DelayMode delay, con
     tprf::Illumination none;
     none.row.assign(kPatches + 1, 0);
     f.cube.assign(std::size_t(kWidth) * kBins * 3, 0.0f);
-    tprf::TransientFilm film(g, none, time, delay, f.cube.data(), -1, false, 2);
+    tprf::TransientFilm film(g, none, time, f.cube.data(), {.delay = delay, .threads = 2});
     std::vector<float> block;
     std::size_t turn = 0;
     for (int b0 = 0, n = 0; b0 < f.bins; b0 += n) {

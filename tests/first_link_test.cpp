@@ -111,13 +111,13 @@ TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
             const char* mode = delay == DelayMode::Linear ? "linear" : "nearest";
             const std::vector<float> second = solver_second_bounce(patches, own, light, scene.time, delay);
             const std::vector<float> whole = solver_second_bounce(patches, links, light, scene.time, delay);
-            const FirstLinkLight first(patches, links, light, scene.time, delay, -1);
+            const FirstLinkLight first(patches, links, light, scene.time, {.delay = delay});
             std::vector<float> rows(n * T * 3, 1.0f);  // fill overwrites every bin
             std::vector<char> lit;
             // In two pieces, as films ask for it: the first ends inside the second bounce's bins.
-            first.fill(0, 300, [](int order) { return order == 2; }, rows.data(), T * 3, lit);
+            first.fill({0, 300}, [](int order) { return order == 2; }, rows.data(), T * 3, lit);
             std::vector<float> tail(n * (T - 300) * 3);
-            first.fill(300, T - 300, [](int order) { return order == 2; }, tail.data(), (T - 300) * 3, lit);
+            first.fill({300, T - 300}, [](int order) { return order == 2; }, tail.data(), (T - 300) * 3, lit);
             for (std::size_t i = 0; i < n; ++i)
                 std::copy_n(tail.data() + i * (T - 300) * 3, (T - 300) * 3, rows.data() + (i * T + 300) * 3);
             double peak = 0.0, worst = 0.0, total = 0.0, above = 0.0, total_whole = 0.0;
@@ -140,7 +140,7 @@ TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
                 EXPECT_LT(total, (1.0 - 1e-3) * total_whole) << mode;  // the cluster links' share stays apart
             }
             // Other orders are not first-link light: order 1 (the pulses themselves) and order 3 give nothing.
-            first.fill(0, T, [](int order) { return order != 2; }, rows.data(), T * 3, lit);
+            first.fill({0, T}, [](int order) { return order != 2; }, rows.data(), T * 3, lit);
             EXPECT_EQ(*std::max_element(rows.begin(), rows.end()), 0.0f);
             EXPECT_EQ(std::count(lit.begin(), lit.end(), 1), 0);
         }

@@ -82,16 +82,16 @@ TEST(FormFactors, ParallelSquaresMatchHowellC11) {
     const auto a = square(0, 0, 1, 1, 0.0, true);
     const auto b = square(0, 0, 1, 1, 1.0, false);
     const FormFactorQuadrature fine{1e-4, 7};
-    const double f = polygon_form_factor(a.data(), 4, Vec3::UnitZ(), b.data(), 4, -Vec3::UnitZ(), fine);
+    const double f = polygon_form_factor({a.data(), 4, Vec3::UnitZ()}, {b.data(), 4, -Vec3::UnitZ()}, fine);
     EXPECT_NEAR(test::ff_parallel_rectangles(1, 1, 1), 0.19982, 1e-5);  // the catalogue's value
     // Adaptive tolerance 1e-4 relative per cell: measured 1.8e-5 off in total; bound about 3 times that.
     EXPECT_NEAR(f / test::ff_parallel_rectangles(1, 1, 1), 1.0, 6e-5);
     // The default rule (1e-3 per cell, at most 4^5 cells): measured 1.6e-4; bound about 4 times that.
-    const double d = polygon_form_factor(a.data(), 4, Vec3::UnitZ(), b.data(), 4, -Vec3::UnitZ());
+    const double d = polygon_form_factor({a.data(), 4, Vec3::UnitZ()}, {b.data(), 4, -Vec3::UnitZ()});
     EXPECT_NEAR(d / test::ff_parallel_rectangles(1, 1, 1), 1.0, 6e-4);
     // The fixed Gauss rule on one unit square at unit distance, far outside its intended range (pairs a
     // few sizes apart): error O((size/distance)^4), measured 7.3e-3; 1e-2 bounds that order.
-    const double g = polygon_form_factor_gauss(a.data(), 4, Vec3::UnitZ(), b.data(), 4, -Vec3::UnitZ());
+    const double g = polygon_form_factor_gauss({a.data(), 4, Vec3::UnitZ()}, {b.data(), 4, -Vec3::UnitZ()});
     EXPECT_NEAR(g / test::ff_parallel_rectangles(1, 1, 1), 1.0, 1e-2);
 }
 
@@ -100,14 +100,14 @@ TEST(FormFactors, PerpendicularSquaresSharingAnEdgeMatchHowellC14) {
     const auto floor = square(0, 0, 1, 1, 0.0, true);
     const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
     // Counter-clockwise about +x: (0,0,0) -> (0,1,0) -> (0,1,1) -> (0,0,1) turns from +y to +z. Good.
-    const double f = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX(),
+    const double f = polygon_form_factor({floor.data(), 4, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()},
                                          FormFactorQuadrature{1e-4, 7});
     EXPECT_NEAR(test::ff_perpendicular_rectangles(1, 1, 1), 0.20004, 1e-5);
     // The integrand's gradient is singular along the shared edge: adaptive refinement at 1e-4 per
     // cell still measures 1.5e-5 off in total; bound about 4 times that.
     EXPECT_NEAR(f / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 6e-5);
     // The default (coarser, for speed) rule: measured 1.8e-4; bound about 3 times that.
-    const double d = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    const double d = polygon_form_factor({floor.data(), 4, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()});
     EXPECT_NEAR(d / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 6e-4);
 }
 
@@ -118,13 +118,13 @@ TEST(FormFactors, AFloorReachingBehindAWallIntegratesOnlyItsPartInFront) {
     const auto floor = square(-0.5, 0, 1.5, 1, 0.0, true);
     const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
     const double expected = test::ff_perpendicular_rectangles(1, 1, 1) / 1.5;
-    const double d = polygon_form_factor(floor.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    const double d = polygon_form_factor({floor.data(), 4, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()});
     // Measured 5.5e-7 (3.9% before the rule cut the floor at the wall's plane); the bound is the default
     // rule's on the square alone (PerpendicularSquaresSharingAnEdgeMatchHowellC14).
     EXPECT_NEAR(d / expected, 1.0, 6e-4);
     // A floor wholly behind the wall: nothing.
     const auto behind = square(-1, 0, 0.5, 1, 0.0, true);
-    EXPECT_EQ(polygon_form_factor(behind.data(), 4, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX()), 0.0);
+    EXPECT_EQ(polygon_form_factor({behind.data(), 4, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()}), 0.0);
 }
 
 TEST(FormFactors, TheTwoTrianglesOfASquareSendWhatTheSquareSends) {
@@ -133,8 +133,8 @@ TEST(FormFactors, TheTwoTrianglesOfASquareSendWhatTheSquareSends) {
     const std::array<Vec3, 3> edge = {Vec3(0, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
     const std::array<Vec3, 3> corner = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0)};
     const std::array<Vec3, 4> wall = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 1, 1), Vec3(0, 0, 1)};
-    const double f_edge = polygon_form_factor(edge.data(), 3, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
-    const double f_corner = polygon_form_factor(corner.data(), 3, Vec3::UnitZ(), wall.data(), 4, Vec3::UnitX());
+    const double f_edge = polygon_form_factor({edge.data(), 3, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()});
+    const double f_corner = polygon_form_factor({corner.data(), 3, Vec3::UnitZ()}, {wall.data(), 4, Vec3::UnitX()});
     EXPECT_GT(f_edge, f_corner);  // the triangle along the wall sees more of it
     // Measured 5.5e-7 off; the bound is the default rule's on the whole square.
     EXPECT_NEAR((0.5 * f_edge + 0.5 * f_corner) / test::ff_perpendicular_rectangles(1, 1, 1), 1.0, 6e-4);

@@ -116,8 +116,8 @@ TEST(Links, EveryLinkMatchesAnIndependentIntegralFromItsSource) {
             const double d = (p.centroid[i] - p.centroid[j]).norm();
             const double reach = circumradius(p, i) + circumradius(p, j);
             const int rule = d < rules.near_factor * reach ? 0 : d < rules.far_factor * reach ? 1 : 2;
-            const double f_ji = polygon_form_factor(p.polygon(j), p.corners(j), p.normal[j], p.polygon(i),
-                                                    p.corners(i), p.normal[i]);
+            const double f_ji =
+                polygon_form_factor({p.polygon(j), p.corners(j), p.normal[j]}, {p.polygon(i), p.corners(i), p.normal[i]});
             ASSERT_GT(f_ji, 0.0);
             EXPECT_NEAR(p.area[i] * double(b.links.ff[k]) / (p.area[j] * f_ji), 1.0, kRuleTolerance[rule])
                 << "link " << i << " <- " << j << " (rule " << rule << ")";

@@ -60,7 +60,7 @@ std::vector<float> measure(const SensorSettings& s, const TimeAxis& time, const 
     if (depth) depth->resize(std::size_t(h * w));
     SensorOptions o;
     o.threads = threads;
-    apply_sensor(s, time, cube.data(), h, w, m.data(), depth ? depth->data() : nullptr, o);
+    apply_sensor(s, {time, cube.data(), h, w}, m.data(), depth ? depth->data() : nullptr, o);
     return m;
 }
 
@@ -578,7 +578,7 @@ TEST(SensorSpad, JitterTailKernelHasUnitAreaAndMeanTimeConstantTimesFraction) {
     const std::vector<float> cube = spike_cube(1, 1, T, 100, 1.0f);
     const SensorSettings s = sensor_from(spad({{"jitter_fwhm", 0.03}, {"jitter_tail", {{"time_constant", 0.05}, {"fraction", 0.3}}}}));
     validate_sensor(s, time);
-    const std::vector<double> m = spad_expected_counts(s, time, cube.data(), 1, 1, 0, 0);
+    const std::vector<double> m = spad_expected_counts(s, {time, cube.data(), 1, 1}, 0, 0);
     double total = 0.0, mean = 0.0;
     for (int k = 0; k < T; ++k) total += m[std::size_t(k * 3)], mean += m[std::size_t(k * 3)] * (k + 0.5);
     EXPECT_NEAR(total, 1000.0, 1e-9);
@@ -592,7 +592,7 @@ TEST(SensorSpad, DeadTimeSuppressesLaterBinsByTheSynchronousFactor) {
     std::vector<float> cube = {2, 2, 2, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f};
     const double N = 1000, p0 = 1 - std::exp(-2.0), p1 = 1 - std::exp(-0.5), p2 = p1;
     auto counts = [&](double dead_time) {
-        return spad_expected_counts(sensor_from(spad({{"dead_time", dead_time}, {"cycles", N}})), time, cube.data(), 1, 1, 0, 0);
+        return spad_expected_counts(sensor_from(spad({{"dead_time", dead_time}, {"cycles", N}})), {time, cube.data(), 1, 1}, 0, 0);
     };
     // No dead time: the counts are the photons themselves.
     const std::vector<double> none = counts(0.0);
@@ -626,8 +626,8 @@ TEST(SensorSpad, AfterpulsingAddsItsProbabilityTimesTheDetections) {
     const json base = {{"dead_time", 0.05}, {"cycles", 1e4}};
     json with = base;
     with["afterpulsing"] = {{"probability", P}, {"time_constant", 0.1}};
-    const std::vector<double> d = spad_expected_counts(sensor_from(spad(base)), time, cube.data(), H, W, 0, 0);
-    const std::vector<double> a = spad_expected_counts(sensor_from(spad(with)), time, cube.data(), H, W, 0, 0);
+    const std::vector<double> d = spad_expected_counts(sensor_from(spad(base)), {time, cube.data(), H, W}, 0, 0);
+    const std::vector<double> a = spad_expected_counts(sensor_from(spad(with)), {time, cube.data(), H, W}, 0, 0);
     double detections = 0.0, total = 0.0, offset = 0.0;
     for (int k = 0; k < T; ++k) {
         detections += d[std::size_t(k * 3)];
@@ -656,7 +656,7 @@ TEST(SensorSpad, AmbientAddsRateTimesBinTimeTimesCycles) {
     const double bin_seconds = 0.01 / kSpeedOfLight;
     const double per_bin = rate * bin_seconds * cycles + dark * bin_seconds;  // 3.34 + 0.01 counts
     const SensorSettings s = sensor_from(spad({{"ambient", rate}, {"cycles", cycles}, {"dark_rate", dark}}));
-    for (const double v : spad_expected_counts(s, time, zero.data(), H, W, 3, 4)) EXPECT_NEAR(v, per_bin, 1e-12 * per_bin);
+    for (const double v : spad_expected_counts(s, {time, zero.data(), H, W}, 3, 4)) EXPECT_NEAR(v, per_bin, 1e-12 * per_bin);
     const std::vector<float> m = measure(s, time, zero, H, W);
     const double n = double(m.size()), mean = std::accumulate(m.begin(), m.end(), 0.0) / n;
     EXPECT_NEAR(mean, per_bin, 5 * std::sqrt(per_bin / n));  // 5 standard errors of a Poisson mean
@@ -670,7 +670,7 @@ TEST(SensorSpad, CrosstalkGivesEachNeighbourItsProbabilityTimesThePixelsCounts) 
     for (int c = 0; c < 3; ++c) cube[at(2, 2, 3) + std::size_t(c)] = 1.0f;  // only the centre sees light, in bin 3
     const double x = 0.02;
     const SensorSettings s = sensor_from(spad({{"crosstalk", x}}));
-    auto counts = [&](int row, int column) { return spad_expected_counts(s, time, cube.data(), H, W, row, column)[3 * 3]; };
+    auto counts = [&](int row, int column) { return spad_expected_counts(s, {time, cube.data(), H, W}, row, column)[3 * 3]; };
     // First order: the crosstalk the neighbours receive does not come back. (The bin's weight is 1 up to the
     // rounding of its overlap with itself.)
     const double centre = counts(2, 2);
@@ -679,7 +679,7 @@ TEST(SensorSpad, CrosstalkGivesEachNeighbourItsProbabilityTimesThePixelsCounts) 
     for (const auto& [r, c] : {std::array<int, 2>{1, 1}, {0, 2}, {3, 3}, {4, 4}}) EXPECT_EQ(counts(r, c), 0.0);
     // A dead pixel sends no crosstalk.
     const SensorSettings dead = sensor_from(spad({{"crosstalk", x}, {"dead_pixels", {{2, 2}}}}));
-    EXPECT_EQ(spad_expected_counts(dead, time, cube.data(), H, W, 1, 2)[3 * 3], 0.0);
+    EXPECT_EQ(spad_expected_counts(dead, {time, cube.data(), H, W}, 1, 2)[3 * 3], 0.0);
 
     // Drawn: lit pixels on a lattice of pitch 3, so that every other pixel has at most one lit neighbour.
     const int N = 60;

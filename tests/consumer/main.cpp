@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
         using tprf::Vec3;
         const Vec3 floor[4] = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
         const Vec3 ceiling[4] = {Vec3(0, 0, 1), Vec3(0, 1, 1), Vec3(1, 1, 1), Vec3(1, 0, 1)};
-        const double f11 = tprf::polygon_form_factor(floor, 4, Vec3::UnitZ(), ceiling, 4, -Vec3::UnitZ());
+        const double f11 = tprf::polygon_form_factor({floor, 4, Vec3::UnitZ()}, {ceiling, 4, -Vec3::UnitZ()});
         // The default quadrature measures 1.6e-4 off here; the bound of tests/form_factors_test.cpp.
         bool ok = check("C-11 parallel unit squares", f11, kParallelUnitSquares, 6e-4 * kParallelUnitSquares);
 

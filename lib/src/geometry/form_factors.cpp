@@ -107,8 +107,16 @@ struct Integrand {
     }
 };
 
-double refine(const Integrand& f, const Cell& cell, double estimate, double tolerance_per_area, double cell_area,
-              int depth, int max_depth) {
+// When a cell stops being refined: its estimate stable to tolerance_per_area times its area, or max_depth
+// levels down.
+struct Refinement {
+    double tolerance_per_area;
+    int max_depth;
+};
+
+double refine(const Integrand& f, const Cell& cell, double estimate, double cell_area, int depth, const Refinement& stop) {
+    const double tolerance_per_area = stop.tolerance_per_area;
+    const int max_depth = stop.max_depth;
     const std::array<Cell, 4> children = split(cell);
     std::array<double, 4> parts{};
     double sum = 0.0;
@@ -121,7 +129,7 @@ double refine(const Integrand& f, const Cell& cell, double estimate, double tole
         return sum + (sum - estimate) * rule.richardson;
     double refined = 0.0;
     for (int k = 0; k < 4; ++k)
-        refined += refine(f, children[k], parts[k], tolerance_per_area, 0.25 * cell_area, depth + 1, max_depth);
+        refined += refine(f, children[k], parts[k], 0.25 * cell_area, depth + 1, stop);
     return refined;
 }
 
@@ -218,8 +226,13 @@ double point_polygon_form_factor(const Vec3& x, const Vec3& n, const Vec3* poly,
     return std::max(0.0, contour_sum(d.v.data(), d.count, n) / (2.0 * M_PI));
 }
 
-double polygon_form_factor_gauss(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
-                                 std::size_t b_count, const Vec3& b_normal) {
+double polygon_form_factor_gauss(const PolygonView& pa, const PolygonView& pb) {
+    const Vec3* a = pa.corners;
+    const std::size_t a_count = pa.count;
+    const Vec3& a_normal = pa.normal;
+    const Vec3* b = pb.corners;
+    const std::size_t b_count = pb.count;
+    const Vec3& b_normal = pb.normal;
     double sum = 0.0;
     if (a_count == 4) {
         // Bilinear map of the unit square; the Jacobian |x_u x x_v| weights each Gauss point.
@@ -244,8 +257,13 @@ double polygon_form_factor_gauss(const Vec3* a, std::size_t a_count, const Vec3&
     return sum / 3.0;
 }
 
-double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
-                           std::size_t b_count, const Vec3& b_normal, const FormFactorQuadrature& quadrature) {
+double polygon_form_factor(const PolygonView& pa, const PolygonView& pb, const FormFactorQuadrature& quadrature) {
+    const Vec3* a = pa.corners;
+    const std::size_t a_count = pa.count;
+    const Vec3& a_normal = pa.normal;
+    const Vec3* b = pb.corners;
+    const std::size_t b_count = pb.count;
+    const Vec3& b_normal = pb.normal;
     TPRF_CHECK(a_count == 3 || a_count == 4);
     double area = 0.0;
     Vec3 centroid;
@@ -288,8 +306,8 @@ double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_nor
     double total = 0.0;
     for (std::size_t r = 0; r < root_count; ++r)
         for (int k = 0; k < 4; ++k)
-            total += refine(f, children[r][k], parts[r][k], tolerance_per_area, 0.25 * root_area[r], 1,
-                            quadrature.max_depth);
+            total += refine(f, children[r][k], parts[r][k], 0.25 * root_area[r], 1,
+                            {tolerance_per_area, quadrature.max_depth});
     return total / area;
 }
 

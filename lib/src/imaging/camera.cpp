@@ -50,12 +50,24 @@ struct Pinhole {
     }
 };
 
+// Where a sample's ray ends: its unnormalised direction from the camera, the reflections `turn` it took,
+// its unfolded path and the normal n of the surface it reaches.
+struct RayEnd {
+    const Vec3& direction;
+    const Eigen::Matrix3d& turn;
+    double path;
+    const Vec3& n;
+};
+
 // Half-axes of a sample's cell (half_px pixels either side of it) on the surface it reaches: ray
-// differentials through the reflections `turn`, onto the plane of normal n at distance `path` along
-// the unfolded ray (first order; a cell that meets the plane almost edge-on is capped at 100 times the
+// differentials through the reflections, onto the plane of normal n at distance `path` along the
+// unfolded ray (first order; a cell that meets the plane almost edge-on is capped at 100 times the
 // cell's width across the ray, rather than spread to infinity).
-void cell_on_surface(const Pinhole& pin, const Vec3& direction, const Eigen::Matrix3d& turn, double path,
-                     const Vec3& n, double half_px, SensingPoint& sp) {
+void cell_on_surface(const Pinhole& pin, const RayEnd& end, double half_px, SensingPoint& sp) {
+    const Vec3& direction = end.direction;
+    const Eigen::Matrix3d& turn = end.turn;
+    const double path = end.path;
+    const Vec3& n = end.n;
     const Vec3 d = turn * direction;  // unnormalised, unfolded
     const double s = path / direction.norm(), nd = n.dot(d);
     const auto on_surface = [&](const Vec3& change) {
@@ -74,10 +86,23 @@ void cell_on_surface(const Pinhole& pin, const Vec3& direction, const Eigen::Mat
     }
 }
 
+// What a pixel's samples are taken with: the camera and its pinhole frame, the scene, the samples per
+// pixel and each one's half share of the pixel's side.
+struct Sampler {
+    const Camera& camera;
+    const Pinhole& pin;
+    const PatchSet& patches;
+    const Visibility& vis;
+    int spp;
+    double half_px;
+};
+
 // Pixel (c, r)'s samples in a scene without mirrors or glass, a packet of rays at a time (they leave
 // one point nearly together): each reaches at most one surface, kept when it meets its front.
-void straight_samples(const Camera& camera, const Pinhole& pin, const PatchSet& patches, const Visibility& vis, int r,
-                      int c, int spp, double half_px, std::vector<SensingPoint>& out) {
+void straight_samples(const Sampler& sampler, int r, int c, std::vector<SensingPoint>& out) {
+    const Camera& camera = sampler.camera;
+    const Pinhole& pin = sampler.pin;
+    const int spp = sampler.spp;
     const std::uint32_t pixel = std::uint32_t(r * camera.width + c);
     static const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     for (int s0 = 0; s0 < spp; s0 += Visibility::kBatch) {
@@ -90,13 +115,14 @@ void straight_samples(const Camera& camera, const Pinhole& pin, const PatchSet& 
             dir[k] = towards[k].normalized();
         }
         RayHit hits[Visibility::kBatch];
-        vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits);
+        sampler.vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits);
         for (int k = 0; k < count; ++k) {
             const RayHit& h = hits[k];
             if (!h.hit || !h.front) continue;
             SensingPoint& sp =
                 out.emplace_back(SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
-            if (camera.footprint) cell_on_surface(pin, towards[k], straight, h.distance, patches.normal[h.patch], half_px, sp);
+            if (camera.footprint)
+                cell_on_surface(pin, {towards[k], straight, h.distance, sampler.patches.normal[h.patch]}, sampler.half_px, sp);
         }
     }
 }
@@ -119,7 +145,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
         by_row[r].reserve(std::size_t(camera.width) * std::size_t(spp));
         for (int c = 0; c < camera.width; ++c) {
             if (!specular) {
-                straight_samples(camera, pin, patches, vis, int(r), c, spp, half_px, by_row[r]);
+                straight_samples({camera, pin, patches, vis, spp, half_px}, int(r), c, by_row[r]);
                 continue;
             }
             const std::uint32_t pixel = std::uint32_t(int(r) * camera.width + c);
@@ -137,7 +163,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
                     SensingPoint& sp = by_row[r].emplace_back(SensingPoint{
                         pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path), float(t.weight)});
                     if (camera.footprint)
-                        cell_on_surface(pin, towards, t.turn, t.path, patches.normal[t.hit.patch], half_px, sp);
+                        cell_on_surface(pin, {towards, t.turn, t.path, patches.normal[t.hit.patch]}, half_px, sp);
                     row_tints[r].push_back(t.tint);
                 }
             }
@@ -161,7 +187,7 @@ Gather prepare_camera(const Camera& camera, const PatchSet& patches, const Light
                       const Visibility& visibility, const GatherOptions& options) {
     const SensingPoints points = pinhole_points(camera, patches, visibility, options.threads);
     if (options.progress) options.progress("camera", 0.3);
-    return gather_points(points, camera.width, camera.height, patches, sources, visibility, options);
+    return gather_points(points, camera.width, camera.height, {patches, sources, visibility}, options);
 }
 
 }  // namespace tprf

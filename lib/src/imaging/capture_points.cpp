@@ -1,7 +1,6 @@
 #include "tprf/imaging/capture_points.h"
 
 #include "tprf/core/error.h"
-#include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/scene/scene.h"
@@ -109,106 +108,6 @@ CapturePoints locate_capture_points(const Scene& scene, const PatchSet& patches,
                                 {c.sensor_grid, c.sensor_position, "sensor", at + "." + c.sensor_grid_key,
                                  at + ".sensor.position"});
     return points;
-}
-
-namespace {
-
-// Patches smaller than this share of their distance from the wall point take one shadow ray, from their
-// centroid, for all their samples; larger ones (near the point, where a shadow edge may cross them) take
-// one per sample. The views' cost is their rays: 4096 wall points x 12k patches are 50M rays instead of
-// 200M.
-constexpr double kOneRayAngle = 0.1;
-
-}  // namespace
-
-ViewCells view_cells(const PatchSet& patches) {
-    ViewCells c;
-    const std::size_t n = patches.size() * std::size_t(kViewSamples);
-    c.point.resize(n);
-    c.hu.resize(n);
-    c.hv.resize(n);
-    // The cell's half-axes: central differences of the patch's map over the cell's width.
-    const double half = 0.5 / kViewSide;
-    for (std::size_t j = 0; j < patches.size(); ++j)
-        for (int s = 0; s < kViewSamples; ++s) {
-            const double u = (s % kViewSide + 0.5) / kViewSide, t = (s / kViewSide + 0.5) / kViewSide;
-            const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
-            c.point[at] = patch_point(patches, j, u, t);
-            c.hu[at] = 0.5 * (patch_point(patches, j, u + half, t) - patch_point(patches, j, u - half, t));
-            c.hv[at] = 0.5 * (patch_point(patches, j, u, t + half) - patch_point(patches, j, u, t - half));
-        }
-    return c;
-}
-
-namespace {
-
-// The view of patch j from `probe` (the wall point, or its image through a chain) by its samples:
-// arrive() gives the kernel and the exact path with its shadow ray (or the unfolded path's weight);
-// small far patches take one ray from the centroid for all samples (straight views only).
-bool view_patch(const PointSource& probe, std::size_t j, const Vec3& wall_normal, const PatchSet& patches,
-                const Visibility& visibility, const ViewCells& cells, PatchView& v) {
-    const Vec3& n = patches.normal[j];
-    const double distance = (patches.centroid[j] - probe.origin).norm();
-    const bool one_ray = probe.chain < 0 && circumradius(patches, j) < kOneRayAngle * distance;
-    v.patch = std::uint32_t(j);
-    v.chain = probe.chain;
-    v.from = probe.origin;
-    if (probe.chain >= 0) v.tint = visibility.chains()[std::size_t(probe.chain)].tint;
-    bool seen = false;
-    for (int s = 0; s < kViewSamples; ++s) {
-        const std::size_t at = j * std::size_t(kViewSamples) + std::size_t(s);
-        const Vec3& y = cells.point[at];
-        double g = 0.0, path = 0.0;
-        if (one_ray) {
-            const Vec3 d = probe.position - y;
-            path = d.norm();
-            g = std::max(0.0, n.dot(d)) * std::max(0.0, -wall_normal.dot(d)) / (path * path * path * path);
-        } else if (PointArrival a; arrive(probe, y, n, visibility, a)) {
-            path = a.path;
-            g = a.intensity[0] * a.cos_over_r2;
-        }
-        if (!(g > 0.0)) continue;
-        v.path[std::size_t(s)] = float(path);
-        v.g[std::size_t(s)] = float(g);
-        const Vec3 dir = (y - probe.position) / path;
-        v.du[std::size_t(s)] = float(dir.dot(cells.hu[at]));
-        v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
-        seen = true;
-    }
-    if (seen && one_ray) {
-        // The one ray from the centroid decides for every sample, glass between passing its share.
-        const double passed = visibility.transmittance(patches.centroid[j] + visibility.epsilon() * n, probe.position);
-        if (!(passed > 0.0)) return false;
-        if (passed < 1.0)
-            for (float& g : v.g) g = float(double(g) * passed);
-    }
-    return seen;
-}
-
-}  // namespace
-
-std::vector<PatchView> view_patches(const WallPoint& w, const PatchSet& patches, const Visibility& visibility,
-                                    const ViewCells& cells) {
-    // A probe whose intensity toward a direction is the cosine at the wall: arrive() then gives
-    // cos cos / r^2 and the exact path, with its shadow ray, as for any point source.
-    PointSource probe;
-    probe.position = w.point + visibility.epsilon() * w.normal;
-    probe.origin = w.point;
-    probe.intensity = Rgb::Constant(M_PI);
-    probe.lobe = w.normal;
-    probe.patch = w.patch;
-    // And its images through mirrors and glass (the wall point's own patch may see those).
-    std::vector<PointSource> probes{probe};
-    point_images(probe, visibility, probes);
-    for (PointSource& image : probes) image.intensity = probe.intensity;  // the chain's tint: PatchView::tint
-    std::vector<PatchView> out;
-    for (std::size_t j = 0; j < patches.size(); ++j)
-        for (const PointSource& p : probes) {
-            if (j == p.patch) continue;
-            PatchView v;
-            if (view_patch(p, j, w.normal, patches, visibility, cells, v)) out.push_back(v);
-        }
-    return out;
 }
 
 std::int64_t grid_cell(const CaptureGrid& grid, const Vec3& x, double tolerance) {

@@ -8,6 +8,7 @@
 #include "tprf/transport/solver.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <tuple>
@@ -100,12 +101,20 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
     return merged;
 }
 
-TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time,
-                             DelayMode delay, float* cube, int order, bool last_is_tail, int threads,
-                             std::shared_ptr<const FilmTaps> taps)
-    : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(order),
-      m_last_is_tail(last_is_tail), m_threads(thread_count(threads)), m_delay(delay),
-      m_taps(taps ? std::move(taps) : std::make_shared<const FilmTaps>(film_taps(gather, time, delay, threads))),
+BlockSink film_sink(std::span<Film* const> films, double& seconds) {
+    return [films, &seconds](const SolveBlock& block) {
+        const auto start = std::chrono::steady_clock::now();
+        for (Film* film : films) film->add_block(block);
+        seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    };
+}
+
+TransientFilm::TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time, float* cube,
+                             FilmOptions options)
+    : m_gather(gather), m_illumination(illumination), m_time(time), m_cube(cube), m_order(options.order),
+      m_last_is_tail(options.last_is_tail), m_threads(thread_count(options.threads)), m_delay(options.delay),
+      m_taps(options.taps ? std::move(options.taps)
+                          : std::make_shared<const FilmTaps>(film_taps(gather, time, options.delay, options.threads))),
       m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, std::int64_t(kFilmPadBins))) {}
 
 void TransientFilm::read_first_link_apart(const FirstLinkLight* light, std::shared_ptr<const FilmTaps> shifted) {
@@ -278,7 +287,10 @@ void TransientFilm::add_fused(const FilmTaps& taps, const FilmTaps::Tap& tap, co
 // One pixel's taps over the block: each reads its patch's profile and spreads it over its kernel
 // (the pixel's legs to that patch, split between bins).
 void TransientFilm::add_taps(const FilmTaps& taps, const std::vector<float>& rows, const std::vector<char>* lit,
-                             std::size_t px, int first_bin, std::size_t bins, std::size_t stride) {
+                             std::size_t px) {
+    // The kept bins, in rows of m_capacity bins between their zero padding.
+    const int first_bin = m_first_bin;
+    const std::size_t bins = m_kept, stride = (m_capacity + 2 * std::size_t(m_pad)) * 3;
     float* out = m_cube + px * std::size_t(m_time.bins) * 3;
     for (std::uint64_t k = taps.row[px]; k < taps.row[px + 1]; ++k) {
         const FilmTaps::Tap& tap = taps.taps[k];
@@ -319,7 +331,7 @@ void TransientFilm::finish() {
         if (m_first_link) std::fill_n(m_first.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
     }
     if (m_first_link) {  // the light one link after its pulse, apart from the rest, for all the kept bins
-        m_first_link->fill(m_first_bin, m_kept, [this](int order) { return takes_order(order); },
+        m_first_link->fill({m_first_bin, m_kept}, [this](int order) { return takes_order(order); },
                            m_first.data() + pad * 3, stride, m_first_lit, &m_first_read);
         parallel_for(rows, {m_threads, 64, true}, [&](std::size_t i) {
             if (!m_first_lit[i]) return;  // no second bounce read here: the rest is the whole profile
@@ -330,8 +342,8 @@ void TransientFilm::finish() {
         });
     }
     parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) {
-        add_taps(*m_taps, m_indirect, nullptr, px, m_first_bin, m_kept, stride);
-        if (m_first_link) add_taps(*m_shifted, m_first, &m_first_lit, px, m_first_bin, m_kept, stride);
+        add_taps(*m_taps, m_indirect, nullptr, px);
+        if (m_first_link) add_taps(*m_shifted, m_first, &m_first_lit, px);
     });
     m_kept = 0;
 }

@@ -105,11 +105,30 @@ struct RunSample {
     std::size_t index = 0, count = 1;
 };
 
+// What the exact direct light at sensing points reads: the patches, the sources, the visibility and the
+// gather's options.
+struct DirectScene {
+    const PatchSet& patches;
+    const LightSources& sources;
+    const Visibility& vis;
+    const GatherOptions& options;
+};
+
+// A pixel's samples (or a group of them: `count` points from `pts`) and each one's weight.
+struct Samples {
+    const SensingPoint* pts;
+    std::size_t count;
+    double weight;
+};
+
 // Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
 // with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
 // spread over their paths and over the point's cell (per bin of the time axis, when there is one).
-void area_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const AreaSource& a,
-                   const Visibility& vis, const GatherOptions& options, std::vector<DirectArrival>& out) {
+void area_arrivals(const DirectScene& scene, const SensingPoint& sp, RunSample at, double weight, const AreaSource& a,
+                   std::vector<DirectArrival>& out) {
+    const PatchSet& patches = scene.patches;
+    const Visibility& vis = scene.vis;
+    const GatherOptions& options = scene.options;
     const Vec3& n = patches.normal[sp.patch];
     const double ff = point_polygon_form_factor(sp.point, n, a.polygon(), a.count, a.normal);
     if (!(ff > 0.0)) return;
@@ -128,16 +147,27 @@ void area_arrivals(const SensingPoint& sp, RunSample at, double weight, const Pa
     for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});
 }
 
-// Light arriving at `path` from a sensing point, spread over the paths of the point's cell (its path
-// changes by +- a and +- b along its half-axes, never before `lowest`) and cut at the bins of the time
-// axis: one arrival per bin it touches. Without a time axis, one arrival.
-void add_over_cell(std::uint32_t output, double path, double a, double b, double lowest, const Rgb& radiance,
-                   std::uint8_t order, const TimeAxis* time, std::vector<DirectArrival>& out) {
+// Light arriving at `path` at an output from a sensing point, whose path changes by +- a and +- b along
+// the point's half-axes and never comes before `lowest`.
+struct CellArrival {
+    std::uint32_t output;
+    double path, a, b, lowest;
+    Rgb radiance;
+    std::uint8_t order;
+};
+
+// The arrival spread over the paths of the point's cell and cut at the bins of the time axis: one
+// arrival per bin it touches. Without a time axis, one arrival.
+void add_over_cell(const CellArrival& c, const TimeAxis* time, std::vector<DirectArrival>& out) {
+    const std::uint32_t output = c.output;
+    const double path = c.path, a = c.a, b = c.b, lowest = c.lowest;
+    const Rgb& radiance = c.radiance;
+    const std::uint8_t order = c.order;
     if (!time) {
         out.push_back({output, path, radiance, order});
         return;
     }
-    spread_over_bins(path, a, b, time->bin_width_m(), time->start_m(), lowest,
+    spread_over_bins({path, a, b, lowest}, time->bin_width_m(), time->start_m(),
                      [&](double at, double share) { out.push_back({output, at, radiance * share, order}); });
 }
 
@@ -243,7 +273,7 @@ Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n,
             if (faces_source(a, x, n, probes[std::size_t(c)])) to.push_back(probes[std::size_t(c)]);
         from.assign(to.size(), x);
         passed.resize(to.size());
-        passes_from_source(a, vis, from.data(), n, to.data(), to.size(), passed.data());
+        passes_from_source(a, vis, from, n, to, passed);
         for (const double q : passed) {
             if (q != 1.0 && q != 0.0) return Shadow::dimmed;
             (q == 1.0 ? open : blocked) = true;
@@ -257,8 +287,10 @@ Shadow probe_shadow(const SensingPoint* pts, const PixelFrame& p, const Vec3& n,
 // cells (r x r in each timing cell), one ray each, from the samples in turn (the golden
 // ratio's sequence spreads them over the pixel) to a jittered point of the cell (the R2 sequence). A
 // timing cell that no ray faces counts as open (its light, if any, is the timing's own affair).
-std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, const Vec3& n, const AreaSource& a,
-                                  const AreaSampling& s, const Visibility& vis, int rays) {
+std::vector<double> penumbra_open(const Samples& samples, const Vec3& n, const AreaSource& a, const AreaSampling& s,
+                                  const Visibility& vis, int rays) {
+    const SensingPoint* pts = samples.pts;
+    const std::size_t count = samples.count;
     const int m = s.timing;
     const int r = std::max(1, int(std::ceil(std::sqrt(double(std::max(rays, 1))) / m)));
     const int f = m * r;
@@ -283,7 +315,7 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
         cells.push_back(std::size_t((fv / r) * m + fu / r));
     }
     ray_passed.resize(to.size());
-    passes_from_source(a, vis, from.data(), n, to.data(), to.size(), ray_passed.data());
+    passes_from_source(a, vis, from, n, to, ray_passed);
     for (std::size_t k = 0; k < cells.size(); ++k) {  // summed in the rays' order, as one by one
         facing[cells[k]] += 1.0;
         passed[cells[k]] += ray_passed[k];
@@ -297,9 +329,13 @@ std::vector<double> penumbra_open(const SensingPoint* pts, std::size_t count, co
 // radiance is albedo L_e F(x) with its own exact F, times the open share of the source: all of it, or,
 // in a penumbra, each timing cell's open share from penumbra_rays rays of the samples (penumbra_open). False
 // (nothing added) when no cell centre faces a penumbra group's centre.
-bool group_light(const SensingPoint* pts, std::size_t count, const PixelFrame& p, double weight,
-                 const PatchSet& patches, const AreaSource& a, const Visibility& vis, const GatherOptions& options,
+bool group_light(const DirectScene& scene, const Samples& samples, const PixelFrame& p, const AreaSource& a,
                  bool penumbra, std::vector<DirectArrival>& out) {
+    const SensingPoint* pts = samples.pts;
+    const std::size_t count = samples.count;
+    const double weight = samples.weight;
+    const PatchSet& patches = scene.patches;
+    const GatherOptions& options = scene.options;
     const Vec3& n = patches.normal[pts[0].patch];
     Rgb radiance = Rgb::Zero();
     for (std::size_t h = 0; h < count; ++h) {
@@ -315,8 +351,8 @@ bool group_light(const SensingPoint* pts, std::size_t count, const PixelFrame& p
     if (!penumbra) {
         total = arrive_area_open(a, p.centre, n, sampling, pairs);  // the shared rays found it open
     } else {
-        total = arrive_area_shaded(a, p.centre, n, sampling, penumbra_open(pts, count, n, a, sampling, vis, options.penumbra_rays),
-                                   pairs);
+        total = arrive_area_shaded(a, p.centre, n, sampling,
+                                   penumbra_open(samples, n, a, sampling, scene.vis, options.penumbra_rays), pairs);
     }
     if (!(total > 0.0)) {
         if (penumbra) return false;  // no cell centre faces the group's centre: sample by sample
@@ -333,16 +369,17 @@ bool group_light(const SensingPoint* pts, std::size_t count, const PixelFrame& p
 // as one), wholly hidden (no light) or a penumbra (each quarter of the group timed as one, with its
 // samples' shared rays). False (nothing added) when glass dims a ray, or no cell faces a quarter's
 // centre: the samples are then gathered one by one.
-bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
-                         const AreaSource& a, const Visibility& vis, const GatherOptions& options,
+bool area_pixel_arrivals(const DirectScene& scene, const Samples& samples, const AreaSource& a,
                          std::vector<DirectArrival>& out) {
+    const SensingPoint* pts = samples.pts;
+    const std::size_t count = samples.count;
     const PixelFrame p = pixel_frame(pts, count);
-    const Vec3& n = patches.normal[pts[0].patch];
-    const Shadow shadow = probe_shadow(pts, p, n, a, vis, options);
+    const Vec3& n = scene.patches.normal[pts[0].patch];
+    const Shadow shadow = probe_shadow(pts, p, n, a, scene.vis, scene.options);
     if (shadow == Shadow::dimmed) return false;
     if (shadow == Shadow::hidden) return true;
     if (shadow == Shadow::open || count < 8)
-        return group_light(pts, count, p, weight, patches, a, vis, options, shadow == Shadow::penumbra, out);
+        return group_light(scene, samples, p, a, shadow == Shadow::penumbra, out);
     // A penumbra: its light comes from part of the pixel more than from the rest, so each quarter of the
     // samples (by side of the centre along the footprint's axes) is timed over its own footprint.
     thread_local std::vector<SensingPoint> quarter[4];
@@ -354,8 +391,8 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
     }
     const std::size_t first = out.size();
     for (const auto& q : quarter)
-        if (!q.empty() && !group_light(q.data(), q.size(), pixel_frame(q.data(), q.size()), weight, patches, a, vis,
-                                       options, true, out)) {
+        if (!q.empty() &&
+            !group_light(scene, {q.data(), q.size(), samples.weight}, pixel_frame(q.data(), q.size()), a, true, out)) {
             out.resize(first);
             return false;
         }
@@ -364,12 +401,14 @@ bool area_pixel_arrivals(const SensingPoint* pts, std::size_t count, double weig
 
 // The area sources' light at each group of two or more of a pixel's samples (flat_groups), where
 // area_pixel_arrivals can share it; done[h * areas + a] marks sample h's light of source a as added.
-void shared_area_arrivals(const SensingPoint* pts, std::size_t count, double weight, const PatchSet& patches,
-                          const LightSources& sources, const Visibility& vis, const GatherOptions& options,
-                          std::vector<char>& done, std::vector<DirectArrival>& out) {
+void shared_area_arrivals(const DirectScene& scene, const Samples& samples, std::vector<char>& done,
+                          std::vector<DirectArrival>& out) {
+    const SensingPoint* pts = samples.pts;
+    const std::size_t count = samples.count;
+    const LightSources& sources = scene.sources;
     thread_local std::vector<int> group;
     thread_local std::vector<SensingPoint> members;
-    const int groups = flat_groups(pts, count, patches, group);
+    const int groups = flat_groups(pts, count, scene.patches, group);
     const std::size_t areas = sources.areas.size();
     for (int g = 0; g < groups; ++g) {
         const std::size_t size = std::size_t(std::count(group.begin(), group.end(), g));
@@ -382,7 +421,7 @@ void shared_area_arrivals(const SensingPoint* pts, std::size_t count, double wei
             at = members.data();
         }
         for (std::size_t a = 0; a < areas; ++a)
-            if (area_pixel_arrivals(at, size, weight, patches, sources.areas[a], vis, options, out))
+            if (area_pixel_arrivals(scene, {at, size, samples.weight}, sources.areas[a], out))
                 for (std::size_t h = 0; h < count; ++h)
                     if (group[h] == g) done[h * areas + a] = 1;
     }
@@ -390,24 +429,26 @@ void shared_area_arrivals(const SensingPoint* pts, std::size_t count, double wei
 
 // Exact direct light of every point and area source at the sensing point, seen along its leg; a point
 // source's light is spread over the paths of the point's cell.
-void direct_arrivals(const SensingPoint& sp, RunSample at, double weight, const PatchSet& patches, const LightSources& sources,
-                     const Visibility& vis, const GatherOptions& options, const char* area_done,
+void direct_arrivals(const DirectScene& scene, const SensingPoint& sp, RunSample at, double weight, const char* area_done,
                      std::vector<DirectArrival>& out) {
+    const PatchSet& patches = scene.patches;
+    const LightSources& sources = scene.sources;
     const Rgb& albedo = patches.albedo[sp.patch];
     const Footprint f = footprint_of(sp);
     for (const PointSource& source : sources.points) {
         if (source.patch == sp.patch) continue;
         PointArrival a;
-        if (!arrive(source, sp.point, patches.normal[sp.patch], vis, a)) continue;
+        if (!arrive(source, sp.point, patches.normal[sp.patch], scene.vis, a)) continue;
         const Vec3 away = (sp.point - source.position).normalized();  // |x - source| changes along it
         const double lowest = f.empty() ? a.path : source.path + f.least_at_corners([&](const Vec3& offset) {
             return (sp.point + offset - source.position).norm();
         });
-        add_over_cell(sp.output, a.path + sp.leg, away.dot(f.du) + f.leg_du, away.dot(f.dv) + f.leg_dv, lowest + sp.leg,
-                      a.reflected(albedo) * (weight / M_PI), source.order, options.time, out);
+        add_over_cell({sp.output, a.path + sp.leg, away.dot(f.du) + f.leg_du, away.dot(f.dv) + f.leg_dv, lowest + sp.leg,
+                       a.reflected(albedo) * (weight / M_PI), source.order},
+                      scene.options.time, out);
     }
     for (std::size_t k = 0; k < sources.areas.size(); ++k)
-        if (!area_done[k]) area_arrivals(sp, at, weight, patches, sources.areas[k], vis, options, out);
+        if (!area_done[k]) area_arrivals(scene, sp, at, weight, sources.areas[k], out);
 }
 
 // One output's arrivals in path order; with a time axis, those that share a bin and an order are summed
@@ -483,8 +524,11 @@ std::uint16_t SensingPoints::tint_index(const Rgb& tint) {
     return std::uint16_t(tints.size() - 1);
 }
 
-Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
-                     const LightSources& sources, const Visibility& vis, const GatherOptions& options) {
+Gather gather_points(const SensingPoints& points, int width, int height, const GatherScene& scene,
+                     const GatherOptions& options) {
+    const PatchSet& patches = scene.patches;
+    const LightSources& sources = scene.sources;
+    const DirectScene direct_scene{patches, sources, scene.visibility, options};
     TPRF_CHECK_EQ(points.outputs, std::size_t(width) * std::size_t(height));
     for (std::size_t h = 0; h < points.points.size(); ++h) {
         const SensingPoint& sp = points.points[h];
@@ -519,7 +563,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
         // done[h * areas + a]: sample h's light of area source a was added with its group's.
         thread_local std::vector<char> done;
         done.assign(count * areas, 0);
-        if (options.time && areas > 0) shared_area_arrivals(&pts[run_start[k]], count, weight, patches, sources, vis, options, done, direct);
+        if (options.time && areas > 0) shared_area_arrivals(direct_scene, {&pts[run_start[k]], count, weight}, done, direct);
         for (std::size_t h = run_start[k]; h < run_start[k + 1]; ++h) {
             const SensingPoint& sp = pts[h];
             const float earliest = float(earliest_path(sources, sp.point)) + sp.leg;
@@ -531,8 +575,8 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
                 run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
             }
             const std::size_t first = direct.size();
-            direct_arrivals(sp, {h - run_start[k], count}, share, patches, sources, vis, options,
-                            done.data() + (h - run_start[k]) * areas, direct);
+            direct_arrivals(direct_scene, sp, {h - run_start[k], count}, share, done.data() + (h - run_start[k]) * areas,
+                            direct);
             if (sp.tint != 0)
                 for (std::size_t a = first; a < direct.size(); ++a) direct[a].radiance *= points.tint_of(sp);
         }

@@ -204,8 +204,10 @@ struct SpadScratch {
 // The means of live pixel p's counts, into scratch.lambda (K x 3): its own expected counts, plus crosstalk
 // from each live 4-neighbour's detections (after that neighbour's own dead time), through the pixel's dead
 // time, plus afterpulses.
-void spad_means(const SpadModel& m, const SensorWeights& w, const float* cube, std::size_t T, int height, int width,
-                std::size_t p, SpadScratch& scratch) {
+void spad_means(const SpadModel& m, const SensorWeights& w, const CubeView& view, std::size_t p, SpadScratch& scratch) {
+    const float* cube = view.data;
+    const std::size_t T = std::size_t(view.time.bins);
+    const int height = view.height, width = view.width;
     const std::size_t K = w.first.size();
     spad_rates(w, cube + p * T * 3, m, scratch.lambda.data());
     if (m.crosstalk > 0.0) {
@@ -226,10 +228,11 @@ void spad_means(const SpadModel& m, const SensorWeights& w, const float* cube, s
 
 // A SPAD's histograms: each pixel's means, then its Poisson counts from its own stream, output p of
 // SplitMix64(seed), drawn bin by bin and channel by channel whichever thread draws it.
-void apply_spad(const SensorSettings& s, const TimeAxis& time, const SensorWeights& w, const float* cube, int height,
-                int width, float* measurements, int threads) {
+void apply_spad(const SensorSettings& s, const SensorWeights& w, const CubeView& view, float* measurements, int threads) {
+    const TimeAxis& time = view.time;
+    const int height = view.height, width = view.width;
     const SpadModel m = spad_model(s, time, height, width);
-    const std::size_t K = w.first.size(), T = std::size_t(time.bins);
+    const std::size_t K = w.first.size();
     const auto pixels = std::int64_t(height) * width;
     // Allocated here, not in the region: an allocation failure there would end the process.
     const std::vector<SpadScratch>::size_type lanes = std::size_t(threads);
@@ -246,7 +249,7 @@ void apply_spad(const SensorSettings& s, const TimeAxis& time, const SensorWeigh
                 std::fill(out, out + K * 3, 0.0f);
                 continue;
             }
-            spad_means(m, w, cube, T, height, width, p, scratch);
+            spad_means(m, w, view, p, scratch);
             Random rng(SplitMix64::output(m.seed, std::uint64_t(p)));
             for (std::size_t j = 0; j < K * 3; ++j) {
                 const double mean = scratch.lambda[j];
@@ -394,26 +397,30 @@ double amcw_depth(const SensorSettings& s, const float* measurements) {
     return 0.5 * theta / omega_per_metre;
 }
 
-std::vector<double> spad_expected_counts(const SensorSettings& s, const TimeAxis& time, const float* cube, int height,
-                                         int width, int row, int column) {
+std::vector<double> spad_expected_counts(const SensorSettings& s, const CubeView& cube, int row, int column) {
+    const TimeAxis& time = cube.time;
+    const int height = cube.height, width = cube.width;
     TPRF_CHECK(s.exposure.type == ExposureType::Spad);
     TPRF_CHECK(row >= 0 && row < height && column >= 0 && column < width);
     const SensorWeights w = sensor_weights(s, time);
     const SpadModel m = spad_model(s, time, height, width);
     const std::size_t p = std::size_t(row) * std::size_t(width) + std::size_t(column);
     SpadScratch scratch(w.first.size());
-    if (!is_dead(m, p)) spad_means(m, w, cube, std::size_t(time.bins), height, width, p, scratch);
+    if (!is_dead(m, p)) spad_means(m, w, cube, p, scratch);
     return scratch.lambda;
 }
 
-void apply_sensor(const SensorSettings& s, const TimeAxis& time, const float* cube, int height, int width,
-                  float* measurements, float* depth, const SensorOptions& options) {
+void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurements, float* depth,
+                  const SensorOptions& options) {
+    const TimeAxis& time = view.time;
+    const float* cube = view.data;
+    const int height = view.height, width = view.width;
     const SensorWeights weights = sensor_weights(s, time);
     const std::size_t K = weights.first.size(), T = std::size_t(time.bins);
     const std::int64_t pixels = std::int64_t(height) * width;
     const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
     if (s.exposure.type == ExposureType::Spad) {
-        apply_spad(s, time, weights, cube, height, width, measurements, threads);
+        apply_spad(s, weights, view, measurements, threads);
         check_cancelled();
         if (depth != nullptr) std::fill(depth, depth + pixels, 0.0f);
         return;

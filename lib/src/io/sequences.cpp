@@ -66,8 +66,8 @@ void write_streaks(const std::filesystem::path& dir, const float* cube, int heig
 
 bool have_ffmpeg() { return std::system("command -v ffmpeg >/dev/null 2>&1") == 0; }
 
-void write_video(const std::filesystem::path& mp4, const std::filesystem::path& scratch, const float* cube, int height,
-                 int width, int bins, int fps) {
+void write_video(const std::filesystem::path& mp4, const float* cube, int height, int width, int bins, int fps) {
+    const std::filesystem::path scratch = mp4.parent_path() / ".video-frames";
     // One exposure for the whole sequence, from a strided sample of the cube's luminance.
     const std::size_t values = std::size_t(height) * std::size_t(width) * std::size_t(bins);
     const std::size_t step = std::max<std::size_t>(1, values / 2000000);

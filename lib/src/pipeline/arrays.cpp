@@ -42,15 +42,14 @@ void Arrays::commit() {
     m_maps.clear();
 }
 
-Measured measure_cube(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
-                      int threads, Arrays& out) {
-    const int K = measurement_count(sensor, time);
-    const std::size_t H = std::size_t(height), W = std::size_t(width);
+Measured measure_cube(const SensorSettings& sensor, const CubeView& cube, int threads, Arrays& out) {
+    const int K = measurement_count(sensor, cube.time);
+    const std::size_t H = std::size_t(cube.height), W = std::size_t(cube.width);
     float* measurements = out.open("measurements", {H, W, std::size_t(K), 3});
     float* depth = sensor.exposure.type == ExposureType::Amcw ? out.open("depth", {H, W}) : nullptr;
     SensorOptions options;
     options.threads = threads;
-    apply_sensor(sensor, time, cube, height, width, measurements, depth, options);
+    apply_sensor(sensor, cube, measurements, depth, options);
     return {K, measurements};
 }
 

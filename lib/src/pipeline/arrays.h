@@ -42,14 +42,15 @@ private:
     std::vector<std::unique_ptr<FloatArray>> m_kept;
 };
 
+struct CubeView;
+
 /// A sensor block applied to a cube (height, width, T, 3): "measurements" (height, width, K, 3) and,
 /// for amcw, "depth" (height, width) opened in `out` and filled. Returns K and the measurements.
 struct Measured {
     int K = 0;
     const float* measurements = nullptr;
 };
-Measured measure_cube(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
-                      int threads, Arrays& out);
+Measured measure_cube(const SensorSettings& sensor, const CubeView& cube, int threads, Arrays& out);
 
 /// A capture's H as a cube that a sensor block measures: one row of pixels per laser point and sensor
 /// row (a confocal capture: per sensor row), one pixel per sensor column, the value in every colour.

@@ -1,6 +1,7 @@
 #include "capture_outputs.h"
 
 #include "tprf/core/error.h"
+#include "tprf/imaging/sensor_model.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/io/hdf5_capture.h"
 #include "tprf/io/npy.h"
@@ -93,9 +94,9 @@ int capture_measurements(const Scene& scene, const RenderOptions& options, const
                          std::vector<std::string>& warnings) {
     const CaptureCube c = capture_cube(H);
     if (Staging* staging = arrays.staging())
-        return write_sensor_outputs(*staging, *scene.sensor, scene.time, c.cube.data(), c.height, c.width,
+        return write_sensor_outputs(*staging, *scene.sensor, {scene.time, c.cube.data(), c.height, c.width},
                                     plot_pixel(std::nullopt, c.width, c.height), options, warnings);
-    return measure_cube(*scene.sensor, scene.time, c.cube.data(), c.height, c.width, options.threads, arrays).K;
+    return measure_cube(*scene.sensor, {scene.time, c.cube.data(), c.height, c.width}, options.threads, arrays).K;
 }
 
 // The capture's options for a render: threads, progress, the ranks, and what the march may use: the
@@ -126,10 +127,9 @@ void check_capture_flags(const RenderOptions& options) {
                                         "rendered");
 }
 
-CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
-                             const Visibility& visibility, const LinkSet* links, Arrays& arrays,
+CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, const CaptureInputs& in, Arrays& arrays,
                              RenderReport& report) {
-    const CaptureResult r = compute_capture(scene, patches, visibility, links, capture_options(scene, options));
+    const CaptureResult r = compute_capture(scene, in.patches, in.visibility, in.links, capture_options(scene, options));
     const auto start = std::chrono::steady_clock::now();
     const FloatArray& H = write_capture(scene, r, arrays);
     if (scene.sensor && !scene.camera)
@@ -158,9 +158,8 @@ CaptureRecord render_capture(const Scene& scene, const RenderOptions& options, c
     return record;
 }
 
-void share_capture(const Scene& scene, const RenderOptions& options, const PatchSet& patches,
-                   const Visibility& visibility, const LinkSet* links) {
-    compute_capture(scene, patches, visibility, links, capture_options(scene, options));
+void share_capture(const Scene& scene, const RenderOptions& options, const CaptureInputs& in) {
+    compute_capture(scene, in.patches, in.visibility, in.links, capture_options(scene, options));
 }
 
 }  // namespace tprf

@@ -63,7 +63,7 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     LinkStats link_stats;
     HierarchyStats stats;
     const double bin_m = march_time(scene).bin_width_m();
-    LinkSet links = make_link_set(patches, visibility, scene.links, bin_m, link_options, &stats, &link_stats);
+    LinkSet links = make_link_set(patches, visibility, scene.links, bin_m, link_options, {&stats, &link_stats});
     if (scene.links.method != LinkMethod::Flat) {
         s.clusters = links.tree.clusters();
         s.cluster_links = stats.cluster_links;

@@ -9,6 +9,7 @@
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
 #include "tprf/imaging/film.h"
+#include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
 #include "tprf/io/hdf5_capture.h"
 #include "tprf/io/image_io.h"
@@ -124,8 +125,11 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
     if (scene.camera->shift_second_bounce) {
-        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time, scene.solver.delay,
-                                             scene.solver.max_bounces, !t.visibility->chains().empty(), options.threads);
+        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time,
+                                             {.delay = scene.solver.delay,
+                                              .max_bounces = scene.solver.max_bounces,
+                                              .threads = options.threads},
+                                             !t.visibility->chains().empty());
         gather_options.first_link = t.first_link.get();
     }
     report.second_bounce_shifted = t.first_link != nullptr;
@@ -151,16 +155,20 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
     const Camera& camera = *scene.camera;
     const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
     c.cube = arrays.open("transient", {H, W, T, 3});
-    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube, -1,
-                                             false, options.threads);
+    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, c.cube,
+                                             FilmOptions{.delay = scene.solver.delay, .threads = options.threads});
     c.film->read_first_link_apart(t.first_link.get());
     if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
     const int terms = bounce_terms(scene.solver);
     for (int k = 0; k < terms; ++k) {
         float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
         const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
-        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
-                                                               term, k, tail, options.threads, c.film->taps()));
+        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, term,
+                                                               FilmOptions{.delay = scene.solver.delay,
+                                                                           .order = k,
+                                                                           .last_is_tail = tail,
+                                                                           .threads = options.threads,
+                                                                           .taps = c.film->taps()}));
         c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
     }
 }
@@ -172,6 +180,24 @@ int lead_bins(const TimeAxis& time, const Gather& gather) {
     return bins_before_window(time, double(longest));
 }
 
+// The patch profiles themselves (--patch-profiles), as a film whose outputs are the patches: each
+// block's bins inside the window, as solved, into the (N, T, 3) cube.
+class PatchProfiles : public Film {
+public:
+    PatchProfiles(float* cube, std::size_t patches, std::size_t bins) : m_cube(cube), m_patches(patches), m_bins(bins) {}
+    void add_block(const SolveBlock& b) override {
+        const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written
+        for (std::size_t i = 0; i < m_patches; ++i)
+            std::copy_n(b.radiosity + (i * std::size_t(b.bins) + std::size_t(skip)) * 3, std::size_t(b.bins - skip) * 3,
+                        m_cube + (i * m_bins + std::size_t(b.first_bin + skip)) * 3);
+    }
+    void finish() override {}
+
+private:
+    float* m_cube;
+    std::size_t m_patches, m_bins;
+};
+
 // Solves and films every block; then the exact direct light. Records the solve and gather times.
 SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Cubes& c,
                             RenderReport& report) {
@@ -181,30 +207,21 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     solver_options.bounce_terms = bounce_terms(scene.solver);
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
-    const std::size_t N = t.patches.size(), T = std::size_t(scene.time.bins);
     // The patches' light from `lead` bins before the window on (the films read those bins too).
     const int lead = lead_bins(scene.time, t.gather);
     solver_options.first_bin = -lead;
+    std::vector<Film*> films{c.film.get()};
+    for (auto& f : c.term_films) films.push_back(f.get());
+    PatchProfiles profiles(c.patch_cube, t.patches.size(), std::size_t(scene.time.bins));
+    if (c.patch_cube) films.push_back(&profiles);
     auto start = Clock::now();
     double sink_seconds = 0.0;
     const SolveStats stats = solve_transient(t.patches, t.links, t.illumination, scene.time, solver_options,
-                                             [&](const SolveBlock& b) {
-        const auto s0 = Clock::now();
-        c.film->add_block(b);
-        for (auto& f : c.term_films) f->add_block(b);
-        const int skip = std::clamp(-b.first_bin, 0, b.bins);  // bins before the window: not written
-        if (c.patch_cube)
-            for (std::size_t i = 0; i < N; ++i)
-                std::copy_n(b.radiosity + (i * std::size_t(b.bins) + std::size_t(skip)) * 3,
-                            std::size_t(b.bins - skip) * 3,
-                            c.patch_cube + (i * T + std::size_t(b.first_bin + skip)) * 3);
-        sink_seconds += seconds_since(s0);
-    });
+                                             film_sink(films, sink_seconds));
     report.link_bin_updates = stats.link_bin_updates;
     report.seconds.solve = seconds_since(start) - sink_seconds;
     start = Clock::now();
-    c.film->finish();
-    for (auto& f : c.term_films) f->finish();
+    for (Film* f : films) f->finish();
     c.film->add_direct();
     for (auto& f : c.term_films) f->add_direct();
     report.seconds.gather += sink_seconds + seconds_since(start);
@@ -240,20 +257,20 @@ void write_views(const Scene& scene, const RenderOptions& options, const float* 
     const int bins = scene.time.bins;
     Staging* staging = arrays.staging();
     if (!staging) {
-        if (scene.sensor) report.measurements = measure_cube(*scene.sensor, scene.time, cube, camera.height,
-                                                             camera.width, options.threads, arrays).K;
+        if (scene.sensor)
+            report.measurements =
+                measure_cube(*scene.sensor, {scene.time, cube, camera.height, camera.width}, options.threads, arrays).K;
         return;
     }
     if (options.frames) write_frames(staging->path("frames"), cube, camera.height, camera.width, bins);
     if (options.streaks) write_streaks(staging->path("streaks"), cube, camera.height, camera.width, bins);
     if (scene.sensor)
-        report.measurements = write_sensor_outputs(*staging, *scene.sensor, scene.time, cube, camera.height,
-                                                   camera.width, plot_pixel(options.plot_pixel, camera.width,
-                                                                            camera.height),
-                                                   options, report.warnings);
+        report.measurements = write_sensor_outputs(*staging, *scene.sensor, {scene.time, cube, camera.height, camera.width},
+                                                   plot_pixel(options.plot_pixel, camera.width, camera.height), options,
+                                                   report.warnings);
     if (options.video) {
         const std::filesystem::path mp4 = staging->path("light_in_flight.mp4");
-        write_video(mp4, mp4.parent_path() / ".video-frames", cube, camera.height, camera.width, bins);
+        write_video(mp4, cube, camera.height, camera.width, bins);
     }
 }
 
@@ -334,7 +351,7 @@ void render_share(const Scene& scene, RenderOptions options) {
     Transport t;
     RenderReport unused;
     build_geometry(scene, options, links, t, unused);
-    share_capture(scene, options, t.patches, *t.visibility, links ? &t.links : nullptr);
+    share_capture(scene, options, {t.patches, *t.visibility, links ? &t.links : nullptr});
 }
 
 // The camera's outputs: the cubes filled block by block, then the steady image and the views.
@@ -393,8 +410,9 @@ RenderRecord run_stages(const std::filesystem::path& scene_file, const Scene& sc
     if (scene.camera) stats = render_camera(scene, options, transport, arrays, report);
     std::optional<CaptureRecord> capture;
     if (scene.capture)
-        capture = render_capture(scene, options, transport.patches, *transport.visibility,
-                                 render_needs_links(scene) ? &transport.links : nullptr, arrays, report);
+        capture = render_capture(scene, options,
+                                 {transport.patches, *transport.visibility, render_needs_links(scene) ? &transport.links : nullptr},
+                                 arrays, report);
     report.seconds.total = seconds_since(start);
     report.peak_rss_mb = peak_rss_mb();
     RenderRecord record = render_record(scene_file, scene, stats, report);
@@ -469,7 +487,7 @@ std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const Re
     }
     RenderResult out;
     Arrays arrays(out);
-    measure_cube(sensor, result.time, cube, c.height, c.width, threads, arrays);
+    measure_cube(sensor, {result.time, cube, c.height, c.width}, threads, arrays);
     return std::move(out.arrays);
 }
 

@@ -2,6 +2,7 @@
 
 #include "staging.h"
 #include "tprf/core/error.h"
+#include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
 #include "tprf/io/npy.h"
 #include "tprf/scene/parse_json.h"
@@ -32,7 +33,7 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     Staging staging(dir);
     if (options.progress) options.progress("sensor", 0.0);
     try {
-        report.measurements = write_sensor_outputs(staging, sensor, time, cube.data(), report.height, report.width,
+        report.measurements = write_sensor_outputs(staging, sensor, {time, cube.data(), report.height, report.width},
                                                    pixel, options, report.warnings);
         staging.publish(sensor_outputs());
     } catch (const OutputError& e) {

@@ -127,12 +127,13 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
     return *asked;
 }
 
-int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
-                         int height, int width, std::array<int, 2> pixel, const PipelineOptions& run,
-                         std::vector<std::string>& warnings) {
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const CubeView& view, std::array<int, 2> pixel,
+                         const PipelineOptions& run, std::vector<std::string>& warnings) {
+    const TimeAxis& time = view.time;
+    const float* cube = view.data;
     Arrays arrays(staging);
-    const auto [K, measurements] = measure_cube(sensor, time, cube, height, width, run.threads, arrays);
-    const std::size_t p = std::size_t(pixel[1]) * std::size_t(width) + std::size_t(pixel[0]);
+    const auto [K, measurements] = measure_cube(sensor, view, run.threads, arrays);
+    const std::size_t p = std::size_t(pixel[1]) * std::size_t(view.width) + std::size_t(pixel[0]);
     const std::filesystem::path data = staging.path("sensor_plot.json");
     write_sensor_plot_json(data, sensor_plot(sensor, time, cube + p * std::size_t(time.bins) * 3,
                                              measurements + p * std::size_t(K) * 3, pixel[0], pixel[1]));

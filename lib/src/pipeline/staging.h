@@ -59,13 +59,14 @@ const std::vector<std::string>& sensor_outputs();
 /// The plot pixel: the image centre by default; one outside the image is a bad flag.
 std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, int width, int height);
 
+struct CubeView;
+
 /// measurements.npy, depth.npy (amcw), sensor.json, sensor_plot.json and sensor_plot.png: what a sensor
 /// block turns a cube (H, W, T, 3) into. Returns K. When no Python with matplotlib can draw the plot,
 /// the data is still written and `warnings` gets a line saying how to draw it; with draw_plots off, only
 /// the data is written.
-int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const TimeAxis& time, const float* cube,
-                         int height, int width, std::array<int, 2> pixel, const PipelineOptions& options,
-                         std::vector<std::string>& warnings);
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const CubeView& cube, std::array<int, 2> pixel,
+                         const PipelineOptions& options, std::vector<std::string>& warnings);
 
 /// Seconds from `start` to now.
 double seconds_since(std::chrono::steady_clock::time_point start);

@@ -15,8 +15,9 @@
 namespace tprf {
 
 FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
-                               const TimeAxis& time, DelayMode delay, int max_bounces, int threads)
-    : m_patches(patches), m_links(links), m_time(time), m_delay(delay), m_threads(threads) {
+                               const TimeAxis& time, const FirstLinkOptions& options)
+    : m_patches(patches), m_links(links), m_time(time), m_delay(options.delay), m_threads(options.threads) {
+    const int max_bounces = options.max_bounces, threads = options.threads;
     const std::size_t n = patches.size();
     TPRF_CHECK_EQ(links.patches(), n);
     TPRF_CHECK_EQ(illumination.row.size(), n + 1);
@@ -104,8 +105,10 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     return true;
 }
 
-void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
-                         std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted) const {
+void FirstLinkLight::fill(BinSpan span, const std::function<bool(int)>& takes, float* rows, std::size_t stride,
+                          std::vector<char>& lit, const std::vector<char>* wanted) const {
+    const std::int64_t first_bin = span.first;
+    const std::size_t bins = span.count;
     const std::size_t n = m_patches.size();
     const std::int64_t end = first_bin + std::int64_t(bins);
     lit.assign(n, 0);
@@ -166,9 +169,9 @@ double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
 
 std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
-                                                      DelayMode delay, int max_bounces, bool mirrors, int threads) {
+                                                      const FirstLinkOptions& options, bool mirrors) {
     if (mirrors || links.links.tinted() || patches.size() == 0) return nullptr;
-    auto light = std::make_unique<FirstLinkLight>(patches, links, illumination, time, delay, max_bounces, threads);
+    auto light = std::make_unique<FirstLinkLight>(patches, links, illumination, time, options);
     if (light->empty()) return nullptr;
     return light;
 }

@@ -188,7 +188,7 @@ private:
         const std::uint32_t i = std::min(r, s), j = std::max(r, s);
         PairFormFactors f;
         const bool is_near = near_pair(m_patches, m_radius, m_options.near_factor, i, j);
-        if (!patch_pair(m_patches, m_vis, m_options, m_radius, i, j, is_near, f, counts.pair_stats)) return;
+        if (!patch_pair({m_patches, m_vis, m_options, m_radius}, i, j, is_near, f, counts.pair_stats)) return;
         emit(i, j, f.ij, f.ji, float((m_patches.centroid[i] - m_patches.centroid[j]).norm()), out);
         ++counts.leaf_links;
     }
@@ -197,17 +197,22 @@ private:
     // carrying less than the tolerance; false when it must be refined.
     bool judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vector<LinkRecord>& out, Counts& counts) const;
     void draw(std::uint32_t r, std::uint32_t s, std::uint64_t salt, int count, PairSamples& out) const;
+    // What cast_rays found: the visible pairs' kernel sum, and the rays blocked and cast.
+    struct RayTally {
+        double visible_sum = 0.0;
+        int blocked = 0;
+        int cast = 0;
+    };
     // Visibility of the facing pairs of p, by rays (in packets): each blocked pair's kernel zeroed,
     // the others' scaled by their glass. False, at its first blocked ray, when `shadow_refines`.
-    bool cast_rays(PairSamples& p, int count, bool shadow_refines, double& visible_sum, int& blocked, int& cast,
-                   Counts& counts) const;
+    bool cast_rays(PairSamples& p, int count, bool shadow_refines, RayTally& tally, Counts& counts) const;
     // The kernel's range and sum over m_samples point pairs of each node's stored points (m_points).
     struct Look {
         double k_min, k_max, k_sum;
     };
     Look look(std::uint32_t r, std::uint32_t s, std::uint64_t salt) const;
-    void emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path, const double* weight,
-                     int count, std::vector<LinkRecord>& out) const;
+    void emit_kernel(std::uint32_t r, std::uint32_t s, const PairFormFactors& f, const PairSamples& p, int count,
+                     std::vector<LinkRecord>& out) const;
 
     const PatchSet& m_patches;
     const Visibility& m_vis;
@@ -328,18 +333,19 @@ bool Builder::judge(std::uint32_t r, std::uint32_t s, bool all_facing, std::vect
     // dark). Such a pair is refined, at its first blocked ray (the others would change nothing), unless
     // all it carries is a small share of the tolerance.
     const bool shadow_refines = carried > kFacingShare * m_h.tolerance;
-    double visible_sum = 0.0;
-    int blocked = 0, cast = 0;
-    if (!cast_rays(p, count, shadow_refines, visible_sum, blocked, cast, counts)) return false;
-    if (blocked > 0 && blocked == cast) return true;  // wholly hidden, and carrying little: dropped
-    if (cast == 0) return true;
-    emit_kernel(r, s, a_s * visible_sum / count, a_r * visible_sum / count, p.path, p.k, count, out);
+    RayTally rays;
+    if (!cast_rays(p, count, shadow_refines, rays, counts)) return false;
+    if (rays.blocked > 0 && rays.blocked == rays.cast) return true;  // wholly hidden, and carrying little: dropped
+    if (rays.cast == 0) return true;
+    emit_kernel(r, s, {a_s * rays.visible_sum / count, a_r * rays.visible_sum / count}, p, count, out);
     ++counts.cluster_links;
     return true;
 }
 
-bool Builder::cast_rays(PairSamples& p, int count, bool shadow_refines, double& visible_sum, int& blocked, int& cast,
-                        Counts& counts) const {
+bool Builder::cast_rays(PairSamples& p, int count, bool shadow_refines, RayTally& tally, Counts& counts) const {
+    double& visible_sum = tally.visible_sum;
+    int& blocked = tally.blocked;
+    int& cast = tally.cast;
     const double lift = m_vis.epsilon();
     int ray_of[Visibility::kBatch];
     Vec3 from[Visibility::kBatch], to[Visibility::kBatch];
@@ -375,10 +381,11 @@ bool Builder::cast_rays(PairSamples& p, int count, bool shadow_refines, double& 
 
 // The link's delay kernel from the sampled paths, weighted by their kernel values (delay_pieces: each
 // piece at its weighted mean path, so that the total and the mean delay are the samples' exactly).
-void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, double f_rs, double f_sr, const double* path,
-                          const double* weight, int count, std::vector<LinkRecord>& out) const {
+void Builder::emit_kernel(std::uint32_t r, std::uint32_t s, const PairFormFactors& f, const PairSamples& p, int count,
+                          std::vector<LinkRecord>& out) const {
+    const double f_rs = f.ij, f_sr = f.ji;
     double share[kMaxPieces], mean[kMaxPieces];
-    const int pieces = delay_pieces(path, weight, count, m_h.bin_width_m, m_pieces, share, mean);
+    const int pieces = delay_pieces<double>({p.path, p.k, count}, m_h.bin_width_m, m_pieces, share, mean);
     for (int g = 0; g < pieces; ++g) emit(r, s, f_rs * share[g], f_sr * share[g], float(mean[g]), out);
 }
 

@@ -20,10 +20,19 @@ Vec3 sample_patch(const PatchSet& patches, std::size_t i, int s, int g) {
 // Side of the stratified grid for about `samples` points.
 int grid_side(int samples) { return std::max(1, int(std::lround(std::sqrt(double(std::max(samples, 1)))))); }
 
-// Direct light of point source k reflected by patch i: one pulse per stratified sample that it
-// reaches, through the same arrive() that sensing points use.
-void light_from_point(const PatchSet& patches, const Visibility& vis, std::size_t i, const PointSource& source,
-                      std::int32_t k, int grid, std::vector<Pulse>& out) {
+// Patch i of the patches, as light reaches it past the visibility's occluders.
+struct LitPatch {
+    const PatchSet& patches;
+    const Visibility& vis;
+    std::size_t i;
+};
+
+// Direct light of point source k reflected by the patch: one pulse per stratified sample (grid x grid)
+// that it reaches, through the same arrive() that sensing points use.
+void light_from_point(const LitPatch& at, const PointSource& source, std::int32_t k, int grid, std::vector<Pulse>& out) {
+    const PatchSet& patches = at.patches;
+    const Visibility& vis = at.vis;
+    const std::size_t i = at.i;
     const int samples = grid * grid;
     for (int s = 0; s < samples; ++s) {
         PointArrival a;
@@ -72,14 +81,17 @@ Pulse area_pulse(double path, const Rgb& energy, std::int32_t source) {
 // of the kernel cos cos / r^2 over point pairs (receiver points x source cells) that shadow rays find
 // unblocked: exact where nothing is in the way. Its time spread is that kernel, each pair at its own
 // path.
-void light_from_area(const PatchSet& patches, const Visibility& vis, std::size_t i, const AreaSource& a,
-                     std::int32_t source, const IlluminationOptions& options, std::vector<AreaPair>& pairs,
-                     std::vector<Pulse>& out) {
+void light_from_area(const LitPatch& at, const AreaSource& a, std::int32_t source, const IlluminationOptions& options,
+                     std::vector<AreaPair>& pairs, std::vector<Pulse>& out) {
+    const PatchSet& patches = at.patches;
+    const Visibility& vis = at.vis;
+    const std::size_t i = at.i;
     if (!faces(patches, i, a)) return;
     FormFactorQuadrature quadrature;
     quadrature.relative_tolerance = 1e-3;
-    const double ff = polygon_form_factor(patches.polygon(i), patches.corners(i), patches.normal[i], a.polygon(),
-                                          a.count, a.normal, quadrature);
+    const double ff =
+        polygon_form_factor({patches.polygon(i), patches.corners(i), patches.normal[i]}, {a.polygon(), a.count, a.normal},
+                            quadrature);
     const Rgb energy = patches.albedo[i] * ff * M_PI * a.radiance;
     if (!(energy > 0.0).any()) return;
     const Vec3& ni = patches.normal[i];
@@ -148,13 +160,13 @@ Illumination illuminate(const LightSources& sources, const PatchSet& patches, co
         std::vector<Pulse>& out = per_patch[i];
         if ((patches.emission[i] > 0.0).any()) out.push_back(self_pulse(patches, i));
         for (std::size_t a = 0; a < sources.areas.size(); ++a)
-            light_from_area(patches, vis, i, sources.areas[a], std::int32_t(a), options, pairs, out);
+            light_from_area({patches, vis, i}, sources.areas[a], std::int32_t(a), options, pairs, out);
         for (std::size_t s = 0; s < sources.points.size(); ++s) {
             const PointSource& source = sources.points[s];
             if (source.patch == i)
                 out.push_back(spot_pulse(patches, i, source));
             else
-                light_from_point(patches, vis, i, source, std::int32_t(s), grid, out);
+                light_from_point({patches, vis, i}, source, std::int32_t(s), grid, out);
         }
         if (options.merge_bins) merge_by_bin(out, *options.merge_bins);
     });

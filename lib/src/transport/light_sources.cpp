@@ -250,13 +250,21 @@ Vec3 cell_point(const AreaSource& a, const AreaSampling& s, int u, int v, int m)
     return a.point((u + s.jitter_u) / m, (v + s.jitter_v) / m);
 }
 
-// The light `weight` of cell (u, v) of an m x m grid over source a, whose point (cell_point) is `path`
-// from x, spread over the cell's paths to first order (a trapezoid over the path's changes along the cell's
-// half-axes; with x's own cell, when it has one, the trapezoid of the same variance as the four
-// changes), never before `nearest` (the earliest path from x's cell, less x's leg), and cut at the bin
-// edges: one pair per bin it touches.
-void cell_spread(const AreaSource& a, const Vec3& x, int u, int v, int m, double path, double nearest,
-                 const AreaSampling& s, double weight, std::vector<AreaPair>& out) {
+// Cell (u, v) of an m x m grid over an area source as point x sees it: its point's (cell_point) path
+// from x, the earliest path from x's cell (less x's leg), and the cell's light.
+struct TimedCell {
+    const Vec3& x;
+    int u, v, m;
+    double path, nearest, weight;
+};
+
+// The cell's light spread over its paths to first order (a trapezoid over the path's changes along the
+// cell's half-axes; with x's own cell, when it has one, the trapezoid of the same variance as the four
+// changes), never before `nearest`, and cut at the bin edges: one pair per bin it touches.
+void cell_spread(const AreaSource& a, const AreaSampling& s, const TimedCell& c, std::vector<AreaPair>& out) {
+    const Vec3& x = c.x;
+    const int u = c.u, v = c.v, m = c.m;
+    const double path = c.path, nearest = c.nearest, weight = c.weight;
     const double cu = (u + s.jitter_u) / m, cv = (v + s.jitter_v) / m, h = 0.5 / m;
     const Vec3 dir = (cell_point(a, s, u, v, m) - x) / path;
     const Footprint& f = s.footprint;
@@ -266,15 +274,25 @@ void cell_spread(const AreaSource& a, const Vec3& x, int u, int v, int m, double
     const double lowest = std::min(nearest, path);
     double wide, narrow;
     equivalent_trapezoid(half, 4, wide, narrow);
-    spread_over_bins(path, wide, narrow, s.bin_m, s.origin, lowest,
+    spread_over_bins({path, wide, narrow, lowest}, s.bin_m, s.origin,
                      [&](double at, double share) { out.push_back({at, weight * share}); });
 }
 
-// The timing cells of an m x m grid over source a that face x: appends each one's pairs with its weight times open(u, v, m) (0: blocked), and returns the weight of
-// every cell that faces x, blocked or not.
+// An m x m grid of timing cells over an area source, seen from the point x with unit normal n.
+struct TimingGrid {
+    const Vec3& x;
+    const Vec3& n;
+    int m;
+};
+
+// The timing cells of the grid over source a that face x: appends each one's pairs with its weight times
+// open(u, v, m) (0: blocked), and returns the weight of every cell that faces x, blocked or not.
 template <class Open>
-double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s, int m, Open&& open,
+double timing_cells(const AreaSource& a, const AreaSampling& s, const TimingGrid& grid, Open&& open,
                     std::vector<AreaPair>& out) {
+    const Vec3& x = grid.x;
+    const Vec3& n = grid.n;
+    const int m = grid.m;
     const auto distance = [&](const Vec3& offset) {
         return distance_to_polygon(x + offset, a.polygon(), a.count, a.normal);
     };
@@ -291,7 +309,7 @@ double timing_cells(const AreaSource& a, const Vec3& x, const Vec3& n, const Are
         const double o = open(u, v, m);
         if (!(o > 0.0)) continue;
         if (s.bin_m > 0.0) {
-            cell_spread(a, x, u, v, m, path, nearest, s, w * o, out);
+            cell_spread(a, s, {x, u, v, m, path, nearest, w * o}, out);
         } else {
             out.push_back({path, w * o});
         }
@@ -305,8 +323,11 @@ double passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3
     return vis.passes(a.chain, x + vis.epsilon() * n, y + vis.epsilon() * a.normal);
 }
 
-void passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3* x, const Vec3& n, const Vec3* y,
-                        std::size_t count, double* passed) {
+void passes_from_source(const AreaSource& a, const Visibility& vis, std::span<const Vec3> x, const Vec3& n,
+                        std::span<const Vec3> y, std::span<double> passed) {
+    TPRF_CHECK_EQ(x.size(), y.size());
+    TPRF_CHECK_EQ(x.size(), passed.size());
+    const std::size_t count = x.size();
     if (a.chain >= 0) {
         for (std::size_t k = 0; k < count; ++k) passed[k] = passes_from_source(a, vis, x[k], n, y[k]);
         return;
@@ -319,7 +340,7 @@ void passes_from_source(const AreaSource& a, const Visibility& vis, const Vec3* 
             from[k] = x[k0 + k] + vis.epsilon() * n;
             to[k] = y[k0 + k] + vis.epsilon() * a.normal;
         }
-        vis.transmittances(from, to, int(m), passed + k0);
+        vis.transmittances(from, to, int(m), passed.data() + k0);
     }
 }
 
@@ -359,8 +380,8 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
             if (faces_source(a, x, n, rim[k])) (passes_from_source(a, vis, x, n, rim[k]) > 0.0 ? any_open : any_blocked) = true;
     }
     if (any_open && any_blocked)  // a penumbra
-        return timing_cells(a, x, n, s, std::max(s.timing, s.penumbra), open_to, out);
-    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int m) {
+        return timing_cells(a, s, {x, n, std::max(s.timing, s.penumbra)}, open_to, out);
+    return timing_cells(a, s, {x, n, s.timing}, [&](int u, int v, int m) {
         const int cu = u * coarse / m, cv = v * coarse / m;
         double& o = coarse_open[std::size_t(cv * coarse + cu)];
         if (o < 0.0) o = open_to(cu, cv, coarse);  // its centre faces away, this pair does not
@@ -370,13 +391,14 @@ double arrive_area(const AreaSource& a, const Vec3& x, const Vec3& n, const Visi
 
 double arrive_area_open(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
                         std::vector<AreaPair>& out) {
-    return timing_cells(a, x, n, s, s.timing, [](int, int, int) { return 1.0; }, out);
+    return timing_cells(a, s, {x, n, s.timing}, [](int, int, int) { return 1.0; }, out);
 }
 
 double arrive_area_shaded(const AreaSource& a, const Vec3& x, const Vec3& n, const AreaSampling& s,
                           const std::vector<double>& open, std::vector<AreaPair>& out) {
     TPRF_CHECK_EQ(open.size(), std::size_t(s.timing * s.timing));
-    return timing_cells(a, x, n, s, s.timing, [&](int u, int v, int) { return open[std::size_t(v * s.timing + u)]; }, out);
+    return timing_cells(a, s, {x, n, s.timing}, [&](int u, int v, int) { return open[std::size_t(v * s.timing + u)]; },
+                        out);
 }
 
 double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, const Visibility& vis,

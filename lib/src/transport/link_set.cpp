@@ -13,7 +13,9 @@ LinkSet flat_link_set(const PatchSet& patches, const Visibility& visibility, con
 }
 
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options, HierarchyStats* stats, LinkStats* flat_stats) {
+                      double bin_width_m, const LinkOptions& options, LinkSetStats counts) {
+    HierarchyStats* stats = counts.hierarchy;
+    LinkStats* flat_stats = counts.flat;
     LinkSet set;
     if (settings.method == LinkMethod::Flat) {
         set = flat_link_set(patches, visibility, options, flat_stats);

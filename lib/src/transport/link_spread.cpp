@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <span>
 
 namespace tprf {
 namespace {
@@ -54,11 +55,21 @@ std::vector<Eigen::Vector3f> source_points(const PatchSet& patches, int threads)
     return points;
 }
 
-// Appends to `row` the pieces of `link`, into patch i from patch j: its paths from i's centroid to j's
-// points, weighted by the kernel cos_i cos_j / r^2; at most max_pieces, one per two bins that the
-// paths span. The link itself when no point of j faces i's centroid.
-void append_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int count, std::size_t i,
-                   std::size_t j, double bin_width, int max_pieces, const RowLink& link, std::vector<RowLink>& row) {
+// How finely a link is cut: bins of bin_width, at most max_pieces pieces.
+struct PieceLimit {
+    double bin_width;
+    int max_pieces;
+};
+
+// Appends to `row` the pieces of `link`, into patch i from patch j = link.source: its paths from i's
+// centroid to j's `points`, weighted by the kernel cos_i cos_j / r^2; at most max_pieces, one per two
+// bins that the paths span. The link itself when no point of j faces i's centroid.
+void append_pieces(const PatchSet& patches, std::span<const Eigen::Vector3f> points, std::size_t i, const PieceLimit& limit,
+                   const RowLink& link, std::vector<RowLink>& row) {
+    const std::size_t j = link.source;
+    const int count = int(points.size());
+    const double bin_width = limit.bin_width;
+    const int max_pieces = limit.max_pieces;
     const Eigen::Vector3f x = patches.centroid[i].cast<float>();
     const Eigen::Vector3f ni = patches.normal[i].cast<float>(), nj = patches.normal[j].cast<float>();
     std::array<float, kMaxPoints> path, weight;
@@ -73,7 +84,7 @@ void append_pieces(const PatchSet& patches, const Eigen::Vector3f* points, int c
         ++used;
     }
     double share[kMaxSpreadPieces], mean[kMaxSpreadPieces];
-    const int pieces = delay_pieces(path.data(), weight.data(), used, bin_width, max_pieces, share, mean);
+    const int pieces = delay_pieces<float>({path.data(), weight.data(), used}, bin_width, max_pieces, share, mean);
     if (pieces == 0) row.push_back(link);
     for (int g = 0; g < pieces; ++g) row.push_back({link.source, link.ff * float(share[g]), float(mean[g]), link.tint});
 }
@@ -101,10 +112,10 @@ std::uint64_t spread_patch_links(LinkSet& set, const PatchSet& patches, double b
             if (m >= leaves || j >= leaves || m == j) {
                 row.push_back(link);
             } else if (radius[j] <= kNearRatio * (patches.centroid[m] - patches.centroid[j]).norm()) {
-                append_pieces(patches, points.data() + j * kPoints, kPoints, m, j, bin_width_m, max_pieces, link, row);
+                append_pieces(patches, {points.data() + j * kPoints, kPoints}, m, {bin_width_m, max_pieces}, link, row);
             } else {
                 strata_points(patches, j, kNearSide, near.data());
-                append_pieces(patches, near.data(), kMaxPoints, m, j, bin_width_m, max_pieces, link, row);
+                append_pieces(patches, near, m, {bin_width_m, max_pieces}, link, row);
             }
         }
     });

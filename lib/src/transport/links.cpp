@@ -114,15 +114,17 @@ void check_tints(const Links& links) {
     for (std::uint16_t t : links.tint) TPRF_CHECK_LT(std::size_t(t), links.tints.size());
 }
 
-bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
-                const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
+bool patch_pair(const PairScene& scene, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
                 LinkStats& counts) {
+    const PatchSet& patches = scene.patches;
+    const LinkOptions& options = scene.options;
+    const std::vector<double>& radius = scene.radius;
     if (!any_in_front(patches, i, j, 1e-9 * radius[i]) || !any_in_front(patches, j, i, 1e-9 * radius[j])) return false;
     ++counts.pairs_tested;
     // Visibility first: on a scanned statue a fifth of the facing pairs are hidden, and their rays
     // cost less than the form factor (a pair whose form factor is zero, which the rays would have
     // spared, is one in a hundred there).
-    const double v = visible_fraction(patches, vis, i, j, options, counts.rays);
+    const double v = visible_fraction(patches, scene.vis, i, j, options, counts.rays);
     if (v <= 0.0) return false;
     // Integrate over the smaller patch, with the exact inner integral over the larger one.
     const bool i_outer = patches.area[i] <= patches.area[j];
@@ -131,11 +133,11 @@ bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOption
     const double far = options.far_factor * (radius[i] + radius[j]);
     if (is_near) {
         ++counts.near_pairs;
-        f_st = polygon_form_factor(patches.polygon(s), patches.corners(s), patches.normal[s], patches.polygon(t),
-                                   patches.corners(t), patches.normal[t], options.quadrature);
+        f_st = polygon_form_factor({patches.polygon(s), patches.corners(s), patches.normal[s]},
+                                   {patches.polygon(t), patches.corners(t), patches.normal[t]}, options.quadrature);
     } else if ((patches.centroid[i] - patches.centroid[j]).squaredNorm() < far * far) {
-        f_st = polygon_form_factor_gauss(patches.polygon(s), patches.corners(s), patches.normal[s],
-                                         patches.polygon(t), patches.corners(t), patches.normal[t]);
+        f_st = polygon_form_factor_gauss({patches.polygon(s), patches.corners(s), patches.normal[s]},
+                                         {patches.polygon(t), patches.corners(t), patches.normal[t]});
     } else {
         f_st = point_polygon_form_factor(patches.centroid[s], patches.normal[s], patches.polygon(t),
                                          patches.corners(t), patches.normal[t]);
@@ -162,9 +164,9 @@ std::vector<double> circumradii(const PatchSet& patches) {
 namespace {
 
 // The links of patch i to every later patch j > i that faces it and is not fully occluded (patch_pair).
-void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
-              const std::vector<double>& radius, const std::vector<std::uint32_t>& near_i, std::size_t i,
-              std::vector<PairLink>& row, LinkStats& counts) {
+void pair_row(const PairScene& scene, const std::vector<std::uint32_t>& near_i, std::size_t i, std::vector<PairLink>& row,
+              LinkStats& counts) {
+    const PatchSet& patches = scene.patches;
     const std::size_t n = patches.size();
     if (inert(patches, i)) return;
     std::size_t near_cursor = 0;
@@ -173,7 +175,7 @@ void pair_row(const PatchSet& patches, const Visibility& vis, const LinkOptions&
         if (is_near) ++near_cursor;
         if (inert(patches, j)) continue;
         PairFormFactors f;
-        if (patch_pair(patches, vis, options, radius, i, j, is_near, f, counts))
+        if (patch_pair(scene, i, j, is_near, f, counts))
             row.push_back({static_cast<std::uint32_t>(j), static_cast<float>(f.ij)});
     }
     row.shrink_to_fit();
@@ -248,7 +250,7 @@ Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOp
     // A progress callback may throw (a cancelled run): parallel_for hands that to this thread.
     parallel_for(n, {threads, 8, true}, [&](std::size_t i) {
         LinkStats counts;
-        pair_row(patches, vis, options, radius, near[i], i, pairs[i], counts);
+        pair_row({patches, vis, options, radius}, near[i], i, pairs[i], counts);
         tested += counts.pairs_tested;
         near_count += counts.near_pairs;
         ray_count += counts.rays;

@@ -144,10 +144,13 @@ double chain_form_factor(const ChainPair& c, std::size_t i, std::size_t j, const
     return f * chain_visibility(c, i, j, options);
 }
 
-// The links along one chain (and, by reciprocity, along its reverse).
-void chain_links(const PatchSet& patches, const Visibility& vis, const MirrorChain& chain, bool palindrome,
-                 std::uint16_t tint, const std::vector<double>& radius, const LinkOptions& options,
+// The links along one chain (and, by reciprocity, along its reverse), each with the chain's tint.
+void chain_links(const PairScene& scene, const MirrorChain& chain, bool palindrome, std::uint16_t tint,
                  std::vector<std::vector<Extra>>& rows) {
+    const PatchSet& patches = scene.patches;
+    const Visibility& vis = scene.vis;
+    const LinkOptions& options = scene.options;
+    const std::vector<double>& radius = scene.radius;
     const std::vector<SpecularPlane>& planes = vis.planes();
     const SpecularPlane& first = planes[chain.plane[0]];
     const SpecularPlane& last = planes[chain.plane[std::size_t(chain.length - 1)]];
@@ -246,7 +249,7 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
             tint = std::uint16_t(tints.size() - 1);
         }
         std::vector<std::vector<Extra>> rows(patches.size());
-        chain_links(patches, vis, chain, same(chain, back), tint, radius, options, rows);
+        chain_links({patches, vis, options, radius}, chain, same(chain, back), tint, rows);
         for (auto& r : rows) extra.insert(extra.end(), r.begin(), r.end());
     }
     const std::uint64_t added = extra.size();

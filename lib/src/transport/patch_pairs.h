@@ -17,11 +17,19 @@ struct PairFormFactors {
     double ji = 0.0;  ///< F_ji = F_ij A_i / A_j
 };
 
+/// What judging a pair of patches reads: the patches, the visibility, the link options and every
+/// patch's circumradius (circumradii).
+struct PairScene {
+    const PatchSet& patches;
+    const Visibility& vis;
+    const LinkOptions& options;
+    const std::vector<double>& radius;
+};
+
 /// Form factors of patches i and j when they face each other and some stratified ray between them is
 /// free: the rule their distance calls for (adaptive when `is_near`, Gauss for middle distances, the
 /// centroid rule beyond options.far_factor), times the visible fraction. False: no link.
-bool patch_pair(const PatchSet& patches, const Visibility& vis, const LinkOptions& options,
-                const std::vector<double>& radius, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
+bool patch_pair(const PairScene& scene, std::size_t i, std::size_t j, bool is_near, PairFormFactors& out,
                 LinkStats& counts);
 
 /// Deterministic jitter in [0, 1) from three integers (threads must not change the answer). Inline: the
@@ -52,15 +60,25 @@ inline bool inert(const PatchSet& patches, std::size_t i) {
 /// Most weighted paths delay_pieces takes.
 constexpr int kMaxPiecePaths = 256;
 
-/// A delay kernel from `count` weighted paths (those of weight <= 0 left out): one piece per two
-/// bins of `bin_width` that they span (one when bin_width is 0), at most max_pieces and at most one
-/// per path, cut from the paths sorted by length into groups of about equal weight. Writes each
-/// non-empty group's share of the total weight and its weighted mean path; returns how many (0: no
-/// path has weight). The shares sum to 1 and the mean of the pieces is the paths' weighted mean.
+/// `count` paths, each with its weight.
+template <typename T>
+struct WeightedPaths {
+    const T* path;
+    const T* weight;
+    int count;
+};
+
+/// A delay kernel from weighted paths (those of weight <= 0 left out): one piece per two bins of
+/// `bin_width` that they span (one when bin_width is 0), at most max_pieces and at most one per path,
+/// cut from the paths sorted by length into groups of about equal weight. Writes each non-empty
+/// group's share of the total weight and its weighted mean path; returns how many (0: no path has
+/// weight). The shares sum to 1 and the mean of the pieces is the paths' weighted mean.
 /// (The kernels of cluster links, hierarchy.cpp, and of spread patch links, link_spread.cpp.)
 template <typename T>
-int delay_pieces(const T* path, const T* weight, int count, double bin_width, int max_pieces, double* share,
-                 double* mean_path) {
+int delay_pieces(const WeightedPaths<T>& paths, double bin_width, int max_pieces, double* share, double* mean_path) {
+    const T* path = paths.path;
+    const T* weight = paths.weight;
+    const int count = paths.count;
     TPRF_CHECK_LE(count, kMaxPiecePaths);
     int order[kMaxPiecePaths];
     int used = 0;

@@ -83,12 +83,21 @@ inline void equivalent_trapezoid(const double* h, int n, double& a, double& b) {
     b = std::sqrt(std::max(0.0, squares - largest * largest));
 }
 
-/// The trapezoid centre + (offsets uniform in [-a, a] and [-b, b]) cut at the bin edges origin +
-/// k bin_m: calls emit(path, share) once per bin it touches, in increasing bins, `path` a point inside
-/// the bin's part of the support and the shares summing to 1. Light before `lowest` (a bound the linear
-/// spread must not cross: the shortest path there is) is counted in lowest's bin.
+/// Light spread over paths as a trapezoid: centre + offsets uniform in [-a, a] and [-b, b], metres, none of
+/// it before `lowest` (a bound the linear spread must not cross: the shortest path there is).
+struct PathSpread {
+    double centre = 0.0;
+    double a = 0.0;
+    double b = 0.0;
+    double lowest = 0.0;
+};
+
+/// The spread cut at the bin edges origin + k bin_m: calls emit(path, share) once per bin it touches, in
+/// increasing bins, `path` a point inside the bin's part of the support and the shares summing to 1.
+/// Light before `lowest` is counted in lowest's bin.
 template <class Emit>
-void spread_over_bins(double centre, double a, double b, double bin_m, double origin, double lowest, Emit&& emit) {
+void spread_over_bins(const PathSpread& spread, double bin_m, double origin, Emit&& emit) {
+    const double centre = spread.centre, a = spread.a, b = spread.b, lowest = spread.lowest;
     const double reach = std::abs(a) + std::abs(b);
     const double lo = std::max(centre - reach, std::min(lowest, centre)), hi = centre + reach;
     const double first = std::floor((lo - origin) / bin_m), last = std::floor((hi - origin) / bin_m);

@@ -52,19 +52,23 @@ struct FormFactorQuadrature {
     int max_depth = 5;                 ///< at most 4^max_depth cells
 };
 
-/// Form factor F_ab from polygon a to polygon b (both convex, planar, CCW about their normals),
-/// without occlusion: (1 / A_a) integral over a of point_polygon_form_factor(x, n_a, b).
+/// A convex planar polygon: `count` corners (3 or 4), counter-clockwise about its unit front normal.
+struct PolygonView {
+    const Vec3* corners = nullptr;
+    std::size_t count = 0;
+    Vec3 normal = Vec3::UnitZ();
+};
+
+/// Form factor F_ab from polygon a to polygon b, without occlusion: (1 / A_a) integral over a of
+/// point_polygon_form_factor(x, n_a, b).
 /// Over the part of a in front of b's plane (the rest sees b's back), by adaptive subdivision until
 /// each cell's estimate is stable: quad cells by the centroid rule, triangle cells (a triangle, or
 /// the fan of a cut polygon) by the three-point rule of degree 2, which stops two levels earlier.
-double polygon_form_factor(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
-                           std::size_t b_count, const Vec3& b_normal,
-                           const FormFactorQuadrature& quadrature = {});
+double polygon_form_factor(const PolygonView& a, const PolygonView& b, const FormFactorQuadrature& quadrature = {});
 
 /// The same form factor by a fixed product rule over a (2 x 2 Gauss points on a quad, the 3-point
 /// degree-2 rule on a triangle): error O((size / distance)^4), for pairs a few sizes apart.
-double polygon_form_factor_gauss(const Vec3* a, std::size_t a_count, const Vec3& a_normal, const Vec3* b,
-                                 std::size_t b_count, const Vec3& b_normal);
+double polygon_form_factor_gauss(const PolygonView& a, const PolygonView& b);
 
 /// Area of a planar polygon, m^2.
 double polygon_area(const Vec3* poly, std::size_t count);

@@ -5,11 +5,13 @@
 #include "tprf/core/types.h"
 #include "tprf/core/time_axis.h"
 #include "tprf/scene/scene.h"
+#include "tprf/transport/solver.h"
 
 #include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 namespace tprf {
@@ -68,18 +70,43 @@ inline double film_buffer_bytes(std::size_t patches, std::size_t block_bins) {
     return double(patches) * 3 * sizeof(float) * double(film_buffer_bins(patches, block_bins) + 2 * kFilmPadBins);
 }
 
+/// What the solver's block sink feeds (film_sink): a film turns the solved patch profiles, block by
+/// block in time order, into its outputs. TransientFilm films a camera's pixels and CaptureFilm
+/// (imaging/capture_film.h) a capture's sensor points alike: each reads every profile less the pulses
+/// that its sensing points take exactly (it adds their light at its exact paths) through its outputs'
+/// taps, each tap's leg split between two bins.
+class Film {
+public:
+    virtual ~Film() = default;
+    /// One solved block (blocks come in order, without gaps).
+    virtual void add_block(const SolveBlock& block) = 0;
+    /// Films what it kept: call it after the last block.
+    virtual void finish() = 0;
+};
+
+/// The solver's sink (solve_transient) that hands every block to each of `films` in turn, adding the
+/// seconds they take to `seconds`.
+BlockSink film_sink(std::span<Film* const> films, double& seconds);
+
+/// How a TransientFilm reads the profiles.
+struct FilmOptions {
+    DelayMode delay = DelayMode::Linear;  ///< how a tap's leg is split between bins
+    /// -1 for all orders; k >= 0 to film one per-order term (SolveBlock::per_order[k]), the last term
+    /// holding every order >= k when `last_is_tail`.
+    int order = -1;
+    bool last_is_tail = false;
+    int threads = 0;                      ///< 0: all cores
+    /// film_taps(gather, time, delay), when another film of the same gather has them; made here when null.
+    std::shared_ptr<const FilmTaps> taps = nullptr;
+};
+
 /// Accumulates radiance into a transient cube of shape (H, W, T, 3), pixel-major (each pixel's time
 /// profile contiguous), which the caller owns (typically a memory-mapped .npy). Bin values are
 /// radiance times seconds (W s / (m^2 sr)) arriving in the bin.
-class TransientFilm {
+class TransientFilm : public Film {
 public:
-    /// `order`: -1 for all orders; k >= 0 to film one per-order term (SolveBlock::per_order[k]), the
-    /// last term holding every order >= k when `last_is_tail`.
-    /// `taps`: film_taps(gather, time, delay), when another film of the same gather has them; made here
-    /// when null.
-    TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time, DelayMode delay,
-                  float* cube, int order = -1, bool last_is_tail = false, int threads = 0,
-                  std::shared_ptr<const FilmTaps> taps = nullptr);
+    TransientFilm(const Gather& gather, const Illumination& illumination, const TimeAxis& time, float* cube,
+                  FilmOptions options = {});
 
     /// The taps this film applies (to share with the other films of the same gather).
     const std::shared_ptr<const FilmTaps>& taps() const { return m_taps; }
@@ -98,15 +125,16 @@ public:
     /// pulses the camera evaluates exactly) and spreads it over the pixel's legs (its kernel). Blocks
     /// come in order; they are kept until kFilmBufferBytes of them (at most kFilmBufferBins bins) are
     /// there and filmed together, so that each pixel's profile is visited in fewer, longer runs.
-    void add_block(const SolveBlock& block);
+    void add_block(const SolveBlock& block) override;
     /// Films the blocks still kept: call it after the last add_block.
-    void finish();
+    void finish() override;
 
 private:
     bool takes_order(int order) const;
     void copy_indirect(const SolveBlock& block);
+    /// One pixel's taps over the kept bins (`rows`: m_indirect or m_first; `lit`: m_first_lit, or null).
     void add_taps(const FilmTaps& taps, const std::vector<float>& rows, const std::vector<char>* lit,
-                  std::size_t pixel, int first_bin, std::size_t bins, std::size_t stride);
+                  std::size_t pixel);
     void add_kernel(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,
                     std::int64_t bins, float* out) const;
     void add_fused(const FilmTaps& taps, const FilmTaps::Tap& tap, const float* profile, std::int64_t base,

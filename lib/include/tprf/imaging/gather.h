@@ -84,9 +84,16 @@ struct GatherOptions {
 /// spp 64 leave about 8x fewer taps.
 void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time);
 
+/// What a gather reads of the scene: the patches, the light sources and the visibility.
+struct GatherScene {
+    const PatchSet& patches;
+    const LightSources& sources;
+    const Visibility& visibility;
+};
+
 /// Prepares the gather of `points` (outputs laid out as width x height). Outputs without points
 /// get no taps and stay zero.
-Gather gather_points(const SensingPoints& points, int width, int height, const PatchSet& patches,
-                     const LightSources& sources, const Visibility& visibility, const GatherOptions& options = {});
+Gather gather_points(const SensingPoints& points, int width, int height, const GatherScene& scene,
+                     const GatherOptions& options = {});
 
 }  // namespace tprf

@@ -48,19 +48,26 @@ struct SensorOptions {
     int threads = 0;                   ///< 0: all cores; results are identical for any count
 };
 
-/// Applies the sensor to a cube (H, W, T, 3): writes `measurements` (H, W, K, 3) and, for amcw,
-/// `depth` (H, W), metres (may be null otherwise). Noise and photon counts are drawn per pixel from
-/// the seed, so that the result does not depend on the thread count. A SPAD's dead pixel outside the
-/// image is an Error (its JSON path and the image's size), raised before anything is written.
-void apply_sensor(const SensorSettings& sensor, const TimeAxis& time, const float* cube, int height, int width,
-                  float* measurements, float* depth, const SensorOptions& options = {});
+/// A transient cube as the sensor model reads it: `data` is (height, width, T, 3), T the bins of `time`.
+struct CubeView {
+    const TimeAxis& time;
+    const float* data = nullptr;
+    int height = 0;
+    int width = 0;
+};
+
+/// Applies the sensor to a cube: writes `measurements` (H, W, K, 3) and, for amcw, `depth` (H, W),
+/// metres (may be null otherwise). Noise and photon counts are drawn per pixel from the seed, so that
+/// the result does not depend on the thread count. A SPAD's dead pixel outside the image is an Error
+/// (its JSON path and the image's size), raised before anything is written.
+void apply_sensor(const SensorSettings& sensor, const CubeView& cube, float* measurements, float* depth,
+                  const SensorOptions& options = {});
 
 /// A SPAD pixel's expected counts per bin and channel (K x 3, bin by bin), the means that apply_sensor
 /// draws its Poisson counts from: photons x signal, dark and ambient counts, crosstalk from the 4-neighbours,
-/// dead time and afterpulses (docs/sensor.md, "SPAD"); all 0 for a dead pixel. `cube` is (height, width,
-/// T, 3); (row, column) the pixel. A dead pixel outside the image is an Error, as in apply_sensor.
-std::vector<double> spad_expected_counts(const SensorSettings& sensor, const TimeAxis& time, const float* cube,
-                                         int height, int width, int row, int column);
+/// dead time and afterpulses (docs/sensor.md, "SPAD"); all 0 for a dead pixel. (row, column) is the
+/// pixel. A dead pixel outside the image is an Error, as in apply_sensor.
+std::vector<double> spad_expected_counts(const SensorSettings& sensor, const CubeView& cube, int row, int column);
 
 /// The depth a CW-ToF camera infers from one pixel's phase measurements (channels summed): the phase
 /// of the fitted M(phi) = a + b cos(phi) + c sin(phi), as distance c * phase / (4 pi f) (emitter

@@ -17,8 +17,8 @@ bool have_ffmpeg();
 
 /// Encodes the cube as an H.264 MP4 at `fps` frames per second through ffmpeg, one frame per bin,
 /// all frames tone-mapped with one exposure (the 99.5th percentile over the whole cube), so that
-/// brightness changes over time stay visible. `scratch` is a directory for the PNG frames.
-void write_video(const std::filesystem::path& mp4, const std::filesystem::path& scratch, const float* cube,
-                 int height, int width, int bins, int fps = 30);
+/// brightness changes over time stay visible. The PNG frames go to a scratch directory beside the MP4,
+/// `.video-frames`, removed once the video is encoded.
+void write_video(const std::filesystem::path& mp4, const float* cube, int height, int width, int bins, int fps = 30);
 
 }  // namespace tprf

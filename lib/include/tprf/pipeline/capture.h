@@ -8,10 +8,14 @@
 ///    spread over the cell that the sensor point stands for;
 /// 2. the spot's light reaching s directly (zero on a planar wall);
 /// 3. spot -> patch j -> s, summed over stratified samples y of every patch that both see, each at its
-///    exact path |l - y| + |y - s| (imaging/capture_points.h): the onsets are exact to the bin;
+///    exact path |l - y| + |y - s| (transport/patch_views.h): the onsets are exact to the bin;
 /// 4+. the solved patch profiles (all later bounces, the links' time march) less their first pulses,
 ///    gathered at s with each patch's mean last leg.
 /// The device legs join every path when account_first_and_last_bounces is set.
+/// Where each is made: 1 in exact_light (imaging/capture_film.h), 2 and 3 by the spot as a source
+/// (transport/spot_light.h), 4+ by the march (transport/solver.h) filmed by CaptureFilm
+/// (imaging/capture_film.h), moved between grid points with march_grid_step (imaging/lattice_move.h).
+/// This stage orders them: views, batches, ranks and H's rows.
 
 #include "tprf/core/progress.h"
 #include "tprf/imaging/capture_points.h"

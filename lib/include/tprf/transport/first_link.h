@@ -35,19 +35,33 @@ struct PatchSet;
 struct LinkSet;
 struct Illumination;
 
+/// How the light one link after its pulse is taken: as the solver places a delay between bins, of the
+/// pulses that max_bounces lets on.
+struct FirstLinkOptions {
+    DelayMode delay = DelayMode::Linear;
+    int max_bounces = -1;  ///< the solver's: -1 for all
+    int threads = 0;       ///< 0: all cores
+};
+
+/// Bins [first, first + count) of a time axis.
+struct BinSpan {
+    std::int64_t first = 0;
+    std::size_t count = 0;
+};
+
 class FirstLinkLight {
 public:
     FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
-                   const TimeAxis& time, DelayMode delay, int max_bounces, int threads = 0);
+                   const TimeAxis& time, const FirstLinkOptions& options = {});
 
-    /// Writes into `rows` the light of bins [first_bin, first_bin + bins) that every patch receives
-    /// through one patch-to-patch link from a propagating pulse whose onward order `takes(order)`
-    /// accepts, times the receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
-    /// bins as the solver splits it. Patch i's bin b (from first_bin) is rows[i * stride + b * 3 + c].
+    /// Writes into `rows` the light of the bins `span` that every patch receives through one
+    /// patch-to-patch link from a propagating pulse whose onward order `takes(order)` accepts, times the
+    /// receiver's albedo: B_i(t) = albedo_i sum_links ff B_pulse(t - delay), the delay split between
+    /// bins as the solver splits it. Patch i's bin b (from span.first) is rows[i * stride + b * 3 + c].
     /// lit[i] (resized to N) is 0 where patch i's row is all zero. With `wanted`, only the rows of
     /// patches i with wanted[i] != 0 are computed (the others are zero, and not lit).
-    void fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
-              std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted = nullptr) const;
+    void fill(BinSpan span, const std::function<bool(int)>& takes, float* rows, std::size_t stride,
+              std::vector<char>& lit, const std::vector<char>* wanted = nullptr) const;
 
     /// Extra path, metres, at which point x of patch k receives the light that fill() gives k (its
     /// senders' weighted mean of |x - c_j| - |c_k - c_j|, to second order). 0 for a patch that
@@ -100,7 +114,6 @@ private:
 /// that max_bounces lets on.
 std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
-                                                      DelayMode delay, int max_bounces, bool mirrors,
-                                                      int threads = 0);
+                                                      const FirstLinkOptions& options, bool mirrors);
 
 }  // namespace tprf

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 namespace tprf {
@@ -203,10 +204,10 @@ inline bool faces_source(const AreaSource& a, const Vec3& x, const Vec3& n, cons
 double passes_from_source(const AreaSource& a, const Visibility& visibility, const Vec3& x, const Vec3& n,
                           const Vec3& y);
 
-/// passes_from_source() of `count` points y[k] of a, each seen from x[k] (unit normal n), into
-/// passed[k]: the same answers, a real source's rays cast in packets (Visibility::transmittances).
-void passes_from_source(const AreaSource& a, const Visibility& visibility, const Vec3* x, const Vec3& n,
-                        const Vec3* y, std::size_t count, double* passed);
+/// passes_from_source() of the points y[k] of a, each seen from x[k] (unit normal n), into passed[k] (the
+/// three of one size): the same answers, a real source's rays cast in packets (Visibility::transmittances).
+void passes_from_source(const AreaSource& a, const Visibility& visibility, std::span<const Vec3> x, const Vec3& n,
+                        std::span<const Vec3> y, std::span<double> passed);
 
 /// Points on the rim of area source a that the shadow test probes besides its grid's cell centres: its
 /// corners and the middles of its sides, each moved a thousandth of the way to the centroid. A shadow

@@ -126,12 +126,16 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
 std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visibility& visibility,
                                const LinkOptions& options, double bin_width_m);
 
+/// Where make_link_set reports its counts, when given: a hierarchical build's, a flat build's.
+struct LinkSetStats {
+    HierarchyStats* hierarchy = nullptr;
+    LinkStats* flat = nullptr;
+};
+
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
-/// `bin_width_m` (and then its counts in `stats`, when given; a flat build's in `flat_stats`), its
-/// patch links spread when settings.spread_pieces > 0 (spread_patch_links). Links through mirrors are
-/// the caller's next step (add_mirror_links), so that it can report them.
+/// `bin_width_m`, its patch links spread when settings.spread_pieces > 0 (spread_patch_links). Links
+/// through mirrors are the caller's next step (add_mirror_links), so that it can report them.
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
-                      double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr,
-                      LinkStats* flat_stats = nullptr);
+                      double bin_width_m, const LinkOptions& options = {}, LinkSetStats stats = {});
 
 }  // namespace tprf
