@@ -10,6 +10,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <vector>
 
 namespace {
 
@@ -171,6 +172,135 @@ TEST(Brdf, NeverReflectsMoreThanArrives) {
     // A smooth lobe seen head-on keeps nearly everything: 1 - albedo at alpha 0.01 is its masking loss.
     const GlossyBrdf smooth{GlossyModel::Glossy, Rgb::Zero(), Rgb::Constant(1.0), 0.01, 1.5};
     EXPECT_NEAR(smooth.directional_albedo(1.0)[0], 1.0, 1e-3);
+}
+
+TEST(HemisphereCells, CutTheDiskIntoCellsOfEqualProjectedSolidAngle) {
+    for (int rings : {1, 2, 4, 8}) {
+        const tprf::HemisphereCells cells(rings);
+        const int m = cells.count();
+        ASSERT_EQ(m, 4 * rings * rings);
+        // Every cell's own points fall in it.
+        for (int c = 0; c < m; ++c)
+            for (double u : {0.01, 0.5, 0.99})
+                for (double v : {0.01, 0.5, 0.99}) ASSERT_EQ(cells.cell_of(cells.direction(c, u, v)), c);
+        // Projected solid angle is area on the unit disk: a fine grid over the disk gives each cell pi / M.
+        const int n = 1200;
+        std::vector<double> area(std::size_t(m), 0.0);
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) {
+                const double x = -1.0 + (2.0 * i + 1.0) / n, y = -1.0 + (2.0 * j + 1.0) / n;
+                if (x * x + y * y >= 1.0) continue;
+                area[std::size_t(cells.cell_of(Vec3(x, y, std::sqrt(1.0 - x * x - y * y))))] += 4.0 / (double(n) * n);
+            }
+        // The grid's error is its cells along each cell's edges: about 4 / n of the disk's width per edge.
+        for (int c = 0; c < m; ++c) EXPECT_NEAR(area[std::size_t(c)], kPi / m, 12.0 * rings / n * kPi / m) << "cell " << c;
+    }
+}
+
+// M times the lobe's directional albedo averaged over cell c's sample directions, by directional_albedo.
+double mean_lobe_albedo(const GlossyBrdf& brdf, const tprf::HemisphereCells& cells, int c, int samples) {
+    GlossyBrdf lobe = brdf;
+    lobe.albedo = Rgb::Zero();
+    lobe.reflectance = Rgb::Ones();
+    double sum = 0.0;
+    for (int a = 0; a < samples; ++a)
+        for (int b = 0; b < samples; ++b)
+            sum += lobe.directional_albedo(cells.direction(c, (a + 0.5) / samples, (b + 0.5) / samples).z())[0];
+    return cells.count() * sum / (samples * samples);
+}
+
+TEST(CellReflectance, EachCellReflectsWhatItsDirectionalAlbedoSays) {
+    const tprf::HemisphereCells cells(3);
+    for (GlossyModel model : {GlossyModel::Glossy, GlossyModel::Plastic}) {
+        for (double alpha : {0.05, 0.3}) {
+            const GlossyBrdf brdf{model, Rgb::Zero(), Rgb::Ones(), alpha, 1.5};
+            const tprf::CellReflectance r = tprf::cell_reflectance(brdf, cells, 2);
+            for (int c = 0; c < cells.count(); ++c) {
+                const double expected = mean_lobe_albedo(brdf, cells, c, 2);
+                EXPECT_NEAR(r.lobe.col(c).sum(), expected, 2e-4 * expected) << "alpha " << alpha << " cell " << c;
+                EXPECT_GE(r.lobe.col(c).minCoeff(), 0.0);
+            }
+        }
+    }
+}
+
+// The share of each cell's reflected light that leaves through a cell other than its mirror cell.
+std::vector<double> leaks(double alpha, const tprf::HemisphereCells& cells) {
+    const GlossyBrdf brdf{GlossyModel::Glossy, Rgb::Zero(), Rgb::Ones(), alpha, 1.5};
+    const tprf::CellReflectance r = tprf::cell_reflectance(brdf, cells, 2);
+    std::vector<double> out;
+    for (int c = 0; c < cells.count(); ++c) {
+        // The mirror direction of (r, phi) is (r, phi + pi): the same ring, half its sectors on.
+        const int k = int(std::sqrt(c / 4.0)), sectors = 4 * (2 * k + 1);
+        const int mirror = 4 * k * k + (c - 4 * k * k + sectors / 2) % sectors;
+        out.push_back(1.0 - r.lobe(mirror, c) / r.lobe.col(c).sum());
+    }
+    return out;
+}
+
+TEST(CellReflectance, ASmoothLobeSendsEachCellToItsMirrorCell) {
+    // GGX's long tail sends a little of a smooth lobe's light past the mirror cell's edges; less the
+    // smoother the lobe.
+    const tprf::HemisphereCells cells(4);
+    const std::vector<double> smooth = leaks(0.01, cells), rougher = leaks(0.03, cells);
+    for (int c = 0; c < cells.count(); ++c) {
+        EXPECT_LT(smooth[std::size_t(c)], 0.1) << "cell " << c;
+        EXPECT_LT(smooth[std::size_t(c)], rougher[std::size_t(c)]) << "cell " << c;
+    }
+}
+
+TEST(CellReflectance, PlacesTheLightAsAnIntegralOverTheDiskOfOutgoingDirections) {
+    // Projected solid angle is area on the unit disk, so the integral over cell c of f(wi, wo) cos_o dwo
+    // is the integral of f over c's part of the disk: a fine grid of the disk, per incoming direction.
+    const tprf::HemisphereCells cells(2);
+    const GlossyBrdf brdf{GlossyModel::Plastic, Rgb::Zero(), Rgb::Zero(), 0.2, 1.5};
+    const tprf::CellReflectance r = tprf::cell_reflectance(brdf, cells, 1);
+    const int m = cells.count(), n = 1000;
+    for (int c = 0; c < m; ++c) {
+        const Vec3 wi = cells.direction(c, 0.5, 0.5);
+        Eigen::VectorXd column = Eigen::VectorXd::Zero(m);
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) {
+                const double x = -1.0 + (2.0 * i + 1.0) / n, y = -1.0 + (2.0 * j + 1.0) / n;
+                if (x * x + y * y >= 1.0) continue;
+                const Vec3 wo(x, y, std::sqrt(1.0 - x * x - y * y));
+                column[cells.cell_of(wo)] += brdf.lobe(kNormal, wi, wo) * 4.0 / (double(n) * n);
+            }
+        column *= m;  // one sample carries the whole cell: weight M
+        // The grid's error is at the cells' edges and the horizon: 0.3% of the column's light.
+        for (int o = 0; o < m; ++o) EXPECT_NEAR(r.lobe(o, c), column[o], 3e-3 * column.sum()) << "cells " << o << ", " << c;
+    }
+}
+
+TEST(CellReflectance, IsReciprocalAsTheBrdf) {
+    // f(wi, wo) = f(wo, wi) makes R symmetric for equal cells; what is left is the placing of each
+    // incoming cell's few sample directions, which shrinks as the samples grow.
+    const tprf::HemisphereCells cells(2);
+    const GlossyBrdf rough{GlossyModel::Plastic, Rgb::Zero(), Rgb::Zero(), 0.5, 1.5};
+    double previous = 1e9;
+    for (int samples : {1, 2, 4}) {
+        const Eigen::MatrixXd lobe = tprf::cell_reflectance(rough, cells, samples).lobe;
+        const double asymmetry = (lobe - lobe.transpose()).cwiseAbs().maxCoeff() / lobe.maxCoeff();
+        EXPECT_LT(asymmetry, previous);
+        previous = asymmetry;
+    }
+    EXPECT_LT(previous, 0.01);
+}
+
+TEST(CellReflectance, ThePlasticBaseIsTheCoatsTransmissionBothWays) {
+    // The mean of 1 - F over the hemisphere, in projected solid angle, for a dielectric of index 1.5 is
+    // 1 - 0.0917780 (its diffuse reflectance, 2 x integral of F(mu) mu over (0, 1)).
+    const tprf::HemisphereCells cells(4);
+    const GlossyBrdf plastic{GlossyModel::Plastic, Rgb(0.6, 0.4, 0.2), Rgb::Zero(), 0.2, 1.5};
+    const tprf::CellReflectance r = tprf::cell_reflectance(plastic, cells, 1);
+    EXPECT_NEAR(r.base.mean(), 1.0 - 0.0917780, 1e-6);
+    const Eigen::MatrixXd red = r.channel(plastic, 0);
+    EXPECT_NEAR(red(5, 9), r.lobe(5, 9) + 0.6 * r.base[5] * r.base[9], 1e-15);
+    // A Lambertian glossy surface sends each cell's light to every cell alike: R = albedo everywhere.
+    const GlossyBrdf matte{GlossyModel::Glossy, Rgb(0.5, 0.5, 0.5), Rgb::Zero(), 0.2, 1.5};
+    const Eigen::MatrixXd grey = tprf::cell_reflectance(matte, cells, 1).channel(matte, 1);
+    EXPECT_NEAR(grey.maxCoeff(), 0.5, 1e-15);
+    EXPECT_NEAR(grey.minCoeff(), 0.5, 1e-15);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
 #include <vector>
 
 namespace tprf {
@@ -85,6 +86,36 @@ double entering_share(double ior) {
     return 2.0 * sum;
 }
 
+// The reflection of light arriving from wi (local frame, z > 0) through the lobe, integrated over the
+// lobe's half vectors as lobe_albedo does (GGX measure; here over the whole circle of azimuths, since
+// the reflected directions are binned), each reflected direction's share added to the cell it leaves
+// through, times `weight`: column[c] += weight * integral over cell c of the lobe's f cos_o.
+void bin_reflection(const GlossyBrdf& brdf, const HemisphereCells& cells, const Vec3& wi, double weight,
+                    Eigen::Ref<Eigen::VectorXd> column) {
+    const double alpha = brdf.roughness, cos_i = wi.z();
+    const Quadrature& radial = rule(128);
+    const Quadrature& azimuth = rule(256);
+    const Vec3 t1 = Vec3::UnitZ().cross(wi).norm() > 1e-12 ? Vec3(wi.x(), wi.y(), 0.0).normalized() : Vec3::UnitX();
+    const Vec3 t2 = Vec3::UnitZ().cross(t1);
+    const double scale = weight * smith_g1(alpha, cos_i) / cos_i;
+    for (std::size_t a = 0; a < radial.x.size(); ++a) {
+        const double xi = radial.x[a];
+        const double cos_h = 1.0 / std::sqrt(1.0 + alpha * alpha * xi / (1.0 - xi));
+        const double sin_h = std::sqrt(std::max(0.0, 1.0 - cos_h * cos_h));
+        for (std::size_t b = 0; b < azimuth.x.size(); ++b) {
+            const double phi = 2.0 * kPi * azimuth.x[b];
+            const Vec3 h = sin_h * (std::cos(phi) * t1 + std::sin(phi) * t2) + cos_h * Vec3::UnitZ();
+            const double i_h = wi.dot(h);
+            if (i_h <= 0.0) continue;
+            const Vec3 wo = 2.0 * i_h * h - wi;
+            if (wo.z() <= 0.0) continue;
+            const double fresnel = brdf.model == GlossyModel::Plastic ? fresnel_dielectric(i_h, brdf.ior) : 1.0;
+            column[cells.cell_of(wo)] +=
+                scale * radial.w[a] * azimuth.w[b] * fresnel * smith_g1(alpha, wo.z()) * i_h / cos_h;
+        }
+    }
+}
+
 }  // namespace
 
 double ggx_distribution(double alpha, double cos_h) {
@@ -131,6 +162,60 @@ Rgb GlossyBrdf::directional_albedo(double cos_o) const {
     if (model == GlossyModel::Glossy) return albedo + reflectance * lobe_part;
     const double base = (1.0 - fresnel_dielectric(cos_o, ior)) * entering_share(ior);
     return Rgb::Constant(lobe_part) + albedo * base;
+}
+
+HemisphereCells::HemisphereCells(int rings) : m_rings(rings) {
+    if (rings < 1) throw std::invalid_argument("HemisphereCells: rings must be at least 1");
+}
+
+int HemisphereCells::cell_of(const Vec3& local) const {
+    const double r = std::min(1.0, std::hypot(local.x(), local.y()));
+    const int k = std::min(m_rings - 1, int(r * m_rings));
+    const int sectors = 4 * (2 * k + 1);
+    double phi = std::atan2(local.y(), local.x());
+    if (phi < 0.0) phi += 2.0 * kPi;
+    const int sector = std::min(sectors - 1, int(phi / (2.0 * kPi) * sectors));
+    return 4 * k * k + sector;
+}
+
+Vec3 HemisphereCells::direction(int cell, double u, double v) const {
+    int k = int(std::sqrt(cell / 4.0));
+    while (4 * (k + 1) * (k + 1) <= cell) ++k;
+    while (4 * k * k > cell) --k;
+    const int sectors = 4 * (2 * k + 1), sector = cell - 4 * k * k;
+    const double r = std::sqrt(k * k + u * (2 * k + 1)) / m_rings;
+    const double phi = 2.0 * kPi * (sector + v) / sectors;
+    return {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - r * r))};
+}
+
+Eigen::MatrixXd CellReflectance::channel(const GlossyBrdf& brdf, int c) const {
+    const double lobe_scale = brdf.model == GlossyModel::Glossy ? brdf.reflectance[c] : 1.0;
+    return lobe_scale * lobe + brdf.albedo[c] * (base * base.transpose());
+}
+
+CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& cells, int samples) {
+    if (samples < 1) throw std::invalid_argument("cell_reflectance: samples must be at least 1");
+    const int m = cells.count();
+    CellReflectance out{Eigen::MatrixXd::Zero(m, m), Eigen::VectorXd::Ones(m)};
+    // Each of a cell's samples^2 directions carries 1/samples^2 of its projected solid angle pi/M; the
+    // light it brings, per unit of the cell's irradiance, is then M / samples^2 of what it reflects.
+    const double weight = double(m) / (samples * samples);
+    for (int c = 0; c < m; ++c)
+        for (int a = 0; a < samples; ++a)
+            for (int b = 0; b < samples; ++b)
+                bin_reflection(brdf, cells, cells.direction(c, (a + 0.5) / samples, (b + 0.5) / samples), weight,
+                               out.lobe.col(c));
+    if (brdf.model == GlossyModel::Plastic) {
+        // 1 - F depends on the ring alone; its mean over a ring, uniform in projected solid angle (u).
+        const Quadrature& q = rule(256);
+        for (int c = 0; c < m; ++c) {
+            double sum = 0.0;
+            for (std::size_t k = 0; k < q.x.size(); ++k)
+                sum += q.w[k] * (1.0 - fresnel_dielectric(cells.direction(c, q.x[k], 0.5).z(), brdf.ior));
+            out.base[c] = sum;
+        }
+    }
+    return out;
 }
 
 }  // namespace tprf

@@ -5,6 +5,8 @@
 
 #include "tprf/core/types.h"
 
+#include <Eigen/Core>
+
 namespace tprf {
 
 /// The GGX (Trowbridge-Reitz) distribution of normals of roughness `alpha` (> 0) at a half vector whose
@@ -48,5 +50,50 @@ struct GlossyBrdf {
     /// in the GGX distribution's cumulative measure and in azimuth), the plastic base over cos_i.
     Rgb directional_albedo(double cos_o) const;
 };
+
+/// The hemisphere above a surface cut into M = 4 R^2 cells of equal projected solid angle (pi / M each):
+/// the unit disk below it (x = sin(theta) cos(phi), y = sin(theta) sin(phi)) cut into R rings of equal
+/// width, ring k into 4 (2k + 1) equal sectors, so that every cell is about 1/R of the disk across. The
+/// directional resolution of light leaving or reaching a glossy patch, in the patch's own frame (z
+/// along its normal).
+class HemisphereCells {
+public:
+    /// `rings` R >= 1.
+    explicit HemisphereCells(int rings);
+    int rings() const { return m_rings; }
+    /// M = 4 R^2.
+    int count() const { return 4 * m_rings * m_rings; }
+    /// The cell holding a direction of the frame (z > 0; z <= 0 is taken as the horizon's ring).
+    int cell_of(const Vec3& local) const;
+    /// The direction at fractional coordinates (u, v) in [0, 1)^2 of a cell: u across its ring, v along
+    /// its sector, both uniform in projected solid angle.
+    Vec3 direction(int cell, double u, double v) const;
+
+private:
+    int m_rings;
+};
+
+/// What a glossy surface does between its cells, as two parts that the materials' colours scale:
+/// for a channel with albedo a and reflectance r, R = r lobe + a base base^T (Glossy) or
+/// R = lobe + a base base^T (Plastic). R (M x M) maps the irradiance E(c') arriving through cell c' with a
+/// radiance uniform over it to pi times the mean radiance leaving through cell c (weighted by projected
+/// solid angle): pi L(c) = sum over c' of R(c, c') E(c'). So column c' of R adds up to M times the share of
+/// the light arriving through c' that leaves, the directional albedo averaged over the cell.
+struct CellReflectance {
+    /// The lobe's part (Glossy: per unit reflectance; Plastic: with its Fresnel factor). Each of the
+    /// samples^2 incoming directions of a cell has its reflection integrated over its half vectors as
+    /// `directional_albedo` integrates it, and binned by the cell it leaves through.
+    Eigen::MatrixXd lobe;
+    /// The Lambertian part's factor per cell: 1 (Glossy), or the mean of 1 - F over the cell in projected
+    /// solid angle (Plastic: light crosses the coat on the way in and on the way out).
+    Eigen::VectorXd base;
+
+    /// R for one channel of `brdf`.
+    Eigen::MatrixXd channel(const GlossyBrdf& brdf, int c) const;
+};
+
+/// The cells' reflectance of `brdf` (its model, roughness and ior; not its colours), with `samples` >= 1
+/// incoming directions per side of a cell.
+CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& cells, int samples);
 
 }  // namespace tprf
