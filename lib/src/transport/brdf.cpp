@@ -91,7 +91,7 @@ double entering_share(double ior) {
 // the reflected directions are binned), each reflected direction's share added to the cell it leaves
 // through, times `weight`: column[c] += weight * integral over cell c of the lobe's f cos_o.
 void bin_reflection(const GlossyBrdf& brdf, const HemisphereCells& cells, const Vec3& wi, double weight,
-                    Eigen::Ref<Eigen::VectorXd> column) {
+                    std::vector<double>& column) {
     const double alpha = brdf.roughness, cos_i = wi.z();
     const Quadrature& radial = rule(128);
     const Quadrature& azimuth = rule(256);
@@ -110,7 +110,7 @@ void bin_reflection(const GlossyBrdf& brdf, const HemisphereCells& cells, const 
             const Vec3 wo = 2.0 * i_h * h - wi;
             if (wo.z() <= 0.0) continue;
             const double fresnel = brdf.model == GlossyModel::Plastic ? fresnel_dielectric(i_h, brdf.ior) : 1.0;
-            column[cells.cell_of(wo)] +=
+            column[std::size_t(cells.cell_of(wo))] +=
                 scale * radial.w[a] * azimuth.w[b] * fresnel * smith_g1(alpha, wo.z()) * i_h / cos_h;
         }
     }
@@ -188,23 +188,28 @@ Vec3 HemisphereCells::direction(int cell, double u, double v) const {
     return {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - r * r))};
 }
 
-Eigen::MatrixXd CellReflectance::channel(const GlossyBrdf& brdf, int c) const {
+double CellReflectance::at(const GlossyBrdf& brdf, int c, int out, int in) const {
     const double lobe_scale = brdf.model == GlossyModel::Glossy ? brdf.reflectance[c] : 1.0;
-    return lobe_scale * lobe + brdf.albedo[c] * (base * base.transpose());
+    return lobe_scale * lobe_at(out, in) + brdf.albedo[c] * base[std::size_t(out)] * base[std::size_t(in)];
 }
 
 CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& cells, int samples) {
     if (samples < 1) throw std::invalid_argument("cell_reflectance: samples must be at least 1");
     const int m = cells.count();
-    CellReflectance out{Eigen::MatrixXd::Zero(m, m), Eigen::VectorXd::Ones(m)};
+    const std::size_t size = std::size_t(m);
+    CellReflectance out{m, std::vector<double>(size * size, 0.0), std::vector<double>(size, 1.0)};
     // Each of a cell's samples^2 directions carries 1/samples^2 of its projected solid angle pi/M; the
     // light it brings, per unit of the cell's irradiance, is then M / samples^2 of what it reflects.
     const double weight = double(m) / (samples * samples);
-    for (int c = 0; c < m; ++c)
+    std::vector<double> column(size);
+    for (int c = 0; c < m; ++c) {
+        std::fill(column.begin(), column.end(), 0.0);
         for (int a = 0; a < samples; ++a)
             for (int b = 0; b < samples; ++b)
                 bin_reflection(brdf, cells, cells.direction(c, (a + 0.5) / samples, (b + 0.5) / samples), weight,
-                               out.lobe.col(c));
+                               column);
+        for (std::size_t o = 0; o < size; ++o) out.lobe[o * size + std::size_t(c)] = column[o];
+    }
     if (brdf.model == GlossyModel::Plastic) {
         // 1 - F depends on the ring alone; its mean over a ring, uniform in projected solid angle (u).
         const Quadrature& q = rule(256);
@@ -212,7 +217,7 @@ CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& 
             double sum = 0.0;
             for (std::size_t k = 0; k < q.x.size(); ++k)
                 sum += q.w[k] * (1.0 - fresnel_dielectric(cells.direction(c, q.x[k], 0.5).z(), brdf.ior));
-            out.base[c] = sum;
+            out.base[std::size_t(c)] = sum;
         }
     }
     return out;

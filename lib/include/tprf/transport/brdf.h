@@ -5,7 +5,7 @@
 
 #include "tprf/core/types.h"
 
-#include <Eigen/Core>
+#include <vector>
 
 namespace tprf {
 
@@ -79,17 +79,23 @@ private:
 /// radiance uniform over it to pi times the mean radiance leaving through cell c (weighted by projected
 /// solid angle): pi L(c) = sum over c' of R(c, c') E(c'). So column c' of R adds up to M times the share of
 /// the light arriving through c' that leaves, the directional albedo averaged over the cell.
+/// (Plain vectors, not Eigen's dynamic matrices: those allocate with the alignment of the instruction
+/// set they are compiled for, which a program built without the library's -march does not share.)
 struct CellReflectance {
-    /// The lobe's part (Glossy: per unit reflectance; Plastic: with its Fresnel factor). Each of the
-    /// samples^2 incoming directions of a cell has its reflection integrated over its half vectors as
-    /// `directional_albedo` integrates it, and binned by the cell it leaves through.
-    Eigen::MatrixXd lobe;
-    /// The Lambertian part's factor per cell: 1 (Glossy), or the mean of 1 - F over the cell in projected
-    /// solid angle (Plastic: light crosses the coat on the way in and on the way out).
-    Eigen::VectorXd base;
+    int cells = 0;  ///< M
+    /// The lobe's part (Glossy: per unit reflectance; Plastic: with its Fresnel factor), M x M by
+    /// outgoing cell then incoming cell: lobe[out * M + in]. Each of the samples^2 incoming directions of
+    /// a cell has its reflection integrated over its half vectors as `directional_albedo` integrates it,
+    /// and binned by the cell it leaves through.
+    std::vector<double> lobe;
+    /// The Lambertian part's factor per cell (M): 1 (Glossy), or the mean of 1 - F over the cell in
+    /// projected solid angle (Plastic: light crosses the coat on the way in and on the way out).
+    std::vector<double> base;
 
-    /// R for one channel of `brdf`.
-    Eigen::MatrixXd channel(const GlossyBrdf& brdf, int c) const;
+    /// The lobe's part from cell `in` to cell `out`.
+    double lobe_at(int out, int in) const { return lobe[std::size_t(out) * std::size_t(cells) + std::size_t(in)]; }
+    /// R(out, in) for channel `c` of `brdf`.
+    double at(const GlossyBrdf& brdf, int c, int out, int in) const;
 };
 
 /// The cells' reflectance of `brdf` (its model, roughness and ior; not its colours), with `samples` >= 1
