@@ -105,10 +105,10 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options, cons
     const double updates_per_s = double(stats.link_bin_updates) / seconds;
     const double gflops = updates_per_s * fma_per_update / 1e9;
     // Links shorter than a block are applied bin by bin from scattered history, not by the kernel above.
-    const double inv_bin = 1.0 / p.scene.time.bin_width_m();
+    const float inv_bin = p.scene.time.inv_bin_f();
     std::size_t short_links = 0;
     for (float d : p.links.links.distance)
-        if (std::floor(double(d) * inv_bin) < double(stats.block_bins)) ++short_links;
+        if (tprf::delay_taps_f(d, inv_bin, options.delay, 1.0f).lag < stats.block_bins) ++short_links;
     // Every block streams each link's source, form factor and distance once (12 bytes).
     const double blocks = std::ceil(double(kBins) / double(stats.block_bins));
     const double link_stream_gbs = 12.0 * double(p.links.links.size()) * blocks / seconds / 1e9;

@@ -54,7 +54,7 @@ void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& tap
 }  // namespace
 
 FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads, bool shifted) {
-    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    const BinMap bins = time.bin_map();
     const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
     std::vector<std::vector<FilmTaps::Tap>> per_pixel(pixels);
     std::vector<std::vector<float>> per_pixel_weights(pixels);
@@ -64,15 +64,14 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         shares.clear();
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
             const PixelTap& tap = gather.taps[k];
-            const double lag = (double(tap.leg) + (shifted ? double(tap.shift) : 0.0)) * inv_bin;
-            const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
+            const BinSplit split = bins.split(double(tap.leg) + (shifted ? double(tap.shift) : 0.0), delay);
+            const std::int64_t first = bins.bin(double(tap.earliest));
+            const std::int32_t whole = std::int32_t(split.first);
             if (delay == DelayMode::Nearest) {
-                shares.push_back({tap.patch, tap.tint, std::int32_t(std::floor(lag + 0.5)), first, tap.weight});
+                shares.push_back({tap.patch, tap.tint, whole, first, tap.weight});
             } else {
-                const std::int32_t whole = std::int32_t(std::floor(lag));
-                const double f = lag - double(whole);
-                shares.push_back({tap.patch, tap.tint, whole, first, float(tap.weight * (1.0 - f))});
-                shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * f)});
+                shares.push_back({tap.patch, tap.tint, whole, first, float(tap.weight * (1.0 - split.frac))});
+                shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * split.frac)});
             }
         }
         merge_shares(shares, per_pixel[px], per_pixel_weights[px], per_pixel_longest[px]);
@@ -125,12 +124,12 @@ bool TransientFilm::takes_order(int order) const {
 }
 
 void TransientFilm::add_direct() {
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap bins = m_time.bin_map();
     const std::size_t T = std::size_t(m_time.bins);
     for (const DirectArrival& a : m_gather.direct) {
         if (!takes_order(a.order)) continue;
         // A delta at an exact path lies wholly in the bin that contains it.
-        const double b = std::floor((a.path - start) * inv_bin);
+        const double b = bins.bin_floor(a.path);
         if (b < 0 || b >= double(T)) continue;
         float* v = m_cube + (std::size_t(a.pixel) * T + std::size_t(b)) * 3;
         for (int c = 0; c < 3; ++c) v[c] += float(a.radiance[c]);
@@ -159,14 +158,14 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
     if (m_kept == 0) m_first_bin = block.first_bin;
     TPRF_CHECK_EQ(block.first_bin, m_first_bin + int(m_kept));
     TPRF_CHECK_LE(m_kept + bins, m_capacity);
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap time_bins = m_time.bin_map();
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {  // each patch's row is its own
         float* row = m_indirect.data() + i * stride + (pad + m_kept) * 3;
         std::copy_n(source + i * bins * 3, bins * 3, row);
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
             const Pulse& p = m_illumination.pulses[k];
             if (!p.exact_at_sensors() || !takes_order(p.order)) continue;
-            const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
+            const double b = time_bins.bin_floor(p.path) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
             float* v = row + std::size_t(b) * 3;
             // What is left is the light of other orders in that bin; float cancellation must not

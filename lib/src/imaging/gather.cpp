@@ -421,10 +421,9 @@ void order_arrivals(std::vector<DirectArrival>& v, const TimeAxis* time) {
         return;
     }
     if (v.empty()) return;
-    const double inv_bin = 1.0 / time->bin_width_m(), start = time->start_m(), bins = double(time->bins);
-    const auto bin = [&](const DirectArrival& a) {
-        return std::int64_t(std::clamp(std::floor((a.path - start) * inv_bin), -1.0, bins));
-    };
+    const BinMap map = time->bin_map();
+    const double bins = double(time->bins);
+    const auto bin = [&](const DirectArrival& a) { return std::int64_t(std::clamp(map.bin_floor(a.path), -1.0, bins)); };
     std::int64_t lo = bin(v[0]), hi = lo;
     int orders = 0;
     for (const DirectArrival& a : v) {
@@ -548,9 +547,9 @@ Gather gather_points(const SensingPoints& points, int width, int height, const P
 
 void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time) {
     if (taps.size() < 2) return;
-    const double inv_bin = 1.0 / time.bin_width_m();
+    const BinMap bins = time.bin_map();
     const auto half = [&](double leg) {  // the half bin of a leg
-        const double lag = leg * inv_bin, whole = std::floor(lag);
+        const double lag = bins.lag(leg), whole = std::floor(lag);
         return std::int64_t(2.0 * whole) + (lag - whole >= 0.5 ? 1 : 0);
     };
     // Open addressing over at least twice the taps (a power of two): slot -> merged index + 1.

@@ -6,8 +6,6 @@
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
 
-#include "solver_plan.h"
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -32,7 +30,7 @@ FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, co
 
 FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumination, int max_bounces) {
     const std::size_t n = m_patches.size();
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap bins = m_time.bin_map();
     Senders s;
     s.weight.assign(n, 0.0);
     s.first.assign(n, std::numeric_limits<std::int64_t>::max());
@@ -45,7 +43,7 @@ FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumina
             const Pulse& p = illumination.pulses[k];
             if (!p.propagates || !(p.energy > 0.0).any()) continue;
             if (max_bounces >= 0 && p.order + 1 > max_bounces) continue;
-            const std::int64_t bin = std::int64_t(std::floor((p.path - start) * inv_bin));  // SolvePlan::pulse_bin
+            const std::int64_t bin = bins.bin(p.path);  // as SolvePlan::pulse_bin
             pulses.push_back({bin, &p});
             s.weight[j] += p.energy.mean();
             s.first[j] = std::min(s.first[j], bin);
@@ -72,7 +70,7 @@ FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumina
 
 bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     const Links& l = m_links.links;
-    const float inv_bin_f = float(1.0 / m_time.bin_width_m());
+    const float inv_bin_f = m_time.inv_bin_f();
     std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
     Vec3 d = Vec3::Zero();
     Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
@@ -80,7 +78,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
         const std::uint32_t j = l.source[k];
         if (j >= m_patches.size() || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
-        const int lag = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, 1.0f).lag;
+        const int lag = delay_taps_f(l.distance[k], inv_bin_f, m_delay, 1.0f).lag;
         lo = std::min(lo, senders.first[j] + lag);
         hi = std::max(hi, senders.last[j] + lag + 2);
         const double c = double(l.ff[k]) * senders.weight[j];  // the light this link brings
@@ -113,7 +111,7 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
     bool taken[256];
     for (int o = 0; o < 256; ++o) taken[o] = takes(o + 1);
     const Links& l = m_links.links;
-    const float inv_bin_f = float(1.0 / m_time.bin_width_m());
+    const float inv_bin_f = m_time.inv_bin_f();
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {
         float* row = rows + i * stride;
         std::fill_n(row, bins * 3, 0.0f);
@@ -123,7 +121,7 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
         for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
             const std::uint32_t j = l.source[k];
             if (j >= n || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
-            const solver_detail::Taps t = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
+            const DelayTaps t = delay_taps_f(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
             for (std::uint64_t r = m_row[j]; r < m_row[j + 1]; ++r) {
                 const Run& run = m_runs[r];
                 if (!taken[run.order]) continue;

@@ -78,7 +78,7 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
     const float* __restrict ff = links.ff.data();
     std::uint64_t k = cursor;
     for (; k < end && source[k] < source_end; ++k) {
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < bt) continue;
         const float* __restrict h =
             ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);

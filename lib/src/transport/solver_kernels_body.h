@@ -40,12 +40,12 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
         if (k + 2 * kAhead < end) {
             __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
             const RingSlot& next = slots[source[k + kAhead]];
-            const int lag = int(distance[k + kAhead] * inv_bin);
+            const int lag = delay_bins_f(distance[k + kAhead], inv_bin);
             const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * C;
             for (int line = 0; line < (C * (BT + 1) * 4 + 63) / 64 && line < 4; ++line)
                 __builtin_prefetch(at + 16 * line);
         }
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const RingSlot& slot = slots[source[k]];
         const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
@@ -213,11 +213,11 @@ TPRF_KERNEL_TARGET void gather_lanes(const Links& links, std::uint64_t& cursor, 
         if (k + 2 * kAhead < end) {  // as in gather_long
             __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
             const RingSlot& next = slots[source[k + kAhead]];
-            const int lag = int(distance[k + kAhead] * inv_bin);
+            const int lag = delay_bins_f(distance[k + kAhead], inv_bin);
             const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * std::size_t(C);
             for (int line = 0; line < 4; ++line) __builtin_prefetch(at + 16 * line);
         }
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const RingSlot& slot = slots[source[k]];
         const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * std::size_t(C);

@@ -37,7 +37,7 @@ TintedLink tinted_taps(const Links& links, std::uint64_t k, std::uint32_t source
     TintedLink out{source, 0, {}, {}};
     const std::array<float, 3>& f = links.tints[links.tint[k]];
     for (int c = 0; c < 3; ++c) {
-        const Taps t = link_taps(links.distance[k], inv_bin, mode, links.ff[k] * f[std::size_t(c)]);
+        const DelayTaps t = delay_taps_f(links.distance[k], inv_bin, mode, links.ff[k] * f[std::size_t(c)]);
         out.lag = t.lag;
         out.w0[c] = t.w0;
         out.w1[c] = t.w1;
@@ -74,7 +74,7 @@ struct BinLinks {
 };
 
 // Adds a link of lag < bt between patches (the same-bin system takes a lag-0 link's w0 tap).
-void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, const Taps& t, float scale) {
+void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, const DelayTaps& t, float scale) {
     if (t.lag == 0) {
         out.same[receiver].push_back({source, t.w0 * scale});
         out.shorts[receiver].push_back({source, 0, 0.0f, t.w1 * scale});
@@ -145,7 +145,7 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     plan.send_window.assign(plan.m, 0);
     for (std::size_t i = 0; i < plan.m; ++i) {
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
-            const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            const DelayTaps t = delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             plan.max_lag = std::max(plan.max_lag, t.lag);
             const std::uint32_t s = links.source[k];
             plan.send_lag[s] = std::max(plan.send_lag[s], t.lag);
@@ -230,7 +230,7 @@ int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
     // A link's lag grows with its length: the longest link's is the largest.
     float longest = 0.0f;
     for (float d : links.distance) longest = std::max(longest, d);
-    const int max_lag = link_taps(longest, plan.inv_bin_f, plan.delay, 1.0f).lag;
+    const int max_lag = delay_taps_f(longest, plan.inv_bin_f, plan.delay, 1.0f).lag;
     const int bits = std::max(1, int(std::bit_width(unsigned(max_lag))));
     return bits < 32 && (std::uint64_t(plan.m) << bits) <= (std::uint64_t(1) << 32) ? bits : 0;
 }
@@ -244,7 +244,7 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
     const bool tinted = any_tinted(links);
     auto packs = [&](std::uint64_t k) {
         return !(tinted && tinted_link(links, k)) &&
-               link_taps(links.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag >= plan.bt;
+               delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag >= plan.bt;
     };
     std::vector<std::uint64_t> start(plan.m + 1, 0);
     parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
@@ -262,7 +262,7 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
         row.clear();
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
             if (tinted && tinted_link(links, k)) continue;
-            const Taps t = link_taps(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
+            const DelayTaps t = delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             if (t.lag < plan.bt) continue;  // as packs(k): a lag does not depend on the form factor
             row.push_back({plan.window_of(t.lag), {(links.source[k] << plan.lag_bits) | std::uint32_t(t.lag), t.w0, t.w1}});
         }
@@ -291,7 +291,7 @@ void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     const std::size_t S = std::size_t(plan.windows);
     plan.segments.assign(plan.m * (S + 1), 0);
     auto window = [&](const Links& l, std::uint64_t k) {
-        return plan.window_of(link_taps(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
+        return plan.window_of(delay_taps_f(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
     if (plan.packs()) {
         pack_links(links, plan, fill);
@@ -457,7 +457,7 @@ void copy_near_links(SolvePlan& plan) {
         std::uint64_t k = plan.segments[i * (S + 1)];
         const std::uint64_t end = plan.segments[i * (S + 1) + 1];
         for (; k < end; ++k) {
-            const Taps t = link_taps(l.distance[k], plan.inv_bin_f, plan.delay, l.ff[k]);
+            const DelayTaps t = delay_taps_f(l.distance[k], plan.inv_bin_f, plan.delay, l.ff[k]);
             near.links.push_back({std::uint32_t(plan.node_slot(l.source[k])), t.lag, t.w0, t.w1});
         }
         plan.segments[i * (S + 1)] = k;
@@ -518,9 +518,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.channels = channels;
     plan.C = illuminations * channels;
     plan.delay = options.delay;
-    plan.start_m = time.start_m();
-    plan.inv_bin = 1.0 / time.bin_width_m();
-    plan.inv_bin_f = float(plan.inv_bin);
+    plan.bin_map = time.bin_map();
+    plan.inv_bin_f = time.inv_bin_f();
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
     // Short blocks reach the sink together (kSinkBins): each hand-over passes over every patch (the

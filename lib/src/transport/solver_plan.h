@@ -29,26 +29,7 @@ namespace solver_detail {
 // Most values marched per patch and bin: the three colours of kMaxBatch illuminations.
 constexpr int kMaxLanes = 3 * kMaxBatch;
 
-// A link's delay as two taps: B_src[t - lag] * w0 + B_src[t - lag - 1] * w1. Nearest rounds the delay
-// to a whole bin; linear spreads a bin of the source (taken as uniform over the bin) over the two
-// bins it overlaps once shifted, so that the mean arrival time is exact and no energy is lost.
-struct Taps {
-    int lag;
-    float w0;
-    float w1;
-};
-
-// In single precision: it runs once per link and block in the hot loop. Delays stay below 2^24 bins, so
-// the fraction keeps at least a few thousandths of a bin.
-inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
-    const float d = distance * inv_bin;
-    if (mode == DelayMode::Nearest) return {int(d + 0.5f), ff, 0.0f};
-    const int lag = int(d);  // d >= 0: truncation is the floor
-    const float frac = d - float(lag);
-    return {lag, ff * (1.0f - frac), ff * frac};
-}
-
-// A grey link with its taps (link_taps), made once when the plan is, for the lists the march visits at
+// A grey link with its taps (delay_taps_f), made once when the plan is, for the lists the march visits at
 // every bin or block: the bin-by-bin pass's links shorter than a block (lag < block length; lag 0 keeps
 // only its w1 tap there, w0 is in the same-bin list), and the shortest window's (SolvePlan::near: lags
 // of one to two blocks), whose taps' arithmetic would otherwise sit between each link and its loads.
@@ -65,7 +46,7 @@ struct SameBinLink {
 };
 
 // A link through tinted mirrors or glass (Links::tint), between patches: its taps in each colour, ff x
-// tints[t][c] split as link_taps splits a grey link's. The long-pass kernels and the lists above keep
+// tints[t][c] split as delay_taps_f splits a grey link's. The long-pass kernels and the lists above keep
 // to grey links, whose one weight serves every lane; the few tinted ones have lists of their own.
 struct TintedLink {
     std::uint32_t source;  // long list: the source patch; bin-by-bin list: its position
@@ -221,8 +202,8 @@ struct SolvePlan {
     int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
     bool wide = false;              // a long-link kernel for AVX-512 runs (SolverOptions::wide_vectors)
-    double start_m = 0.0, inv_bin = 0.0;
-    float inv_bin_f = 0.0f;
+    BinMap bin_map;                 // the time axis's bins in metres (pulse_bin)
+    float inv_bin_f = 0.0f;         // its reciprocal bin width in float, as the kernels take it (delay_taps_f)
     LayerPlan layers;
     int L = 0;                      // layers
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
@@ -323,7 +304,7 @@ struct SolvePlan {
         return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(bt)))) - 1, windows - 1);
     }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
-    std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
+    std::int64_t pulse_bin(const Pulse& p) const { return bin_map.bin(p.path); }
 };
 
 /// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's

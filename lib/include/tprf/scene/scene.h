@@ -97,9 +97,6 @@ struct Object {
     std::string json_path;             ///< e.g. "objects[2]", for error messages; "" means objects[its index]
 };
 
-/// How a delay that falls between two bins is placed.
-enum class DelayMode { Nearest, Linear };
-
 /// The optional `solver` block.
 struct SolverSettings {
     int max_bounces = -1;               ///< >= 0, or -1: every bounce that arrives inside the window

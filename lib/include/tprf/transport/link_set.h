@@ -23,7 +23,7 @@ namespace tprf {
 
 class Visibility;
 
-/// Delay octaves: a link of delay d bins (floor of distance * inv_bin, in float, as the solver
+/// Delay octaves: a link of delay d bins (delay_bins_f: distance * inv_bin in float, as the solver
 /// computes it) is in octave 0 when d < 1, else 1 + floor(log2 d), at most kDelayOctaves - 1. The
 /// solver applies the links of octave k >= 1 in windows of 2^(k-1) bins, and every link of 32 bins
 /// or more (the last octave) in its longest window, so a row sorted by octave splits into one range
