@@ -2,6 +2,7 @@
 
 #include "arrays.h"
 #include "capture_outputs.h"
+#include "cubes.h"
 #include "staging.h"
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
@@ -143,25 +144,22 @@ struct Cubes {
     float* patch_cube = nullptr;
 };
 
-// Per-bounce terms asked for by `solver.bounces`: every order up to max_bounces, or orders 0..3 and
-// the tail of all later ones.
-int bounce_terms(const SolverSettings& s) { return s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0; }
-
 void open_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays, Cubes& c) {
-    const Camera& camera = *scene.camera;
-    const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
-    c.cube = arrays.open("transient", {H, W, T, 3});
-    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, c.cube, -1,
-                                             false, options.threads);
-    c.film->read_first_link_apart(t.first_link.get());
-    if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
-    const int terms = bounce_terms(scene.solver);
-    for (int k = 0; k < terms; ++k) {
-        float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
-        const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
-        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay,
-                                                               term, k, tail, options.threads, c.film->taps()));
-        c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
+    for (const RenderCube& cube : render_cubes(scene, t.patches.size(), options.patch_profiles)) {
+        float* data = arrays.open(cube.name, cube.shape);
+        if (cube.kind == RenderCube::Kind::Patches) {
+            c.patch_cube = data;
+        } else if (cube.kind == RenderCube::Kind::Transient) {
+            c.cube = data;
+            c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, data, -1,
+                                                     false, options.threads);
+            c.film->read_first_link_apart(t.first_link.get());
+        } else {  // after the transient cube: its film's taps serve every order's
+            c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time,
+                                                                   scene.solver.delay, data, cube.order, cube.tail,
+                                                                   options.threads, c.film->taps()));
+            c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
+        }
     }
 }
 
@@ -178,7 +176,7 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     SolverOptions solver_options;
     solver_options.delay = scene.solver.delay;
     solver_options.max_bounces = scene.solver.max_bounces;
-    solver_options.bounce_terms = bounce_terms(scene.solver);
+    solver_options.bounce_terms = bounce_cubes(scene.solver);
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
     const std::size_t N = t.patches.size(), T = std::size_t(scene.time.bins);
@@ -266,7 +264,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     r.time = scene.time;
     r.camera = scene.camera;
     r.solver = scene.solver;
-    r.bounce_terms = bounce_terms(scene.solver);
+    r.bounce_terms = bounce_cubes(scene.solver);
     r.stats = stats;
     r.seconds = report.seconds;
     if (scene.sensor) r.sensor = scene.sensor->exposure.type;

@@ -742,12 +742,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
 
 std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, const TimeAxis& time,
                                 const SolverOptions& options, int illuminations, int channels) {
-    TPRF_CHECK_LE(1, illuminations);
-    TPRF_CHECK_LE(illuminations, kMaxBatch);
-    TPRF_CHECK(channels == 1 || channels == 3);
-    TPRF_CHECK_EQ(set.patches(), patches.size());
-    check_tints(set.links);
-    return working_bytes(make_plan(patches, set, time, options, illuminations, channels, true));
+    return solve_sizing(patches, set, time, options, illuminations, channels).working_bytes;
 }
 
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
@@ -763,7 +758,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
     }
     check_tints(links);
     SolvePlan plan =
-        make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, links, batch) ? 1 : 3);
+        make_plan(patches, set, time, options, int(batch.size()), march_channels(keeps_grey(patches, links) && pulses_grey(batch)));
     TPRF_CHECK_LE(options.first_bin, 0);
     plan.first_emitted = options.first_bin;
     plan_blocks(plan, batch);

@@ -64,6 +64,13 @@ LayerPlan plan_layers(int max_bounces, int bounce_terms) {
     return plan;
 }
 
+// Layers that gather from links: all but those of the pulses alone.
+int fed_layers(const LayerPlan& plan) {
+    int fed = 0;
+    for (int l = 0; l < plan.layers(); ++l) fed += plan.source[std::size_t(l)] >= 0;
+    return fed;
+}
+
 // The links that have to be applied bin by bin (lag < bt), as lists by receiver patch; the tinted
 // ones (sized only when some link is tinted), long ones included.
 struct BinLinks {
@@ -219,20 +226,17 @@ void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, Window
 }
 
 // Dense rows (sources in tiles) whose lane count has packed kernels: the bits of a packed key's lag
-// (SolvePlan::lag_bits), or 0 where a source and a lag do not fit one word or a window of
+// (MarchShape::lag_bits), or 0 where a source and a lag do not fit one word or a window of
 // bt..kDenseLongestWindow bins has no packed kernel.
-int packed_lag_bits(const Links& links, const SolvePlan& plan, bool wide) {
+int packed_lag_bits(const MarchInputs& in, const MarchShape& s, bool wide) {
     // Flat sets only: a dense hierarchical set would lose its per-node rings (every packed ring is as
     // long as the longest).
-    if (plan.clusters || plan.source_tile >= plan.m || plan.bt > kDenseLongestWindow) return 0;
-    for (int bins = plan.bt; bins <= kDenseLongestWindow; bins *= 2)
-        if (!packed_kernel_for(plan.C, bins, wide)) return 0;
+    if (in.clusters || s.source_tile >= s.nodes || s.block_bins > kDenseLongestWindow) return 0;
+    for (int bins = s.block_bins; bins <= kDenseLongestWindow; bins *= 2)
+        if (!packed_kernel_for(s.lanes, bins, wide)) return 0;
     // A link's lag grows with its length: the longest link's is the largest.
-    float longest = 0.0f;
-    for (float d : links.distance) longest = std::max(longest, d);
-    const int max_lag = delay_taps_f(longest, plan.inv_bin_f, plan.delay, 1.0f).lag;
-    const int bits = std::max(1, int(std::bit_width(unsigned(max_lag))));
-    return bits < 32 && (std::uint64_t(plan.m) << bits) <= (std::uint64_t(1) << 32) ? bits : 0;
+    const int bits = std::max(1, int(std::bit_width(unsigned(in.longest_lag))));
+    return bits < 32 && (std::uint64_t(s.nodes) << bits) <= (std::uint64_t(1) << 32) ? bits : 0;
 }
 
 // plan.packed: the grey links of every row at least a block long (tinted ones have lists of their own,
@@ -277,16 +281,12 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
     });
 }
 
-// The long pass's windows and every row's range of links per window (SolvePlan::segments). Rows of a
+// Every row's range of links per window of the long pass (SolvePlan::segments). Rows of a
 // hierarchical set come sorted by delay octave, which for the linear delay orders them by window;
 // other rows are sorted here, into a copy, when more than one window is used. The kernels read grey
 // links only: a set with tinted links is copied without them. Dense rows of a flat set are packed
 // instead (pack_links), where packed kernels serve their lanes; `fill`: with their links, not only counted.
 void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
-    plan.lag_bits = packed_lag_bits(links, plan, wide);
-    plan.acc_bins = std::max(plan.bt, plan.packs() ? kDenseLongestWindow : kLongestWindow);
-    plan.windows = 1 + std::countr_zero(unsigned(plan.acc_bins / plan.bt));
-    TPRF_CHECK_LE(plan.windows, kMaxWindows);
     plan.links = &links;
     const std::size_t S = std::size_t(plan.windows);
     plan.segments.assign(plan.m * (S + 1), 0);
@@ -477,16 +477,16 @@ void plan_rings(SolvePlan& plan) {
             longest = std::max(longest, plan.send_lag[k]);
             window = std::max(window, plan.send_window[k]);
         }
-        plan.ring = int(std::bit_ceil(unsigned(longest + plan.bt + 2)));
-        const int mirror = window > 0 ? window + 1 : 0;
+        plan.ring = ring_bins(longest, plan.bt);
+        const int mirror = ring_mirror_bins(window);
         plan.packed_ring = std::size_t(plan.ring + mirror) * std::size_t(plan.C);
         for (std::size_t k = 0; k < plan.m; ++k) plan.slots[k] = {k * plan.packed_ring, plan.ring - 1, plan.ring, mirror};
         plan.ring_floats = plan.m * plan.packed_ring;
     } else
         for (std::size_t at = 0; at < plan.m; ++at) {
             const std::size_t k = at < plan.n ? plan.order[at] : at;
-            const int length = int(std::bit_ceil(unsigned(plan.send_lag[k] + plan.bt + 2)));
-            const int mirror = plan.send_window[k] > 0 ? plan.send_window[k] + 1 : 0;
+            const int length = ring_bins(plan.send_lag[k], plan.bt);
+            const int mirror = ring_mirror_bins(plan.send_window[k]);
             plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
             plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
             plan.ring = std::max(plan.ring, length);
@@ -497,40 +497,60 @@ void plan_rings(SolvePlan& plan) {
 
 }  // namespace
 
+namespace {
+
+// The sizes of what a plan of this march is given (MarchInputs).
+MarchInputs plan_inputs(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
+                        int illuminations, int channels) {
+    MarchInputs in;
+    in.patches = patches.size();
+    in.nodes = set.nodes();
+    in.links = set.links.size();
+    in.clusters = set.tree.clusters() > 0;
+    in.cluster_block_bins = set.block_bins;
+    // A link's lag grows with its length: the longest link's is the largest.
+    float longest = 0.0f;
+    for (float d : set.links.distance) longest = std::max(longest, d);
+    in.longest_lag = delay_taps_f(longest, time.inv_bin_f(), options.delay, 1.0f).lag;
+    in.illuminations = illuminations;
+    in.channels = channels;
+    return in;
+}
+
+}  // namespace
+
 // The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
-// first block (plan_blocks moves the start to the batch's earliest pulse).
+// first block (plan_blocks moves the start to the batch's earliest pulse): the shape that march_shape
+// decides, then the lists.
 SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
                     int illuminations, int channels, bool sizing_only) {
     const Links& links = set.links;
+    const MarchShape shape = march_shape(plan_inputs(patches, set, time, options, illuminations, channels), options);
     SolvePlan plan;
-    plan.n = patches.size();
-    plan.m = set.nodes();
+    plan.n = shape.patches;
+    plan.m = shape.nodes;
     plan.tree = &set.tree;
     plan.clusters = set.tree.clusters() > 0;
-    plan.threads = thread_count(options.threads);
+    plan.threads = shape.threads;
     if (plan.clusters) cut_subtrees(set.tree, plan);
-    if (links.size() < kDenseRow * plan.m) plan.source_tile = std::max<std::size_t>(plan.m, 1);
-    plan.bt = int(std::bit_ceil(unsigned(std::clamp(options.block_bins, 1, 4096))));
-    // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
-    if (plan.clusters && set.block_bins > 0)
-        while (plan.bt > 1 && plan.bt > set.block_bins) plan.bt /= 2;
-    plan.K = illuminations;
-    plan.channels = channels;
-    plan.C = illuminations * channels;
+    plan.source_tile = shape.source_tile;
+    plan.bt = shape.block_bins;
+    plan.K = shape.illuminations;
+    plan.channels = shape.channels;
+    plan.C = shape.lanes;
     plan.delay = options.delay;
     plan.bin_map = time.bin_map();
     plan.inv_bin_f = time.inv_bin_f();
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
     plan.L = plan.layers.layers();
-    // Short blocks reach the sink together (kSinkBins): each hand-over passes over every patch (the
-    // spots, the sink's own copy); for the statue's 57k patches in blocks of two bins the output's work
-    // fell from 4.0% to 2.7% of the render's CPU.
-    const std::size_t out_per_bin = (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.K) * 3 * sizeof(float);
-    while (plan.emit_bins() * 2 <= kSinkBins && out_per_bin * std::size_t(plan.emit_bins() * 2) <= kSinkBytes)
-        plan.emit_blocks *= 2;
+    plan.fed_layers = shape.layers.fed;
+    plan.emit_blocks = shape.emit_blocks;
+    plan.lag_bits = shape.lag_bits;
+    plan.acc_bins = shape.window_bins;
+    plan.windows = shape.windows;
+    plan.recent_bins = shape.recent_bins;
     const bool wide = options.wide_vectors && cpu_has_wide_kernels();
     plan_windows(links, plan, wide, !sizing_only);
-    plan.recent_bins = int(std::bit_ceil(unsigned(plan.bt + 1)));
     split_links(patches, links, plan);
     split_positions(plan);
     plan_sweeps(patches, plan);
@@ -538,13 +558,10 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan_rings(plan);
     plan.T = time.bins;
     plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
-    for (int l = 0; l < plan.L; ++l) plan.fed_layers += plan.layers.source[std::size_t(l)] >= 0;
-    // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
-    // shortest window's links read.
-    // Packed links have kernels for every window, the shortest's included (which reads the rings).
-    if (!plan.packs() && plan.windows > 1 && plan.recent_bins >= 2 * plan.bt)
+    if (shape.near_list) {
         plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
-    if (plan.recent_kernel) copy_near_links(plan);
+        copy_near_links(plan);
+    }
     bool any_kernel = plan.recent_kernel != nullptr || plan.packs();
     for (int s = 0; s < plan.windows && !plan.packs(); ++s) {
         plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), wide);
@@ -568,37 +585,177 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
     plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
 }
 
-// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
-std::size_t working_bytes(const SolvePlan& p) {
-    const std::size_t L = std::size_t(p.L), C = std::size_t(p.C), bt = std::size_t(p.bt);
-    const std::size_t state = L * p.n * C;  // per patch and lane: m_base
-    // Per row of the same-bin system: the iterates and the last two bins' shares.
-    const std::size_t sweeps = p.same_bin() ? std::size_t(p.sweep_buffers() + 2) * L * p.sweep_rows.size() * C : 0;
-    const std::size_t floats = L * p.ring_floats + L * p.n * bt * C + L * p.acc_values() +
-                               L * std::size_t(p.recent_bins) * p.m * C + state + sweeps +
-                               (p.emit_blocks > 1 ? 2 : 1) * (1 + std::size_t(p.layers.terms)) * p.n *
-                                   std::size_t(p.emit_bins()) * std::size_t(p.K) * 3 +
-                               std::size_t(p.threads) * p.tile_sum_floats();
-    return floats * sizeof(float) + p.short_links.size() * sizeof(TapLink) +
-           p.same_links.size() * sizeof(SameBinLink) + (p.short_row.size() + p.same_row.size()) * sizeof(std::uint64_t) +
-           p.sweep_rows.size() * sizeof(std::uint32_t) + p.sweep_row_of.size() * sizeof(std::int32_t) +
-           p.slots.size() * sizeof(RingSlot) + p.segments.size() * sizeof(std::uint64_t) + p.sorted.bytes() + p.near.bytes() +
-           p.packed_count * sizeof(PackedLink) +
-           p.albedo.size() * sizeof(float) + (p.tinted_long.size() + p.tinted_short.size()) * sizeof(TintedLink) +
-           p.tinted_same.size() * sizeof(TintedSameLink) +
-           (p.tinted_long_row.size() + p.tinted_short_row.size() + p.tinted_same_row.size()) * sizeof(std::uint64_t);
+namespace {
+
+// The shape the plan was made in (march_shape decided it).
+MarchShape shape_of(const SolvePlan& p) {
+    MarchShape s;
+    s.patches = p.n;
+    s.nodes = p.m;
+    s.threads = p.threads;
+    s.illuminations = p.K;
+    s.channels = p.channels;
+    s.lanes = p.C;
+    s.layers = {p.L, p.layers.terms, p.fed_layers};
+    s.block_bins = p.bt;
+    s.emit_blocks = p.emit_blocks;
+    s.source_tile = p.source_tile;
+    s.lag_bits = p.lag_bits;
+    s.windows = p.windows;
+    s.window_bins = p.acc_bins;
+    s.recent_bins = p.recent_bins;
+    s.near_list = p.recent_kernel != nullptr;
+    s.tile_sum_floats = p.tile_sum_floats();
+    return s;
 }
 
-bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch) {
-    auto grey = [](const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; };
-    for (const Rgb& a : patches.albedo)
-        if (!grey(a)) return false;
-    for (std::uint16_t t : links.tint)
-        if (!(links.tints[t][0] == links.tints[t][1] && links.tints[t][1] == links.tints[t][2])) return false;
+// The lengths of the plan's lists and rings.
+MarchLists lists_of(const SolvePlan& p) {
+    MarchLists l;
+    l.ring_bins = p.ring_floats / std::size_t(p.C);
+    l.short_links = p.short_links.size();
+    l.same_bin_links = p.same_links.size();
+    l.sweep_rows = p.sweep_rows.size();
+    l.chebyshev = p.sweep_buffers() == 3;
+    l.sorted = !p.sorted.row.empty();
+    l.sorted_links = p.sorted.size();
+    l.near_links = p.near.links.size();
+    l.packed_links = p.packed_count;
+    l.tinted = !p.tinted_long_row.empty();
+    l.tinted_long = p.tinted_long.size();
+    l.tinted_short = p.tinted_short.size();
+    l.tinted_same = p.tinted_same.size();
+    return l;
+}
+
+}  // namespace
+
+// Bytes of the ring buffers, block buffers and lists of a march on this plan.
+std::size_t working_bytes(const SolvePlan& p) { return march_working_bytes(shape_of(p), lists_of(p)); }
+
+bool pulses_grey(std::span<const Illumination* const> batch) {
     for (const Illumination* illumination : batch)
         for (const Pulse& p : illumination->pulses)
-            if (!grey(p.energy)) return false;
+            if (!is_grey(p.energy)) return false;
     return true;
 }
 
 }  // namespace tprf::solver_detail
+
+namespace tprf {
+
+MarchLayers march_layers(const SolverOptions& options) {
+    const solver_detail::LayerPlan plan = solver_detail::plan_layers(options.max_bounces, options.bounce_terms);
+    return {plan.layers(), plan.terms, solver_detail::fed_layers(plan)};
+}
+
+bool keeps_grey(const PatchSet& patches, const Links& links) {
+    for (const Rgb& a : patches.albedo)
+        if (!is_grey(a)) return false;
+    for (std::uint16_t t : links.tint)
+        if (!(links.tints[t][0] == links.tints[t][1] && links.tints[t][1] == links.tints[t][2])) return false;
+    return true;
+}
+
+bool scene_keeps_grey(const Scene& scene) {
+    for (const Object& o : scene.objects)
+        if (!is_grey(o.albedo) || !is_grey(o.emission) || !is_grey(o.material.reflectance)) return false;
+    for (const Light& l : scene.lights) {
+        if (const auto* p = std::get_if<PointLight>(&l); p && !is_grey(p->intensity)) return false;
+        if (const auto* p = std::get_if<Laser>(&l); p && !is_grey(p->power)) return false;
+    }
+    return !scene.capture || is_grey(scene.capture->laser_power);
+}
+
+MarchShape march_shape(const MarchInputs& in, const SolverOptions& options) {
+    using namespace solver_detail;
+    MarchShape s;
+    s.patches = in.patches;
+    s.nodes = in.nodes;
+    s.threads = thread_count(options.threads);
+    s.illuminations = in.illuminations;
+    s.channels = in.channels;
+    s.lanes = in.illuminations * in.channels;
+    s.layers = march_layers(options);
+    // Sources in tiles where the rows are dense.
+    s.source_tile = in.links < kDenseRow * in.nodes ? std::max<std::size_t>(in.nodes, 1) : kSourceTile;
+    s.block_bins = march_block_bins(options, in.clusters ? in.cluster_block_bins : 0);
+    // Short blocks reach the sink together (kSinkBins): each hand-over passes over every patch (the
+    // spots, the sink's own copy); for the statue's 57k patches in blocks of two bins the output's work
+    // fell from 4.0% to 2.7% of the render's CPU.
+    const std::size_t out_per_bin =
+        (1 + std::size_t(s.layers.terms)) * s.patches * std::size_t(s.illuminations) * 3 * sizeof(float);
+    while (s.block_bins * s.emit_blocks * 2 <= kSinkBins &&
+           out_per_bin * std::size_t(s.block_bins * s.emit_blocks * 2) <= kSinkBytes)
+        s.emit_blocks *= 2;
+    const bool wide = options.wide_vectors && cpu_has_wide_kernels();
+    s.lag_bits = packed_lag_bits(in, s, wide);
+    s.window_bins = std::max(s.block_bins, s.lag_bits > 0 ? kDenseLongestWindow : kLongestWindow);
+    s.windows = 1 + std::countr_zero(unsigned(s.window_bins / s.block_bins));
+    TPRF_CHECK_LE(s.windows, kMaxWindows);
+    s.recent_bins = int(std::bit_ceil(unsigned(s.block_bins + 1)));
+    // The recent bins hold the last 2 bt bins before a block (bit_ceil(bt + 1) = 2 bt), all that the
+    // shortest window's links read. Packed links have kernels for every window, the shortest's included
+    // (which reads the rings).
+    s.near_list = s.lag_bits == 0 && s.windows > 1 && s.recent_bins >= 2 * s.block_bins &&
+                  recent_kernel_for(s.lanes, s.block_bins, wide) != nullptr;
+    s.tile_sum_floats = receiver_tile_floats(s.source_tile, s.nodes, s.window_bins, s.lanes);
+    return s;
+}
+
+std::size_t march_working_bytes(const MarchShape& s, const MarchLists& l) {
+    using namespace solver_detail;
+    const std::size_t L = std::size_t(s.layers.layers), C = std::size_t(s.lanes), bt = std::size_t(s.block_bins);
+    const std::size_t n = s.patches, m = s.nodes;
+    const bool same_bin = l.same_bin_links > 0 || l.tinted_same > 0;
+    // Per row of the same-bin system: the iterates and the last two bins' shares.
+    const std::size_t sweeps = same_bin ? std::size_t(l.chebyshev ? 5 : 4) * L * l.sweep_rows * C : 0;
+    const std::size_t emit_bins = bt * std::size_t(s.emit_blocks);
+    const std::size_t floats = L * l.ring_bins * C + L * n * bt * C + L * m * std::size_t(s.window_bins) * C +
+                               L * std::size_t(s.recent_bins) * m * C + L * n * C + sweeps +
+                               (s.emit_blocks > 1 ? 2 : 1) * (1 + std::size_t(s.layers.terms)) * n * emit_bins *
+                                   std::size_t(s.illuminations) * 3 +
+                               std::size_t(s.threads) * s.tile_sum_floats;
+    // Rows: the bin-by-bin links' by position; the same-bin links' by row of their system (or by
+    // position without one); the tinted lists' likewise.
+    const std::size_t same_rows = same_bin ? l.sweep_rows + 1 : n + 1;
+    const std::size_t rows = (n + 1) + same_rows + (l.tinted ? 2 * (n + 1) + same_rows : 0) +
+                             m * std::size_t(s.windows + 1) + (l.sorted ? m + 1 : 0) + (s.near_list ? m + 1 : 0);
+    const std::size_t grey_link = sizeof(std::uint32_t) + 2 * sizeof(float);  // Links: source, ff, distance
+    return floats * sizeof(float) + rows * sizeof(std::uint64_t) + (l.short_links + l.near_links) * sizeof(TapLink) +
+           l.same_bin_links * sizeof(SameBinLink) + l.sweep_rows * sizeof(std::uint32_t) + n * sizeof(std::int32_t) +
+           m * sizeof(RingSlot) + l.sorted_links * grey_link + l.packed_links * sizeof(PackedLink) +
+           n * C * sizeof(float) + (l.tinted_long + l.tinted_short) * sizeof(TintedLink) +
+           l.tinted_same * sizeof(TintedSameLink);
+}
+
+MarchSizing solve_sizing(const PatchSet& patches, const LinkSet& set, const TimeAxis& time,
+                         const SolverOptions& options, int illuminations, int channels) {
+    using namespace solver_detail;
+    TPRF_CHECK_LE(1, illuminations);
+    TPRF_CHECK_LE(illuminations, kMaxBatch);
+    TPRF_CHECK(channels == 1 || channels == 3);
+    TPRF_CHECK_EQ(set.patches(), patches.size());
+    check_tints(set.links);
+    MarchSizing out;
+    out.inputs = plan_inputs(patches, set, time, options, illuminations, channels);
+    const SolvePlan plan = make_plan(patches, set, time, options, illuminations, channels, true);
+    out.shape = shape_of(plan);
+    out.lists = lists_of(plan);
+    out.working_bytes = march_working_bytes(out.shape, out.lists);
+    return out;
+}
+
+int march_block_bins(const SolverOptions& options, int cluster_block_bins) {
+    int bt = int(std::bit_ceil(unsigned(std::clamp(options.block_bins, 1, 4096))));
+    // Blocks no longer than the shortest cluster link, so that no cluster link has to be expanded.
+    if (cluster_block_bins > 0)
+        while (bt > 1 && bt > cluster_block_bins) bt /= 2;
+    return bt;
+}
+
+int ring_bins(int lag, int block_bins) { return int(std::bit_ceil(unsigned(lag + block_bins + 2))); }
+
+int ring_mirror_bins(int window_bins) { return window_bins > 0 ? window_bins + 1 : 0; }
+
+}  // namespace tprf

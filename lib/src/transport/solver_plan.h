@@ -149,6 +149,12 @@ constexpr std::size_t kDenseRow = 256;
 // source tile's rings. Three lanes in windows of 32 bins take 96 KiB; a batch of 48 lanes would take
 // 1.5 MiB, where they measured no faster than adding into the accumulators (bench/RESULTS.md).
 constexpr std::size_t kTileSumBytes = std::size_t(512) << 10;
+// Floats of a thread's receiver-tile sums: a tile's receivers x the longest window x lanes, where the
+// sources are tiled (fewer a tile than the nodes) and that fits in kTileSumBytes; else none.
+inline std::size_t receiver_tile_floats(std::size_t source_tile, std::size_t nodes, int window_bins, int lanes) {
+    const std::size_t floats = std::min(nodes, kReceiverTile) * std::size_t(window_bins) * std::size_t(lanes);
+    return source_tile < nodes && floats * sizeof(float) <= kTileSumBytes ? floats : 0;
+}
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
@@ -286,10 +292,7 @@ struct SolvePlan {
     // Floats of a thread's receiver-tile sums in the long pass: a tile's receivers x the longest window
     // x lanes, where the sources are tiled (dense rows) and that fits in kTileSumBytes; none otherwise
     // (the kernels then add into the accumulators directly).
-    std::size_t tile_sum_floats() const {
-        const std::size_t floats = std::min(m, kReceiverTile) * std::size_t(acc_bins) * std::size_t(C);
-        return source_tile < m && floats * sizeof(float) <= kTileSumBytes ? floats : 0;
-    }
+    std::size_t tile_sum_floats() const { return receiver_tile_floats(source_tile, m, acc_bins, C); }
     // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
     // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
     // shortest window read (a few bins of near nodes together), besides the rings.
@@ -316,8 +319,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
 void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch);
 /// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
 std::size_t working_bytes(const SolvePlan& p);
-/// Whether the march can run on one channel: every albedo, link tint and pulse grey.
-bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch);
+/// Whether every pulse of the batch is grey (with keeps_grey: the march runs on one channel).
+bool pulses_grey(std::span<const Illumination* const> batch);
 
 /// Whether this build has the kernels compiled for AVX-512 (512-bit vectors) and this CPU runs them.
 bool cpu_has_wide_kernels();

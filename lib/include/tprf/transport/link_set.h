@@ -134,4 +134,15 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
                       double bin_width_m, const LinkOptions& options = {}, HierarchyStats* stats = nullptr,
                       LinkStats* flat_stats = nullptr);
 
+/// What the link stage holds per item while it builds, bytes (the sizes of its records), for sizing a
+/// build without running it (tprf info).
+struct LinkBuildSizes {
+    std::size_t flat_pair = 0;          ///< a facing pair (both links) in the flat builder's lists
+    std::size_t hierarchical_pair = 0;  ///< a pair of links (both directions) in the hierarchical builder's records
+    std::size_t oracle_node = 0;        ///< a node's points stored for the hierarchical oracle
+    std::size_t spread_link = 0;        ///< a spread link's piece in its row's list (spread_patch_links)
+    std::size_t mirror_link = 0;        ///< a link through mirrors in its pair list and its row's rebuilt copy
+};
+LinkBuildSizes link_build_sizes(const HierarchyOptions& options = {});
+
 }  // namespace tprf
