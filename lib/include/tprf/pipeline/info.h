@@ -70,6 +70,7 @@ struct ResourceEstimate {
     std::size_t links = 0;               ///< estimated links (flat: facing pairs, both directions)
     std::size_t near_links = 0;          ///< hierarchical: facing patch pairs nearer than its shortest cluster link
     double near_gap_m = 0.0;             ///< hierarchical: that distance, metres
+    std::size_t mirror_links = 0;        ///< of `links`, those through mirrors and glass
     double facing_fraction = 0.0;        ///< share of sampled patch pairs that face each other
     int channels = 3;                    ///< 1 for a grey scene
     int ring_bins = 0;                   ///< history per node and layer
