@@ -98,7 +98,7 @@ constexpr double kGB = 1e9;
 
 // Memory, bytes.
 // The process before any stage: code, libraries, threads.
-constexpr double kBaseBytes = 16 * kMB;  // tprf_base: peak_bytes
+constexpr double kBaseBytes = 16 * kMB;  // tprf_tiny_render: peak_bytes
 // A mesh file while it is loaded and triangulated, per face.
 constexpr double kMeshBytesPerFace = 150;  // BM_LoadBinaryStl: bytes_per_face
 // Embree's quads and BVH (RTC_BUILD_QUALITY_HIGH) at its peak, per patch.
@@ -160,8 +160,8 @@ constexpr double kShortLinkBinSeconds = 1.0 / 1e9;  // BM_MeshSceneSolve/wide:0:
 constexpr double kHierarchicalPatchBinSeconds = 5e-7;  // BM_MeshSceneSolve/wide:0: seconds_per_patch_bin
 // A march of B lanes costs 1 + (B - 1) x this many single marches.
 constexpr double kBatchLaneCost = 1.0 / 15.0;  // BM_TransientSolveBatch/K:16/grey:1: extra_cost_per_lane
-// The images and render.json.
-constexpr double kWriteSeconds = 0.2;  // BM_WriteImages: seconds
+// The write phase's own work besides the cubes: the images, render.json, moving the files in place.
+constexpr double kWriteSeconds = 0.2;  // tprf_tiny_render: write_seconds
 // Writing back the memory-mapped cubes.
 constexpr double kCubeBytesPerSecond = 0.7e9;  // BM_WriteCube: bytes_per_s
 // links.spread_pieces, per link spread.
@@ -439,6 +439,7 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
 // by the solver's own rule (march_shape), the lengths of its lists from the sampled pairs, its working
 // bytes by the solver's own sum (march_working_bytes). The largest delay is the scene's diagonal.
 struct MarchEstimate {
+    MarchInputs inputs;
     MarchShape shape;
     std::size_t working_bytes = 0;
     int max_lag = 0;  // bins
@@ -459,6 +460,7 @@ MarchEstimate estimate_march(const Scene& scene, const PatchCensus& census, cons
     in.longest_lag = m.max_lag;
     in.illuminations = illuminations;
     in.channels = e.channels;
+    m.inputs = in;
     m.shape = march_shape(in, options);
     const MarchShape& s = m.shape;
     const bool packed = s.lag_bits > 0, tinted = tinted_mirrors(scene);
@@ -482,13 +484,15 @@ MarchEstimate estimate_march(const Scene& scene, const PatchCensus& census, cons
     return m;
 }
 
-// The march and the films' kept profiles; the seconds of the solve. Returns the bytes that one more
-// illumination of a batch adds to the march (a capture's, which marches its laser points in batches).
-double estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares,
-                       const SolverOptions& options, ResourceEstimate& e) {
+// The march and the films' kept profiles; the seconds of the solve. Returns the march's inputs for one
+// illumination and the bytes that one more illumination of a batch adds (a capture's, which marches
+// its laser points in batches).
+std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares,
+                                               const SolverOptions& options, ResourceEstimate& e) {
     e.channels = march_channels(scene_keeps_grey(scene));
     const MarchEstimate one = estimate_march(scene, census, shares, e, options, 1);
     const MarchShape& s = one.shape;
+    e.march = s;
     e.layers = s.layers.layers;
     e.ring_bins = ring_bins(one.max_lag, s.block_bins);
     // The films' kept profiles (film_buffer_bytes); a film that reads the second bounce apart keeps it in
@@ -502,9 +506,9 @@ double estimate_solver(const Scene& scene, const PatchCensus& census, const Pair
     // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
     if (scene.links.method == LinkMethod::Hierarchical)
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * double(census.patches) * scene.time.bins);
-    if (!scene.capture || scene.camera) return 0.0;
+    if (!scene.capture || scene.camera) return {one.inputs, 0.0};
     const MarchEstimate all = estimate_march(scene, census, shares, e, options, kMaxBatch);
-    return std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1);
+    return {one.inputs, std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1)};
 }
 
 // The memory-mapped cubes the solve fills (render_cubes: the transient cube, per-bounce cubes, patch
@@ -514,8 +518,10 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
     const double n = double(census.patches);
     double cube = 0.0, image = 0.0, measurements = 0.0;
     if (scene.camera) {
-        for (const RenderCube& c : render_cubes(scene, census.patches, patch_profiles))
+        for (const RenderCube& c : render_cubes(scene, census.patches, patch_profiles)) {
             cube += double(c.floats()) * sizeof(float) * (c.kind == RenderCube::Kind::Patches ? 1.0 : e.lit_pixels);
+            e.cubes.push_back({c.name, c.shape});
+        }
         const double pixels = double(scene.camera->width) * double(scene.camera->height);
         image = 4.0 * pixels * 3 * 4;  // the steady image, its preview and the writers' copies
         if (scene.sensor) measurements = pixels * (measurement_count(*scene.sensor, scene.time) * 3 + 1) * 4;
@@ -669,9 +675,14 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     estimate_links(marched, census, shares, e);
     estimate_mirror_links(marched, census, e);
     estimate_camera(scene, census, shares, e);
-    const double per_illumination = estimate_solver(marched, census, shares, solver, e);
+    const auto [march, per_illumination] = estimate_solver(marched, census, shares, solver, e);
     estimate_outputs(scene, census, patch_profiles, e);
     estimate_capture(scene, options, per_illumination, e);
+    if (e.capture_batch > 1) {
+        MarchInputs batch = march;
+        batch.illuminations = e.capture_batch;
+        e.march = march_shape(batch, solver);
+    }
     sum_peak(e);
     // The throughputs are for 2 threads; every stage but loading the meshes runs in parallel.
     const double scale = 2.0 / double(thread_count(options.threads));

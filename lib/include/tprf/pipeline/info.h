@@ -7,6 +7,7 @@
 #include "tprf/io/json_records.h"
 #include "tprf/scene/parse_mitsuba.h"
 #include "tprf/scene/scene.h"
+#include "tprf/transport/solver.h"
 
 #include <cstdint>
 #include <string>
@@ -58,6 +59,12 @@ std::string describe(const MeshReport& mesh);
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
 
+/// An array the solve fills, as a camera render opens it: its name (the .npy file's stem) and shape.
+struct CubeShape {
+    std::string name;
+    std::vector<std::size_t> shape;
+};
+
 /// What a render will cost, estimated from the scene alone before anything heavy runs: patches are
 /// counted by build_patches' rules (mesh files are loaded to count their triangles), links are
 /// modelled, nothing is built. Bytes are what each stage holds once it has run (the builders' scratch
@@ -75,6 +82,10 @@ struct ResourceEstimate {
     int channels = 3;                    ///< 1 for a grey scene
     int ring_bins = 0;                   ///< history per node and layer
     int layers = 1;                      ///< solver layers (bounce orders kept apart)
+    /// The march as the solver would plan it (march_shape) from the estimated sizes: a camera render's
+    /// one illumination, or a capture's batch of capture_batch.
+    MarchShape march;
+    std::vector<CubeShape> cubes;        ///< the cubes a camera render fills (and their shapes)
     double lit_pixels = 1.0;             ///< share of pixels that see an object (occlusion left out)
     std::size_t samples = 0;             ///< camera samples that meet the scene (lit pixels x spp)
 
