@@ -229,7 +229,7 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                 const std::size_t stride = tiled ? std::size_t(p.C) : p.acc_stride();
                 // The shortest window's links, from their own list, with the first source tile.
                 if (p.recent_kernel && s0 == 0)
-                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0, p.C, a, stride);
+                    p.recent_kernel({&p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0, p.C, a, stride});
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
@@ -240,17 +240,18 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).
                         if (p.packed[cursor[i - i0][d]].key >= key_end) continue;
-                        p.packed_kernel[s](p.packed.data(), cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
-                                           p.packed_ring, p.ring - 1, b0, a, stride);
-                    } else if (p.kernel[s])
-                        p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                    p.slots.data(), b0, a, stride);
+                        p.packed_kernel[s]({p.packed.data(), &cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
+                                            p.packed_ring, p.ring - 1, b0, a, stride});
+                        continue;
+                    }
+                    const LongCall call{&m_links, &cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
+                                        p.slots.data(), b0, p.C, p.window_bins(s), a, stride};
+                    if (p.kernel[s])
+                        p.kernel[s](call);
                     else if (p.lane_kernel[s])
-                        p.lane_kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                         p.slots.data(), b0, p.C, a, stride);
+                        p.lane_kernel[s](call);
                     else
-                        gather_long_any(m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                        p.slots.data(), b0, p.C, p.window_bins(s), a, stride);
+                        gather_long_any(call);
                 }
             }
         }

@@ -99,11 +99,42 @@ struct PackedLink {
     float w0;
     float w1;
 };
-using PackedKernel = void (*)(const PackedLink*, std::uint64_t&, std::uint64_t, std::uint64_t, int, const float*,
-                              std::size_t, int, std::int64_t, float*, std::size_t);
 
-using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                              const float*, const RingSlot*, std::int64_t, float*, std::size_t);
+// One call of a long-link kernel (GatherKernel, LaneKernel, gather_long_any): one receiver's links of one
+// window, from `cursor` on while their sources lie in the source tile, applied to the block.
+struct LongCall {
+    const Links* links;        // the grey links, by receiver (SolvePlan::links)
+    std::uint64_t* cursor;     // in: the receiver's next link of the window; out: past the tile's last
+    std::uint64_t end;         // the end of the receiver's links of the window
+    std::uint32_t source_end;  // the source tile's end
+    float inv_bin;             // SolvePlan::inv_bin_f, for delay_taps_f
+    DelayMode mode;            // SolvePlan::delay
+    const float* ring;         // the rings of the layer gathered from
+    const RingSlot* slots;     // every node's ring in them (SolvePlan::slots)
+    std::int64_t b0;           // the block's first bin
+    int lanes;                 // C (LaneKernel and gather_long_any; a GatherKernel is compiled for its own)
+    int bins;                  // the window's bins (gather_long_any; the others are compiled for theirs)
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+
+// One call of a packed kernel (PackedKernel): one receiver's packed links of one window in one source tile.
+struct PackedCall {
+    const PackedLink* links;   // SolvePlan::packed
+    std::uint64_t* cursor;     // in: the receiver's next link of the window; out: past the tile's last
+    std::uint64_t end;         // the end of the receiver's links of the window
+    std::uint64_t key_end;     // the source tile's end as a key (source << lag_bits)
+    int lag_bits;              // SolvePlan::lag_bits
+    const float* ring;         // the rings of the layer gathered from, `ring_floats` each
+    std::size_t ring_floats;   // SolvePlan::packed_ring
+    int mask;                  // bins of a ring less one (before its mirror)
+    std::int64_t b0;           // the block's first bin
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+
+using PackedKernel = void (*)(const PackedCall&);
+using GatherKernel = void (*)(const LongCall&);
 // Where the shortest window's links read their sources' history: the recent bins, bin-major by node slot
 // (SolvePlan::recent_at), `slice` floats a bin, `mask` = recent_bins - 1.
 struct RecentView {
@@ -118,10 +149,19 @@ struct NearLinks {
     std::vector<TapLink> links;
     std::size_t bytes() const { return row.size() * sizeof(std::uint64_t) + links.size() * sizeof(TapLink); }
 };
-using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, const RecentView&, std::int64_t, int,
-                              float*, std::size_t);
-using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                            const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
+// One call of the shortest window's kernel (RecentKernel): one receiver's near links.
+struct RecentCall {
+    const NearLinks* near;     // SolvePlan::near
+    std::uint64_t first;       // the receiver's links: near->links[first, last)
+    std::uint64_t last;
+    RecentView recent;         // the recent bins of the layer gathered from
+    std::int64_t b0;           // the block's first bin
+    int lanes;                 // C (a kernel compiled for a lane count ignores it)
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+using RecentKernel = void (*)(const RecentCall&);
+using LaneKernel = void (*)(const LongCall&);
 
 // Calls fn with the lane count C as a std::integral_constant where the bin-by-bin passes are
 // specialised for it (as pick_kernel), else with 0: lanes counted at run time.
@@ -337,9 +377,7 @@ RecentKernel recent_kernel_for(int C, int bins, bool wide);
 /// one does not depend on `wide`, and the wide one gives the same bits.
 PackedKernel packed_kernel_for(int C, int bins, bool wide);
 /// Any lane count and window length, summed straight into the accumulators.
-void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
-                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
-                     int bins, float* acc, std::size_t stride);
+void gather_long_any(const LongCall& call);
 
 }  // namespace solver_detail
 }  // namespace tprf
