@@ -9,7 +9,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/io/npy.h"
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
 #include "tprf/transport/link_set.h"
@@ -205,7 +205,7 @@ void BM_SecondBounceLight(benchmark::State& state) {
     double seconds = 0.0;
     for (auto _ : state) {
         const auto t0 = std::chrono::steady_clock::now();
-        const auto light = tprf::make_first_link_light(c.patches, c.links, c.emission, c.scene.time,
+        const auto light = tprf::make_second_bounce_light(c.patches, c.links, c.emission, c.scene.time,
                                                        c.scene.solver.delay, -1, false, kThreads);
         seconds = seconds_since(t0);
         benchmark::DoNotOptimize(light.get());

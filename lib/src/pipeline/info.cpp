@@ -150,7 +150,7 @@ constexpr double kSampleSeconds = 2e-6;  // BM_PrepareCamera/96/0: seconds_per_s
 // The film: one tap applied to one bin.
 constexpr double kTapBinSeconds = 1.0 / 1.5e9;  // BM_FilmBlock/96/0: seconds_per_tap_bin
 // camera.shift_second_bounce: the second bounce from the links, its shift and its own taps, per link.
-constexpr double kFirstLinkSecondsPerLink = 5e-8;  // BM_SecondBounceLight: seconds_per_link
+constexpr double kSecondBounceSecondsPerLink = 5e-8;  // BM_SecondBounceLight: seconds_per_link
 // The solve's link-bin updates, flat sets, with the kernels every x86-64-v3 machine runs (AVX2).
 constexpr double kGreyLinkBinSeconds = 1.0 / 13e9;  // BM_TransientSolveGrey/wide:0: seconds_per_link_bin
 constexpr double kColourLinkBinSeconds = 1.0 / 7.5e9;  // BM_TransientSolve/wide:0: seconds_per_link_bin
@@ -174,7 +174,7 @@ constexpr double kMirrorPairsPerSecond = 1.0e6;  // BM_MirrorLinks: pairs_per_s
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
 
-// Whether the camera reads the second bounce at its samples' times (render.cpp, make_first_link_light):
+// Whether the camera reads the second bounce at its samples' times (render.cpp, make_second_bounce_light):
 // no mirror or glass.
 bool shifts_second_bounce(const Scene& scene) {
     return scene.camera && scene.camera->shift_second_bounce &&
@@ -430,7 +430,7 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
         e.gather_bytes = to_size(kGatherBytesPerSample * double(e.samples) + kGatherBytesPerPatch * n);
         const int films = 1 + bounce_cubes(scene.solver);
         seconds += kSampleSeconds * double(e.samples) + kTapBinSeconds * taps * scene.time.bins * films;
-        if (shifts_second_bounce(scene)) seconds += kFirstLinkSecondsPerLink * double(e.links);
+        if (shifts_second_bounce(scene)) seconds += kSecondBounceSecondsPerLink * double(e.links);
     }
     e.seconds.gather = seconds;
 }

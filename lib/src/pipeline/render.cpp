@@ -19,7 +19,7 @@
 #include "tprf/pipeline/ranks.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
 #include "tprf/transport/link_set.h"
@@ -69,7 +69,7 @@ struct Transport {
     LightSources sources;
     Illumination illumination;
     /// The second bounce, read at each sample's own time (camera.shift_second_bounce), or null.
-    std::unique_ptr<FirstLinkLight> first_link;
+    std::unique_ptr<SecondBounceLight> second_bounce;
     Gather gather;
 };
 
@@ -125,11 +125,11 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
     if (scene.camera->shift_second_bounce) {
-        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time, scene.solver.delay,
+        t.second_bounce = make_second_bounce_light(t.patches, t.links, t.illumination, scene.time, scene.solver.delay,
                                              scene.solver.max_bounces, !t.visibility->chains().empty(), options.threads);
-        gather_options.first_link = t.first_link.get();
+        gather_options.first_link = t.second_bounce.get();
     }
-    report.second_bounce_shifted = t.first_link != nullptr;
+    report.second_bounce_shifted = t.second_bounce != nullptr;
     t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, gather_options);
     report.seconds.gather = seconds_since(start);
 }
@@ -153,12 +153,12 @@ void open_cubes(const Scene& scene, const RenderOptions& options, const Transpor
             c.cube = data;
             c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, scene.solver.delay, data, -1,
                                                      false, options.threads);
-            c.film->read_first_link_apart(t.first_link.get());
+            c.film->read_first_link_apart(t.second_bounce.get());
         } else {  // after the transient cube: its film's taps serve every order's
             c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time,
                                                                    scene.solver.delay, data, cube.order, cube.tail,
                                                                    options.threads, c.film->taps()));
-            c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
+            c.term_films.back()->read_first_link_apart(t.second_bounce.get(), c.film->shifted_taps());
         }
     }
 }

@@ -66,7 +66,7 @@ struct RenderRecord {
     int measurements = 0;                 ///< the sensor's measurements per pixel and channel
     double peak_rss_mb = 0.0;
     std::vector<MeshReport> meshes;       ///< one per mesh object
-    bool second_bounce_shifted = false;   ///< camera.shift_second_bounce applied (FirstLinkLight)
+    bool second_bounce_shifted = false;   ///< camera.shift_second_bounce applied (SecondBounceLight)
 };
 
 /// render.json's text (JSON, indented, ending in a newline).

@@ -1,4 +1,4 @@
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
@@ -12,7 +12,7 @@
 
 namespace tprf {
 
-FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
+SecondBounceLight::SecondBounceLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
                                const TimeAxis& time, DelayMode delay, int max_bounces, int threads)
     : m_patches(patches), m_links(links), m_time(time), m_delay(delay), m_threads(threads) {
     const std::size_t n = patches.size();
@@ -28,7 +28,7 @@ FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, co
     m_any = std::any_of(any.begin(), any.end(), [](char a) { return a != 0; });
 }
 
-FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumination, int max_bounces) {
+SecondBounceLight::Senders SecondBounceLight::take_pulses(const Illumination& illumination, int max_bounces) {
     const std::size_t n = m_patches.size();
     const BinMap bins = m_time.bin_map();
     Senders s;
@@ -68,7 +68,7 @@ FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumina
     return s;
 }
 
-bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
+bool SecondBounceLight::plan_receiver(std::size_t i, const Senders& senders) {
     const Links& l = m_links.links;
     const float inv_bin_f = m_time.inv_bin_f();
     std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
@@ -102,7 +102,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     return true;
 }
 
-void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
+void SecondBounceLight::fill(std::int64_t first_bin, std::size_t bins, const std::function<bool(int)>& takes, float* rows,
                          std::size_t stride, std::vector<char>& lit, const std::vector<char>* wanted) const {
     const std::size_t n = m_patches.size();
     const std::int64_t end = first_bin + std::int64_t(bins);
@@ -152,7 +152,7 @@ void FirstLinkLight::fill(std::int64_t first_bin, std::size_t bins, const std::f
     });
 }
 
-double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
+double SecondBounceLight::shift(std::uint32_t k, const Vec3& x) const {
     const Vec3 d = x - m_patches.centroid[k];
     const std::array<float, 3>& g = m_gradient[k];
     const std::array<float, 6>& h = m_hessian[k];
@@ -162,11 +162,11 @@ double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
     return linear + 0.5 * quadratic;
 }
 
-std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
+std::unique_ptr<SecondBounceLight> make_second_bounce_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
                                                       DelayMode delay, int max_bounces, bool mirrors, int threads) {
     if (mirrors || links.links.tinted() || patches.size() == 0) return nullptr;
-    auto light = std::make_unique<FirstLinkLight>(patches, links, illumination, time, delay, max_bounces, threads);
+    auto light = std::make_unique<SecondBounceLight>(patches, links, illumination, time, delay, max_bounces, threads);
     if (light->empty()) return nullptr;
     return light;
 }
