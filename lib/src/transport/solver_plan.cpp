@@ -94,10 +94,10 @@ void add_bin_link(BinLinks& out, std::size_t receiver, std::uint32_t source, con
 // block, else to the tinted long list, which reads a block and one bin of the source's ring.
 void add_tinted_link(BinLinks& out, SolvePlan& plan, const Links& links, std::uint64_t k, std::size_t i,
                      std::uint32_t s) {
-    TPRF_CHECK(i < plan.n && s < plan.n);  // only links between patches are tinted (Links::tint)
+    TPRF_CHECK(i < plan.patches && s < plan.patches);  // only links between patches are tinted (Links::tint)
     TintedLink t = tinted_taps(links, k, s, plan.inv_bin_f, plan.delay);
-    if (t.lag >= plan.bt) {
-        plan.send_window[s] = std::max(plan.send_window[s], plan.bt);
+    if (t.lag >= plan.block_bins) {
+        plan.send_window[s] = std::max(plan.send_window[s], plan.block_bins);
         out.tinted_long[i].push_back(t);
         return;
     }
@@ -110,14 +110,14 @@ void add_tinted_link(BinLinks& out, SolvePlan& plan, const Links& links, std::ui
 
 // The tinted lists as CSR: long ones by receiver patch, the others by position, naming their source's.
 void flatten_tinted(BinLinks& bins, SolvePlan& plan) {
-    plan.tinted_long_row.assign(plan.n + 1, 0);
-    plan.tinted_short_row.assign(plan.n + 1, 0);
-    plan.tinted_same_row.assign(plan.n + 1, 0);
-    for (std::size_t i = 0; i < plan.n; ++i) {
+    plan.tinted_long_row.assign(plan.patches + 1, 0);
+    plan.tinted_short_row.assign(plan.patches + 1, 0);
+    plan.tinted_same_row.assign(plan.patches + 1, 0);
+    for (std::size_t i = 0; i < plan.patches; ++i) {
         plan.tinted_long.insert(plan.tinted_long.end(), bins.tinted_long[i].begin(), bins.tinted_long[i].end());
         plan.tinted_long_row[i + 1] = plan.tinted_long.size();
     }
-    for (std::size_t q = 0; q < plan.n; ++q) {
+    for (std::size_t q = 0; q < plan.patches; ++q) {
         const std::size_t i = plan.order[q];
         for (TintedLink l : bins.tinted_shorts[i]) {
             l.source = plan.position[l.source];
@@ -140,17 +140,17 @@ void flatten_tinted(BinLinks& bins, SolvePlan& plan) {
 void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
     const ClusterTree& tree = *plan.tree;
     BinLinks bins;
-    bins.shorts.resize(plan.n);
-    bins.same.resize(plan.n);
+    bins.shorts.resize(plan.patches);
+    bins.same.resize(plan.patches);
     const bool tinted = any_tinted(links);
     if (tinted) {
-        bins.tinted_long.resize(plan.n);
-        bins.tinted_shorts.resize(plan.n);
-        bins.tinted_same.resize(plan.n);
+        bins.tinted_long.resize(plan.patches);
+        bins.tinted_shorts.resize(plan.patches);
+        bins.tinted_same.resize(plan.patches);
     }
-    plan.send_lag.assign(plan.m, 0);
-    plan.send_window.assign(plan.m, 0);
-    for (std::size_t i = 0; i < plan.m; ++i) {
+    plan.send_lag.assign(plan.nodes, 0);
+    plan.send_window.assign(plan.nodes, 0);
+    for (std::size_t i = 0; i < plan.nodes; ++i) {
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
             const DelayTaps t = delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
             plan.max_lag = std::max(plan.max_lag, t.lag);
@@ -160,11 +160,11 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
                 add_tinted_link(bins, plan, links, k, i, s);
                 continue;
             }
-            if (t.lag >= plan.bt) {
+            if (t.lag >= plan.block_bins) {
                 plan.send_window[s] = std::max(plan.send_window[s], plan.window_bins(plan.window_of(t.lag)));
                 continue;
             }
-            if (i < plan.n && s < plan.n) {
+            if (i < plan.patches && s < plan.patches) {
                 add_bin_link(bins, i, s, t, 1.0f);
                 continue;
             }
@@ -176,16 +176,16 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         }
     }
     plan.order.assign(tree.leaf_order.begin(), tree.leaf_order.end());
-    plan.position.assign(plan.n, 0);
-    for (std::size_t q = 0; q < plan.n; ++q) plan.position[plan.order[q]] = std::uint32_t(q);
-    for (std::size_t i = 0; i < plan.n; ++i) {
+    plan.position.assign(plan.patches, 0);
+    for (std::size_t q = 0; q < plan.patches; ++q) plan.position[plan.order[q]] = std::uint32_t(q);
+    for (std::size_t i = 0; i < plan.patches; ++i) {
         for (TapLink& l : bins.shorts[i]) l.source = plan.position[l.source];
         for (SameBinLink& l : bins.same[i]) l.source = plan.position[l.source];
     }
-    plan.short_row.assign(plan.n + 1, 0);
-    plan.same_row.assign(plan.n + 1, 0);
-    plan.albedo.resize(plan.n * std::size_t(plan.C));
-    for (std::size_t q = 0; q < plan.n; ++q) {
+    plan.short_row.assign(plan.patches + 1, 0);
+    plan.same_row.assign(plan.patches + 1, 0);
+    plan.albedo.resize(plan.patches * std::size_t(plan.lanes));
+    for (std::size_t q = 0; q < plan.patches; ++q) {
         const std::size_t i = plan.order[q];
         plan.short_links.insert(plan.short_links.end(), bins.shorts[i].begin(), bins.shorts[i].end());
         plan.same_links.insert(plan.same_links.end(), bins.same[i].begin(), bins.same[i].end());
@@ -193,8 +193,8 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         std::vector<SameBinLink>().swap(bins.same[i]);
         plan.short_row[q + 1] = plan.short_links.size();
         plan.same_row[q + 1] = plan.same_links.size();
-        for (int c = 0; c < plan.C; ++c)
-            plan.albedo[q * std::size_t(plan.C) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
+        for (int c = 0; c < plan.lanes; ++c)
+            plan.albedo[q * std::size_t(plan.lanes) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
     }
     if (tinted) flatten_tinted(bins, plan);
 }
@@ -209,7 +209,7 @@ void copy_grey_links(const Links& links, SolvePlan& plan, bool by_window, Window
     out.ff.reserve(links.size());
     out.distance.reserve(links.size());
     std::vector<std::uint64_t> order;
-    for (std::size_t i = 0; i < plan.m; ++i) {
+    for (std::size_t i = 0; i < plan.nodes; ++i) {
         order.clear();
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k)
             if (!tinted_link(links, k)) order.push_back(k);
@@ -248,26 +248,26 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
     const bool tinted = any_tinted(links);
     auto packs = [&](std::uint64_t k) {
         return !(tinted && tinted_link(links, k)) &&
-               delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag >= plan.bt;
+               delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag >= plan.block_bins;
     };
-    std::vector<std::uint64_t> start(plan.m + 1, 0);
-    parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
+    std::vector<std::uint64_t> start(plan.nodes + 1, 0);
+    parallel_for(plan.nodes, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
         std::uint64_t count = 0;
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) count += packs(k) ? 1 : 0;
         start[i + 1] = count;
     });
-    for (std::size_t i = 0; i < plan.m; ++i) start[i + 1] += start[i];
-    plan.packed_count = start[plan.m];
+    for (std::size_t i = 0; i < plan.nodes; ++i) start[i + 1] += start[i];
+    plan.packed_count = start[plan.nodes];
     if (!fill) return;
-    plan.packed.resize(start[plan.m]);
+    plan.packed.resize(start[plan.nodes]);
     std::vector<std::vector<std::pair<int, PackedLink>>> rows(std::size_t(plan.threads));
-    parallel_for(plan.m, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
+    parallel_for(plan.nodes, LoopSchedule{plan.threads, 64, true}, [&](std::size_t i) {
         std::vector<std::pair<int, PackedLink>>& row = rows[std::size_t(omp_get_thread_num())];
         row.clear();
         for (std::uint64_t k = links.row[i]; k < links.row[i + 1]; ++k) {
             if (tinted && tinted_link(links, k)) continue;
             const DelayTaps t = delay_taps_f(links.distance[k], plan.inv_bin_f, plan.delay, links.ff[k]);
-            if (t.lag < plan.bt) continue;  // as packs(k): a lag does not depend on the form factor
+            if (t.lag < plan.block_bins) continue;  // as packs(k): a lag does not depend on the form factor
             row.push_back({plan.window_of(t.lag), {(links.source[k] << plan.lag_bits) | std::uint32_t(t.lag), t.w0, t.w1}});
         }
         // Windows 0 to S - 1, one pass each: stable, and S is small.
@@ -289,18 +289,19 @@ void pack_links(const Links& links, SolvePlan& plan, bool fill) {
 void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     plan.links = &links;
     const std::size_t S = std::size_t(plan.windows);
-    plan.segments.assign(plan.m * (S + 1), 0);
+    plan.segments.assign(plan.nodes * (S + 1), 0);
     auto window = [&](const Links& l, std::uint64_t k) {
         return plan.window_of(delay_taps_f(l.distance[k], plan.inv_bin_f, plan.delay, 1.0f).lag);
     };
     if (plan.packs()) {
         pack_links(links, plan, fill);
-        for (int s = 0; s < plan.windows; ++s) plan.packed_kernel[s] = packed_kernel_for(plan.C, plan.window_bins(s), wide);
+        for (int s = 0; s < plan.windows; ++s)
+            plan.packed_kernel[s] = packed_kernel_for(plan.lanes, plan.window_bins(s), wide);
         return;
     }
     const bool tinted = any_tinted(links);
     bool ordered = true;
-    for (std::size_t i = 0; i < plan.m && ordered && S > 1; ++i)
+    for (std::size_t i = 0; i < plan.nodes && ordered && S > 1; ++i)
         for (std::uint64_t k = links.row[i] + 1; k < links.row[i + 1] && ordered; ++k)
             ordered = window(links, k - 1) <= window(links, k);
     if (tinted || !ordered) {
@@ -309,13 +310,13 @@ void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
     }
     const Links& l = *plan.links;
     if (S == 1) {
-        for (std::size_t i = 0; i < plan.m; ++i) {
+        for (std::size_t i = 0; i < plan.nodes; ++i) {
             plan.segments[2 * i] = l.row[i];
             plan.segments[2 * i + 1] = l.row[i + 1];
         }
         return;
     }
-    for (std::size_t i = 0; i < plan.m; ++i) {
+    for (std::size_t i = 0; i < plan.nodes; ++i) {
         std::uint64_t k = l.row[i];
         for (std::size_t s = 0; s < S; ++s) {
             while (k < l.row[i + 1] && window(l, k) < int(s)) ++k;
@@ -332,7 +333,7 @@ void plan_windows(const Links& links, SolvePlan& plan, bool wide, bool fill) {
 // A_i w_ij = A_j w_ji, a tinted link's reverse passing the same mirrors), so its spectrum lies in
 // [-rho, rho], the interval that the Chebyshev weights assume.
 double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
-    const std::size_t n = plan.n;
+    const std::size_t n = plan.patches;
     std::vector<double> v(n, 1.0), y(n);
     double bound = 0.0;
     for (int iteration = 0; iteration < 24; ++iteration) {
@@ -380,13 +381,13 @@ void cut_subtrees(const ClusterTree& t, SolvePlan& plan) {
 // Chebyshev needs one system that gathers from itself; per-order layers chain (and converge in as many
 // sweeps as there are orders), so they sweep plain Jacobi.
 void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
-    if (plan.L != 1 || plan.layers.source[0] != 0 || !plan.same_bin()) return;
+    if (plan.layer_count != 1 || plan.layers.source[0] != 0 || !plan.same_bin()) return;
     const double rho = same_bin_radius(patches, plan);
     if (rho > 0.05 && rho < 0.95) plan.same_radius = rho;
     double w = 1.0;
     for (int k = 1; k <= kMaxSweeps; ++k) {
         w = k == 1 ? 1.0 : k == 2 ? 1.0 / (1.0 - 0.5 * rho * rho) : 1.0 / (1.0 - 0.25 * rho * rho * w);
-        plan.omega.push_back(float(w));
+        plan.chebyshev_weights.push_back(float(w));
     }
 }
 
@@ -398,13 +399,13 @@ void split_positions(SolvePlan& plan) {
         return w;
     };
     std::uint64_t total = 0;
-    for (std::size_t q = 0; q < plan.n; ++q) total += work(q);
+    for (std::size_t q = 0; q < plan.patches; ++q) total += work(q);
     const std::size_t T = std::size_t(plan.threads);
-    plan.short_split.assign(T + 1, plan.n);
+    plan.short_split.assign(T + 1, plan.patches);
     plan.short_split[0] = 0;
     std::uint64_t done = 0;
     std::size_t t = 1;
-    for (std::size_t q = 0; q < plan.n && t < T; ++q) {
+    for (std::size_t q = 0; q < plan.patches && t < T; ++q) {
         done += work(q);
         while (t < T && done * T >= total * t) plan.short_split[t++] = q + 1;
     }
@@ -413,10 +414,10 @@ void split_positions(SolvePlan& plan) {
 // The same-bin system restricted to its rows (SolvePlan::sweep_rows): the patches that receive or send a
 // same-bin link, in position order, their link lists re-indexed by row.
 void compact_same_bin(SolvePlan& plan) {
-    plan.sweep_row_of.assign(plan.n, -1);
+    plan.sweep_row_of.assign(plan.patches, -1);
     if (!plan.same_bin()) return;
-    std::vector<char> in(plan.n, 0);
-    for (std::size_t q = 0; q < plan.n; ++q) {
+    std::vector<char> in(plan.patches, 0);
+    for (std::size_t q = 0; q < plan.patches; ++q) {
         const bool receives = plan.same_row[q + 1] > plan.same_row[q] ||
                               (!plan.tinted_same.empty() && plan.tinted_same_row[q + 1] > plan.tinted_same_row[q]);
         in[q] = char(in[q] | receives);
@@ -425,7 +426,7 @@ void compact_same_bin(SolvePlan& plan) {
             for (std::uint64_t k = plan.tinted_same_row[q]; k < plan.tinted_same_row[q + 1]; ++k)
                 in[plan.tinted_same[k].source] = 1;
     }
-    for (std::size_t q = 0; q < plan.n; ++q)
+    for (std::size_t q = 0; q < plan.patches; ++q)
         if (in[q]) {
             plan.sweep_row_of[q] = std::int32_t(plan.sweep_rows.size());
             plan.sweep_rows.push_back(std::uint32_t(q));
@@ -449,11 +450,11 @@ void copy_near_links(SolvePlan& plan) {
     const Links& l = *plan.links;
     const std::size_t S = std::size_t(plan.windows);
     NearLinks& near = plan.near;
-    near.row.assign(plan.m + 1, 0);
+    near.row.assign(plan.nodes + 1, 0);
     std::size_t count = 0;
-    for (std::size_t i = 0; i < plan.m; ++i) count += plan.segments[i * (S + 1) + 1] - plan.segments[i * (S + 1)];
+    for (std::size_t i = 0; i < plan.nodes; ++i) count += plan.segments[i * (S + 1) + 1] - plan.segments[i * (S + 1)];
     near.links.reserve(count);
-    for (std::size_t i = 0; i < plan.m; ++i) {
+    for (std::size_t i = 0; i < plan.nodes; ++i) {
         std::uint64_t k = plan.segments[i * (S + 1)];
         const std::uint64_t end = plan.segments[i * (S + 1) + 1];
         for (; k < end; ++k) {
@@ -468,28 +469,29 @@ void copy_near_links(SolvePlan& plan) {
 // Every node's ring of C lanes per bin: patches' rings in leaf order (the bin-by-bin passes store them
 // in that order), then clusters'.
 void plan_rings(SolvePlan& plan) {
-    plan.slots.resize(plan.m);
+    plan.slots.resize(plan.nodes);
     if (plan.packs()) {
         // Packed links find their source's ring from the source alone (SolvePlan::packed_ring): every
         // ring as long as the longest, node k's k rings in. The short rings' unused bins are never read.
         int longest = 0, window = 0;
-        for (std::size_t k = 0; k < plan.m; ++k) {
+        for (std::size_t k = 0; k < plan.nodes; ++k) {
             longest = std::max(longest, plan.send_lag[k]);
             window = std::max(window, plan.send_window[k]);
         }
-        plan.ring = ring_bins(longest, plan.bt);
+        plan.longest_ring = ring_bins(longest, plan.block_bins);
         const int mirror = ring_mirror_bins(window);
-        plan.packed_ring = std::size_t(plan.ring + mirror) * std::size_t(plan.C);
-        for (std::size_t k = 0; k < plan.m; ++k) plan.slots[k] = {k * plan.packed_ring, plan.ring - 1, plan.ring, mirror};
-        plan.ring_floats = plan.m * plan.packed_ring;
+        plan.packed_ring_floats = std::size_t(plan.longest_ring + mirror) * std::size_t(plan.lanes);
+        for (std::size_t k = 0; k < plan.nodes; ++k)
+            plan.slots[k] = {k * plan.packed_ring_floats, plan.longest_ring - 1, plan.longest_ring, mirror};
+        plan.ring_floats = plan.nodes * plan.packed_ring_floats;
     } else
-        for (std::size_t at = 0; at < plan.m; ++at) {
-            const std::size_t k = at < plan.n ? plan.order[at] : at;
-            const int length = ring_bins(plan.send_lag[k], plan.bt);
+        for (std::size_t at = 0; at < plan.nodes; ++at) {
+            const std::size_t k = at < plan.patches ? plan.order[at] : at;
+            const int length = ring_bins(plan.send_lag[k], plan.block_bins);
             const int mirror = ring_mirror_bins(plan.send_window[k]);
             plan.slots[k] = {plan.ring_floats, length - 1, length, mirror};
-            plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.C);
-            plan.ring = std::max(plan.ring, length);
+            plan.ring_floats += std::size_t(length + mirror) * std::size_t(plan.lanes);
+            plan.longest_ring = std::max(plan.longest_ring, length);
         }
     std::vector<int>().swap(plan.send_lag);
     std::vector<int>().swap(plan.send_window);
@@ -527,26 +529,26 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     const Links& links = set.links;
     const MarchShape shape = march_shape(plan_inputs(patches, set, time, options, illuminations, channels), options);
     SolvePlan plan;
-    plan.n = shape.patches;
-    plan.m = shape.nodes;
+    plan.patches = shape.patches;
+    plan.nodes = shape.nodes;
     plan.tree = &set.tree;
     plan.clusters = set.tree.clusters() > 0;
     plan.threads = shape.threads;
     if (plan.clusters) cut_subtrees(set.tree, plan);
     plan.source_tile = shape.source_tile;
-    plan.bt = shape.block_bins;
-    plan.K = shape.illuminations;
+    plan.block_bins = shape.block_bins;
+    plan.illuminations = shape.illuminations;
     plan.channels = shape.channels;
-    plan.C = shape.lanes;
+    plan.lanes = shape.lanes;
     plan.delay = options.delay;
     plan.bin_map = time.bin_map();
     plan.inv_bin_f = time.inv_bin_f();
     plan.layers = plan_layers(options.max_bounces, options.bounce_terms);
-    plan.L = plan.layers.layers();
+    plan.layer_count = plan.layers.layers();
     plan.fed_layers = shape.layers.fed;
     plan.emit_blocks = shape.emit_blocks;
     plan.lag_bits = shape.lag_bits;
-    plan.acc_bins = shape.window_bins;
+    plan.accumulator_bins = shape.window_bins;
     plan.windows = shape.windows;
     plan.recent_bins = shape.recent_bins;
     const bool wide = options.wide_vectors && cpu_has_wide_kernels();
@@ -556,15 +558,15 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan_sweeps(patches, plan);
     compact_same_bin(plan);
     plan_rings(plan);
-    plan.T = time.bins;
-    plan.blocks = (plan.T + plan.bt - 1) / plan.bt;
+    plan.bins = time.bins;
+    plan.blocks = (plan.bins + plan.block_bins - 1) / plan.block_bins;
     if (shape.near_list) {
-        plan.recent_kernel = recent_kernel_for(plan.C, plan.bt, wide);
+        plan.recent_kernel = recent_kernel_for(plan.lanes, plan.block_bins, wide);
         copy_near_links(plan);
     }
     bool any_kernel = plan.recent_kernel != nullptr || plan.packs();
     for (int s = 0; s < plan.windows && !plan.packs(); ++s) {
-        plan.kernel[s] = pick_kernel(plan.C, plan.window_bins(s), wide);
+        plan.kernel[s] = pick_kernel(plan.lanes, plan.window_bins(s), wide);
         if (!plan.kernel[s]) plan.lane_kernel[s] = lane_kernel_for(plan.window_bins(s), wide);
         any_kernel = any_kernel || plan.kernel[s] || plan.lane_kernel[s];
     }
@@ -580,9 +582,9 @@ void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch) {
     std::int64_t first_pulse_bin = std::min<std::int64_t>(0, plan.first_emitted);
     for (const Illumination* illumination : batch)
         for (const Pulse& p : illumination->pulses) first_pulse_bin = std::min(first_pulse_bin, plan.pulse_bin(p));
-    const std::int64_t align = plan.acc_bins;
-    plan.b_begin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + align - 1) / align) * align;
-    plan.blocks = (plan.T - plan.b_begin + plan.bt - 1) / plan.bt;
+    const std::int64_t align = plan.accumulator_bins;
+    plan.start_bin = (first_pulse_bin >= 0) ? 0 : -((-first_pulse_bin + align - 1) / align) * align;
+    plan.blocks = (plan.bins - plan.start_bin + plan.block_bins - 1) / plan.block_bins;
 }
 
 namespace {
@@ -590,19 +592,19 @@ namespace {
 // The shape the plan was made in (march_shape decided it).
 MarchShape shape_of(const SolvePlan& p) {
     MarchShape s;
-    s.patches = p.n;
-    s.nodes = p.m;
+    s.patches = p.patches;
+    s.nodes = p.nodes;
     s.threads = p.threads;
-    s.illuminations = p.K;
+    s.illuminations = p.illuminations;
     s.channels = p.channels;
-    s.lanes = p.C;
-    s.layers = {p.L, p.layers.terms, p.fed_layers};
-    s.block_bins = p.bt;
+    s.lanes = p.lanes;
+    s.layers = {p.layer_count, p.layers.terms, p.fed_layers};
+    s.block_bins = p.block_bins;
     s.emit_blocks = p.emit_blocks;
     s.source_tile = p.source_tile;
     s.lag_bits = p.lag_bits;
     s.windows = p.windows;
-    s.window_bins = p.acc_bins;
+    s.window_bins = p.accumulator_bins;
     s.recent_bins = p.recent_bins;
     s.near_list = p.recent_kernel != nullptr;
     s.tile_sum_floats = p.tile_sum_floats();
@@ -612,7 +614,7 @@ MarchShape shape_of(const SolvePlan& p) {
 // The lengths of the plan's lists and rings.
 MarchLists lists_of(const SolvePlan& p) {
     MarchLists l;
-    l.ring_bins = p.ring_floats / std::size_t(p.C);
+    l.ring_bins = p.ring_floats / std::size_t(p.lanes);
     l.short_links = p.short_links.size();
     l.same_bin_links = p.same_links.size();
     l.sweep_rows = p.sweep_rows.size();

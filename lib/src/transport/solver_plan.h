@@ -215,8 +215,10 @@ constexpr std::size_t kShortPatchLinks = 4;
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
 struct SolvePlan {
-    std::size_t n = 0;              // patches (the leaves: they emit, reflect and are output)
-    std::size_t m = 0;              // nodes: patches, then clusters (rings, gathers)
+    /// Patches: the tree's leaves, which emit, reflect and are output.
+    std::size_t patches = 0;
+    /// Nodes: the patches, then the clusters (each keeps a ring and gathers).
+    std::size_t nodes = 0;
     const ClusterTree* tree = nullptr;
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the
@@ -226,24 +228,29 @@ struct SolvePlan {
     // (hierarchical links), whose rows would otherwise be walked once per empty tile.
     std::size_t source_tile = kSourceTile;
     int threads = 1;
-    int bt = 0;                     // block length, bins (a power of two)
+    /// The march's block, bins (a power of two).
+    int block_bins = 0;
     int emit_blocks = 1;            // blocks per SolveBlock handed to the sink (a power of two)
-    int emit_bins() const { return bt * emit_blocks; }
-    // Windows of the long pass: window s is bt << s bins long and is applied at the blocks that
-    // start at its multiples, to the links of delay >= its length (and below the next window's;
-    // the last takes every longer one). The accumulators hold the next `acc_bins` bins.
+    int emit_bins() const { return block_bins * emit_blocks; }
+    // Windows of the long pass: window s is block_bins << s bins long and is applied at the blocks
+    // that start at its multiples, to the links of delay >= its length (and below the next window's;
+    // the last takes every longer one).
     int windows = 1;
-    int acc_bins = 0;               // the last window's length: bt << (windows - 1)
+    /// The accumulators' bins, the next ones the long pass adds into: the last window's length,
+    /// block_bins << (windows - 1).
+    int accumulator_bins = 0;
     // Per receiver: where its links of each window start, then where its row ends (windows + 1
     // offsets); with one window, the whole row (the kernel skips links shorter than the block).
     std::vector<std::uint64_t> segments;
     const Links* links = nullptr;   // the set's links, or `sorted` (plan_windows): the grey ones, by window
     Links sorted;
     // Lanes: every value the march keeps per node and bin (rings, accumulators, recent bins, emission,
-    // sweep state) is C floats, illumination k's colour c in lane k * channels + c.
-    int K = 1;                      // illuminations marched together
+    // sweep state) is `lanes` floats, illumination k's colour c in lane k * channels + c.
+    /// Illuminations marched together.
+    int illuminations = 1;
     int channels = 3;               // per illumination: 1 for a grey scene (every albedo and pulse), else 3
-    int C = 3;                      // lanes, K x channels
+    /// Values per node and bin: illuminations x channels.
+    int lanes = 3;
     // The lane that holds illumination k's colour c (a grey lane serves all three).
     int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
@@ -251,7 +258,8 @@ struct SolvePlan {
     BinMap bin_map;                 // the time axis's bins in metres (pulse_bin)
     float inv_bin_f = 0.0f;         // its reciprocal bin width in float, as the kernels take it (delay_taps_f)
     LayerPlan layers;
-    int L = 0;                      // layers
+    /// Rings per node: layers.layers().
+    int layer_count = 0;
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<TapLink> short_links;
@@ -261,7 +269,7 @@ struct SolvePlan {
     // 4k Cornell box's in the first half.
     std::vector<std::size_t> short_split;
     std::vector<SameBinLink> same_links;
-    // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
+    // Tinted links: those of lag >= block_bins by receiver patch, applied a block at a time (March::gather_tinted);
     // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
     // rows too, when no link is tinted.
     std::vector<std::uint64_t> tinted_long_row, tinted_short_row, tinted_same_row;
@@ -271,11 +279,11 @@ struct SolvePlan {
     // The same-bin system's rows: the patches that receive or send a same-bin link, by position (most
     // of a scene's patches have none: their values are final before the sweeps). Once the plan is
     // made, same_row and tinted_same_row are by row and the same-bin links name their source's row, so
-    // that the sweeps read and write compact iterates (L x rows x C).
+    // that the sweeps read and write compact iterates (layer_count x rows x lanes).
     std::vector<std::uint32_t> sweep_rows;   // row -> position
     std::vector<std::int32_t> sweep_row_of;  // position -> row, or -1 outside the system
     std::size_t sweep_at(int layer, std::size_t row) const {
-        return (std::size_t(layer) * sweep_rows.size() + row) * std::size_t(C);
+        return (std::size_t(layer) * sweep_rows.size() + row) * std::size_t(lanes);
     }
     // Iterates the sweeps rotate through: the current and the next, and with Chebyshev the one before.
     int sweep_buffers() const { return same_radius > 0.0 ? 3 : 2; }
@@ -283,27 +291,34 @@ struct SolvePlan {
     // and keep their state by position in it: short and same-bin links name their source's position.
     std::vector<std::uint32_t> order;     // position -> patch
     std::vector<std::uint32_t> position;  // patch -> position
-    std::vector<float> albedo;            // by position, C per patch: each lane's colour
+    std::vector<float> albedo;            // by position, `lanes` per patch: each lane's colour
     // Where node i's values are kept in arrays over nodes that the bin-by-bin passes read: patches
     // by position, clusters by id.
-    std::size_t node_slot(std::size_t i) const { return i < n ? position[i] : i; }
+    std::size_t node_slot(std::size_t i) const { return i < patches ? position[i] : i; }
     // Chebyshev acceleration of the same-bin sweeps: an upper bound of the spectral radius of the
     // same-bin operator (albedo x weights), or 0 to sweep plain Jacobi.
     double same_radius = 0.0;
-    std::vector<float> omega;  // Chebyshev weights of sweeps 1..kMaxSweeps
+    /// The Chebyshev weights of sweeps 1..kMaxSweeps.
+    std::vector<float> chebyshev_weights;
     int max_lag = 0;
     // Rings: the window [t - lag - 1, t] of every read from a node must fit, plus one block; mirrored
-    // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
+    // so that any window of block_bins + 1 bins is contiguous. Each node's as long as its longest outgoing
     // link needs: most patches of a hierarchical set send only to near ones (or not at all).
     std::vector<int> send_lag;      // per node: its longest outgoing link's lag, bins
     std::vector<int> send_window;   // per node: its longest outgoing long link's window, bins (0: none)
     std::vector<RingSlot> slots;    // per node
     std::size_t ring_floats = 0;    // per layer
-    int ring = 0;                   // longest ring
-    std::int64_t T = 0, b_begin = 0, blocks = 0;
+    /// The longest ring, bins.
+    int longest_ring = 0;
+    /// The time axis's bins.
+    std::int64_t bins = 0;
+    /// The march's first bin: the window's first, or before it the batch's earliest pulse's, aligned to
+    /// the longest window (plan_blocks).
+    std::int64_t start_bin = 0;
+    std::int64_t blocks = 0;        // blocks marched from start_bin
     std::int64_t first_emitted = 0;  // first bin handed to the sink (SolverOptions::first_bin)
     int fed_layers = 0;             // layers that gather from links
-    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
+    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (lanes, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
     // Dense rows of a flat set whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey
     // links of at least a block packed, by row and window (`segments` index them, not `links`), and per
@@ -312,39 +327,41 @@ struct SolvePlan {
     std::uint64_t packed_count = 0;  // their number (also in a plan made for sizing only, which has none)
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
     bool packs() const { return lag_bits > 0; }
-    std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node
+    /// With packed links every ring is longest_ring bins and one mirror: the floats of a node's.
+    std::size_t packed_ring_floats = 0;
     PackedKernel packed_kernel[kMaxWindows] = {};
-    // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
-    // recent bins hold then, instead of their rings: near links have near sources, whose values share
-    // cache lines there, where each source's ring is a line of its own (bench/RESULTS.md, 2026-11-27).
+    // The shortest window's links (lags block_bins to 2 block_bins - 1) read the sources' last
+    // 2 block_bins bins, which the recent bins hold then, instead of their rings: near links have near
+    // sources, whose values share cache lines there, where each source's ring is a line of its own
+    // (bench/RESULTS.md).
     // Null with one window (blocks of the longest window).
     RecentKernel recent_kernel = nullptr;
     NearLinks near;  // the links it applies (taken out of `segments`: the first window is empty)
 
-    std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
+    std::size_t acc_values() const { return nodes * std::size_t(accumulator_bins) * std::size_t(lanes); }
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
     // every node together), so that the bin-by-bin passes read them contiguously.
     std::size_t acc_at(std::size_t i, std::int64_t bin) const { return acc_at_slot(node_slot(i), bin); }
     std::size_t acc_at_slot(std::size_t slot, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
+        return (std::size_t(bin & std::int64_t(accumulator_bins - 1)) * nodes + slot) * std::size_t(lanes);
     }
-    std::size_t acc_stride() const { return m * std::size_t(C); }
+    std::size_t acc_stride() const { return nodes * std::size_t(lanes); }
     // Floats of a thread's receiver-tile sums in the long pass: a tile's receivers x the longest window
     // x lanes, where the sources are tiled (dense rows) and that fits in kTileSumBytes; none otherwise
     // (the kernels then add into the accumulators directly).
-    std::size_t tile_sum_floats() const { return receiver_tile_floats(source_tile, m, acc_bins, C); }
+    std::size_t tile_sum_floats() const { return receiver_tile_floats(source_tile, nodes, accumulator_bins, lanes); }
     // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
     // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
     // shortest window read (a few bins of near nodes together), besides the rings.
     int recent_bins = 0;
     std::size_t recent_at(std::size_t slot, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * m + slot) * std::size_t(C);
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * nodes + slot) * std::size_t(lanes);
     }
-    int window_bins(int s) const { return bt << s; }
+    int window_bins(int s) const { return block_bins << s; }
     // The window of a link `lag` bins long: -1 below the block.
     int window_of(int lag) const {
-        if (lag < bt) return -1;  // bt is a power of two: a shift, not a division (once per link in the plan)
-        return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(bt)))) - 1, windows - 1);
+        if (lag < block_bins) return -1;  // block_bins is a power of two: a shift, not a division (once per link in the plan)
+        return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(block_bins)))) - 1, windows - 1);
     }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
     std::int64_t pulse_bin(const Pulse& p) const { return bin_map.bin(p.path); }
