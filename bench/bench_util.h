@@ -4,6 +4,7 @@
 
 #include "tprf/scene/parse_json.h"
 
+#include <malloc.h>
 #include <sys/resource.h>
 
 #include <cstddef>
@@ -61,6 +62,15 @@ inline bool reset_peak_rss() {
     out << "5";
     out.flush();
     return bool(out);
+}
+
+/// Starts measuring a peak: returns the freed heap to the system (malloc would otherwise hand what an
+/// earlier case freed to the next one unseen by RSS) and resets the peak RSS. Returns the RSS then,
+/// bytes: VmHWM less it, read after the work, is the work's peak.
+inline double start_peak() {
+    malloc_trim(0);
+    reset_peak_rss();
+    return proc_status_bytes("VmRSS");
 }
 
 }  // namespace tprf::bench

@@ -66,18 +66,35 @@ void BM_PrepareCamera(benchmark::State& state) {
     tprf::GatherOptions options;
     options.threads = kThreads;
     options.time = &s.scene.time;
-    std::size_t taps = 0;
+    std::size_t taps = 0, lit = 0;
+    double bytes = 0.0;
     for (auto _ : state) {
+        const double before = tprf::bench::start_peak();
         const tprf::Gather gather = tprf::prepare_camera(camera, s.patches, s.sources, *s.visibility, options);
+        bytes = tprf::bench::proc_status_bytes("VmHWM") - before;
         taps = gather.taps.size();
+        lit = 0;
+        for (std::size_t px = 0; px + 1 < gather.row.size(); ++px) lit += gather.row[px + 1] > gather.row[px];
         benchmark::DoNotOptimize(gather.taps.data());
     }
+    // Samples of the pixels that see something: the others trace a ray and keep nothing.
     const double samples = double(camera.width) * camera.height * camera.spp;
+    const double lit_samples = double(lit) * camera.spp;
     state.counters["samples"] = samples;
     state.counters["taps"] = double(taps);
+    state.counters["taps_per_pixel"] = double(taps) / double(lit);
+    state.counters["bytes_per_sample"] = bytes / lit_samples;
     state.counters["samples_per_s"] = benchmark::Counter(samples, benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["seconds_per_sample"] = benchmark::Counter(
+        lit_samples, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
 }
-BENCHMARK(BM_PrepareCamera)->Args({96, 0})->Args({256, 0})->Args({96, 64})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PrepareCamera)
+    ->Args({96, 0})
+    ->Args({96, 1})
+    ->Args({256, 0})
+    ->Args({96, 64})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // One block of patch profiles (made-up values: the cost does not depend on them) filmed into the cube.
 void BM_FilmBlock(benchmark::State& state) {
@@ -104,6 +121,9 @@ void BM_FilmBlock(benchmark::State& state) {
     state.counters["taps"] = double(gather.taps.size());
     state.counters["tap_bins_per_s"] = benchmark::Counter(double(gather.taps.size()) * kBlockBins,
                                                           benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["seconds_per_tap_bin"] =
+        benchmark::Counter(double(gather.taps.size()) * kBlockBins,
+                           benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_FilmBlock)->Args({96, 0})->Args({256, 0})->Args({96, 64})->Unit(benchmark::kMillisecond)->UseRealTime();
 

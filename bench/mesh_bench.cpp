@@ -115,8 +115,7 @@ fs::path written(const std::string& name, std::string (*make)(const HeightField&
 }
 
 void load(benchmark::State& state, const fs::path& file) {
-    tprf::bench::reset_peak_rss();
-    const double before = tprf::bench::proc_status_bytes("VmRSS");
+    const double before = tprf::bench::start_peak();
     std::size_t triangles = 0;
     for (auto _ : state) {
         const tprf::PolygonMesh mesh = tprf::load_mesh(file, Eigen::Matrix4d::Identity(), "bench", "mesh");
@@ -125,9 +124,13 @@ void load(benchmark::State& state, const fs::path& file) {
     }
     state.counters["triangles"] = double(triangles);
     state.counters["file_MB"] = double(fs::file_size(file)) / 1e6;
-    state.counters["peak_MB"] = (tprf::bench::proc_status_bytes("VmHWM") - before) / 1e6;
+    const double peak = tprf::bench::proc_status_bytes("VmHWM") - before;
+    state.counters["peak_MB"] = peak / 1e6;
+    state.counters["bytes_per_face"] = peak / double(triangles);
     state.counters["triangles_per_s"] =
         benchmark::Counter(double(triangles), benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["seconds_per_face"] = benchmark::Counter(
+        double(triangles), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
 }
 
 void BM_LoadBinaryPly(benchmark::State& state) { load(state, written("field.ply", binary_ply)); }

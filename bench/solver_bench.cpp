@@ -105,10 +105,10 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options, cons
     const double updates_per_s = double(stats.link_bin_updates) / seconds;
     const double gflops = updates_per_s * fma_per_update / 1e9;
     // Links shorter than a block are applied bin by bin from scattered history, not by the kernel above.
-    const double inv_bin = 1.0 / p.scene.time.bin_width_m();
+    const float inv_bin = p.scene.time.inv_bin_f();
     std::size_t short_links = 0;
     for (float d : p.links.links.distance)
-        if (std::floor(double(d) * inv_bin) < double(stats.block_bins)) ++short_links;
+        if (tprf::delay_taps_f(d, inv_bin, options.delay, 1.0f).lag < stats.block_bins) ++short_links;
     // Every block streams each link's source, form factor and distance once (12 bytes).
     const double blocks = std::ceil(double(kBins) / double(stats.block_bins));
     const double link_stream_gbs = 12.0 * double(p.links.links.size()) * blocks / seconds / 1e9;
@@ -121,6 +121,7 @@ void run_solve(benchmark::State& state, const tprf::SolverOptions& options, cons
     state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
     state.counters["link_bin_updates"] = double(stats.link_bin_updates);
     state.counters["updates_per_s"] = updates_per_s;
+    state.counters["seconds_per_link_bin"] = seconds / double(stats.link_bin_updates);
     state.counters["fma_per_update"] = fma_per_update;
     state.counters["achieved_GFMA_s"] = gflops;
     state.counters["peak_GFMA_s"] = machine.fma_gflops;
@@ -160,9 +161,10 @@ BENCHMARK(BM_TransientSolve)->ArgName("wide")->Arg(1)->Arg(0)->Unit(benchmark::k
 void BM_TransientSolveGrey(benchmark::State& state) {
     tprf::SolverOptions options;
     options.threads = kThreads;
+    options.wide_vectors = state.range(0) != 0;
     run_solve(state, options, grey_problem());
 }
-BENCHMARK(BM_TransientSolveGrey)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_TransientSolveGrey)->ArgName("wide")->Arg(1)->Arg(0)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 // The same solve with block_bins = range(0): the block length that the default should take.
 void BM_TransientSolveBlockBins(benchmark::State& state) {
@@ -215,8 +217,11 @@ const LaserBatch& lasers(bool grey) {
 }
 
 // K = range(0) laser illuminations in one march, on the grey (range(1) = 1: K lanes) or the coloured
-// Cornell box (3 K lanes). seconds_per_illumination against the K = 1 case's seconds is the batch's gain.
+// Cornell box (3 K lanes). seconds_per_illumination against the K = 1 case's seconds is the batch's gain;
+// extra_cost_per_lane, a march of K against one of a single illumination (the K = 1 case, run first):
+// seconds_K = seconds_1 (1 + (K - 1) extra_cost_per_lane).
 void BM_TransientSolveBatch(benchmark::State& state) {
+    static double single_seconds[2] = {0.0, 0.0};  // the K = 1 cases', coloured and grey
     const int K = int(state.range(0));
     const LaserBatch& batch = lasers(state.range(1) != 0);
     const Problem& p = *batch.problem;
@@ -244,6 +249,9 @@ void BM_TransientSolveBatch(benchmark::State& state) {
     state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
     state.counters["achieved_GFMA_s"] = fma / seconds / 1e9;
     state.counters["working_MB"] = double(stats.working_bytes) / 1e6;
+    double& single = single_seconds[state.range(1) != 0 ? 1 : 0];
+    if (K == 1) single = seconds;
+    if (K > 1 && single > 0.0) state.counters["extra_cost_per_lane"] = (seconds / single - 1.0) / double(K - 1);
 }
 BENCHMARK(BM_TransientSolveBatch)
     ->ArgsProduct({{1, 8, 16}, {1, 0}})
@@ -307,6 +315,9 @@ void BM_MeshSceneSolve(benchmark::State& state) {
     state.counters["cpu_util"] = cpu_seconds / (kThreads * seconds);
     state.counters["jacobi_sweeps"] = double(stats.jacobi_sweeps);
     state.counters["short_links"] = double(stats.short_links);
+    const double bins = double(p.scene.time.bins);
+    state.counters["seconds_per_patch_bin"] = seconds / runs / (double(p.patches.size()) * bins);
+    state.counters["seconds_per_short_link_bin"] = stats.seconds_short / (double(stats.short_links) * bins);
     state.counters["working_MB"] = double(stats.working_bytes) / 1e6;
     state.counters["wide_kernels"] = stats.wide_kernels ? 1.0 : 0.0;
 }

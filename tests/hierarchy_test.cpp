@@ -580,7 +580,7 @@ std::vector<int> predicted_onsets(const LinkSet& set, const Illumination& e, dou
         for (std::size_t m = 0; m < t.nodes(); ++m)
             for (std::uint64_t k = set.links.row[m]; k < set.links.row[m + 1]; ++k)
                 if (node[set.links.source[k]] < kNever)
-                    gathered[m] = std::min(gathered[m], node[set.links.source[k]] + int(set.links.distance[k] * inv_bin));
+                    gathered[m] = std::min(gathered[m], node[set.links.source[k]] + tprf::delay_bins_f(set.links.distance[k], inv_bin));
         for (std::uint32_t i = 0; i < n; ++i) {
             int best = kNever;
             for (std::uint32_t m : path_up(t, i)) best = std::min(best, gathered[m]);

@@ -174,7 +174,7 @@ void finish(const PatchSet& patches, ClusterTree& t) {
 std::size_t ClusterTree::bytes() const {
     return parent.size() * (sizeof(std::uint32_t) * 3 + sizeof(double) * 3 + sizeof(Vec3) * 2) +
            children.size() * sizeof(children[0]) + leaf_order.size() * sizeof(std::uint32_t) +
-           area_prefix.size() * sizeof(double);
+           area_prefix.size() * sizeof(double);  // as bytes_for
 }
 
 ClusterTree leaves_only(const PatchSet& patches) {

@@ -4,7 +4,7 @@
 #include "tprf/imaging/gather.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/core/error.h"
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 #include "tprf/transport/solver.h"
 
 #include <algorithm>
@@ -55,7 +55,7 @@ void merge_shares(std::vector<BinShare>& shares, std::vector<FilmTaps::Tap>& tap
 }  // namespace
 
 FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, int threads, bool shifted) {
-    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    const BinMap bins = time.bin_map();
     const std::size_t pixels = gather.row.empty() ? 0 : gather.row.size() - 1;
     std::vector<std::vector<FilmTaps::Tap>> per_pixel(pixels);
     std::vector<std::vector<float>> per_pixel_weights(pixels);
@@ -65,15 +65,14 @@ FilmTaps film_taps(const Gather& gather, const TimeAxis& time, DelayMode delay, 
         shares.clear();
         for (std::uint64_t k = gather.row[px]; k < gather.row[px + 1]; ++k) {
             const PixelTap& tap = gather.taps[k];
-            const double lag = (double(tap.leg) + (shifted ? double(tap.shift) : 0.0)) * inv_bin;
-            const std::int64_t first = std::int64_t(std::floor((double(tap.earliest) - start) * inv_bin));
+            const BinSplit split = bins.split(double(tap.leg) + (shifted ? double(tap.shift) : 0.0), delay);
+            const std::int64_t first = bins.bin(double(tap.earliest));
+            const std::int32_t whole = std::int32_t(split.first);
             if (delay == DelayMode::Nearest) {
-                shares.push_back({tap.patch, tap.tint, std::int32_t(std::floor(lag + 0.5)), first, tap.weight});
+                shares.push_back({tap.patch, tap.tint, whole, first, tap.weight});
             } else {
-                const std::int32_t whole = std::int32_t(std::floor(lag));
-                const double f = lag - double(whole);
-                shares.push_back({tap.patch, tap.tint, whole, first, float(tap.weight * (1.0 - f))});
-                shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * f)});
+                shares.push_back({tap.patch, tap.tint, whole, first, float(tap.weight * (1.0 - split.frac))});
+                shares.push_back({tap.patch, tap.tint, whole + 1, first, float(tap.weight * split.frac)});
             }
         }
         merge_shares(shares, per_pixel[px], per_pixel_weights[px], per_pixel_longest[px]);
@@ -117,10 +116,10 @@ TransientFilm::TransientFilm(const Gather& gather, const Illumination& illuminat
                           : std::make_shared<const FilmTaps>(film_taps(gather, time, options.delay, options.threads))),
       m_pad(std::min<std::int64_t>(std::int64_t(m_taps->longest) - 1, std::int64_t(kFilmPadBins))) {}
 
-void TransientFilm::read_first_link_apart(const FirstLinkLight* light, std::shared_ptr<const FilmTaps> shifted) {
+void TransientFilm::read_second_bounce_apart(const SecondBounceLight* light, std::shared_ptr<const FilmTaps> shifted) {
     TPRF_CHECK(m_capacity == 0);  // before the first block
     if (!light) return;
-    m_first_link = light;
+    m_second_bounce = light;
     m_shifted = shifted ? std::move(shifted)
                         : std::make_shared<const FilmTaps>(film_taps(m_gather, m_time, m_delay, m_threads, true));
     m_first_read.assign(m_illumination.row.size() - 1, 0);
@@ -134,12 +133,12 @@ bool TransientFilm::takes_order(int order) const {
 }
 
 void TransientFilm::add_direct() {
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap bins = m_time.bin_map();
     const std::size_t T = std::size_t(m_time.bins);
     for (const DirectArrival& a : m_gather.direct) {
         if (!takes_order(a.order)) continue;
         // A delta at an exact path lies wholly in the bin that contains it.
-        const double b = std::floor((a.path - start) * inv_bin);
+        const double b = bins.bin_floor(a.path);
         if (b < 0 || b >= double(T)) continue;
         float* v = m_cube + (std::size_t(a.pixel) * T + std::size_t(b)) * 3;
         for (int c = 0; c < 3; ++c) v[c] += float(a.radiance[c]);
@@ -162,20 +161,20 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
         TPRF_CHECK_EQ(m_kept, std::size_t(0));  // add_block has filmed what it kept
         m_capacity = film_buffer_bins(n, std::max(bins, std::size_t(kSinkBins)));
         m_indirect.assign(n * (m_capacity + 2 * pad) * 3 + kSlack, 0.0f);
-        if (m_first_link) m_first.assign(m_indirect.size(), 0.0f);
+        if (m_second_bounce) m_first.assign(m_indirect.size(), 0.0f);
     }
     const std::size_t stride = (m_capacity + 2 * pad) * 3;
     if (m_kept == 0) m_first_bin = block.first_bin;
     TPRF_CHECK_EQ(block.first_bin, m_first_bin + int(m_kept));
     TPRF_CHECK_LE(m_kept + bins, m_capacity);
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap time_bins = m_time.bin_map();
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {  // each patch's row is its own
         float* row = m_indirect.data() + i * stride + (pad + m_kept) * 3;
         std::copy_n(source + i * bins * 3, bins * 3, row);
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {
             const Pulse& p = m_illumination.pulses[k];
             if (!p.exact_at_sensors() || !takes_order(p.order)) continue;
-            const double b = std::floor((p.path - start) * inv_bin) - block.first_bin;
+            const double b = time_bins.bin_floor(p.path) - block.first_bin;
             if (b < 0 || b >= double(bins)) continue;
             float* v = row + std::size_t(b) * 3;
             // What is left is the light of other orders in that bin; float cancellation must not
@@ -299,7 +298,7 @@ void TransientFilm::add_taps(const FilmTaps& taps, const std::vector<float>& row
         std::int64_t n = std::int64_t(bins);
         if (lit) {  // first-link light: only the bins its links can reach hold any (zeros around them)
             if (!(*lit)[tap.patch]) continue;
-            const auto [lo, hi] = m_first_link->bins_of(tap.patch);
+            const auto [lo, hi] = m_second_bounce->bins_of(tap.patch);
             const std::int64_t skip = std::max<std::int64_t>(0, lo - first_bin);
             n = std::min<std::int64_t>(n, hi - first_bin) - skip;
             if (n <= 0) continue;
@@ -328,10 +327,10 @@ void TransientFilm::finish() {
     const std::size_t rows = (m_indirect.size() - kSlack) / stride;
     for (std::size_t i = 0; i < rows && stale > 0; ++i) {
         std::fill_n(m_indirect.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
-        if (m_first_link) std::fill_n(m_first.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
+        if (m_second_bounce) std::fill_n(m_first.data() + i * stride + (pad + m_kept) * 3, stale * 3, 0.0f);
     }
-    if (m_first_link) {  // the light one link after its pulse, apart from the rest, for all the kept bins
-        m_first_link->fill({m_first_bin, m_kept}, [this](int order) { return takes_order(order); },
+    if (m_second_bounce) {  // the light one link after its pulse, apart from the rest, for all the kept bins
+        m_second_bounce->fill({m_first_bin, m_kept}, [this](int order) { return takes_order(order); },
                            m_first.data() + pad * 3, stride, m_first_lit, &m_first_read);
         parallel_for(rows, {m_threads, 64, true}, [&](std::size_t i) {
             if (!m_first_lit[i]) return;  // no second bounce read here: the rest is the whole profile
@@ -343,7 +342,7 @@ void TransientFilm::finish() {
     }
     parallel_for(pixels, {m_threads, 64, true}, [&](std::size_t px) {
         add_taps(*m_taps, m_indirect, nullptr, px);
-        if (m_first_link) add_taps(*m_shifted, m_first, &m_first_lit, px);
+        if (m_second_bounce) add_taps(*m_shifted, m_first, &m_first_lit, px);
     });
     m_kept = 0;
 }

@@ -8,7 +8,7 @@
 #include "tprf/geometry/neighbours.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 #include "tprf/transport/light_sources.h"
 
 #include <algorithm>
@@ -462,10 +462,9 @@ void order_arrivals(std::vector<DirectArrival>& v, const TimeAxis* time) {
         return;
     }
     if (v.empty()) return;
-    const double inv_bin = 1.0 / time->bin_width_m(), start = time->start_m(), bins = double(time->bins);
-    const auto bin = [&](const DirectArrival& a) {
-        return std::int64_t(std::clamp(std::floor((a.path - start) * inv_bin), -1.0, bins));
-    };
+    const BinMap map = time->bin_map();
+    const double bins = double(time->bins);
+    const auto bin = [&](const DirectArrival& a) { return std::int64_t(std::clamp(map.bin_floor(a.path), -1.0, bins)); };
     std::int64_t lo = bin(v[0]), hi = lo;
     int orders = 0;
     for (const DirectArrival& a : v) {
@@ -571,7 +570,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const G
             thread_local std::vector<std::pair<std::uint32_t, double>> weights;
             kernel_weights(patches, sp.patch, sp.point, radius[sp.patch], candidates, weights);
             for (const auto& [q, w] : weights) {
-                const float shift = options.first_link ? float(options.first_link->shift(q, sp.point)) : 0.0f;
+                const float shift = options.second_bounce ? float(options.second_bounce->shift(q, sp.point)) : 0.0f;
                 run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
             }
             const std::size_t first = direct.size();
@@ -592,9 +591,9 @@ Gather gather_points(const SensingPoints& points, int width, int height, const G
 
 void merge_taps(std::vector<PixelTap>& taps, const TimeAxis& time) {
     if (taps.size() < 2) return;
-    const double inv_bin = 1.0 / time.bin_width_m();
+    const BinMap bins = time.bin_map();
     const auto half = [&](double leg) {  // the half bin of a leg
-        const double lag = leg * inv_bin, whole = std::floor(lag);
+        const double lag = bins.lag(leg), whole = std::floor(lag);
         return std::int64_t(2.0 * whole) + (lag - whole >= 0.5 ? 1 : 0);
     };
     // Open addressing over at least twice the taps (a power of two): slot -> merged index + 1.

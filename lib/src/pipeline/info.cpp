@@ -1,5 +1,6 @@
 #include "tprf/pipeline/info.h"
 
+#include "cubes.h"
 #include "staging.h"
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
@@ -78,12 +79,17 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     return s;
 }
 
-// ---- Resource estimate (SPEC.md v2, "Links and scale": `tprf info`, `--max-memory`) ----
+// ---- Resource estimate (`tprf info`, `--max-memory`) ----
 //
-// Every constant below was measured on the project's machine (AMD EPYC, 2 cores, 23.5 GiB; see
-// bench/RESULTS.md for the runs the throughputs come from): bytes from VmRSS and VmHWM around each stage
-// (meshes/corner.json and meshes/cornell-box.json at their own and at finer patch sizes), seconds on 2
-// threads. Repeated runs on that shared machine vary by up to 30%; the estimate aims at a factor of 2.
+// Sizes come from the stages' own rules wherever a stage has one: the patch set's and the link set's
+// arrays (PatchSet::bytes_for, ClusterTree::bytes_for, Links::kLinkBytes), the link builders' records
+// (link_build_sizes), the march's shape and working memory (march_shape, march_working_bytes), the
+// films' buffers (film_buffer_bytes) and the cubes (render_cubes). What remains is measured: each
+// constant below names, after `//`, the benchmark of bench/ that measures it and the counter that
+// benchmark reports in the constant's unit. `python3 bench/estimate_constants.py` runs them all, prints
+// each measured value beside the constant, and checks the estimate against renders of the sample scenes
+// (within a factor of 2 in peak memory and seconds). Seconds are for 2 threads; the estimate aims at a
+// factor of 2.
 
 namespace {
 
@@ -91,91 +97,84 @@ constexpr double kMB = 1e6;
 constexpr double kGB = 1e9;
 
 // Memory, bytes.
-constexpr double kBaseBytes = 16 * kMB;          // the process before any stage: code, libraries, threads
-constexpr double kPatchBytes = 108;              // a patch's arrays besides its corners (centroid ... object)
-constexpr double kCornerBytes = 24;              // one corner (a Vec3)
-constexpr double kMeshBytesPerFace = 150;        // a mesh file while it is loaded and triangulated (1M faces:
-                                                 // 84 binary PLY, 87 OBJ, 183 binary STL; bench/RESULTS.md)
-constexpr double kEmbreeBytesPerPatch = 180;     // Embree's quads and BVH (RTC_BUILD_QUALITY_HIGH), at its peak
-constexpr double kLinkBytes = 12;                // a link: source u32, form factor f32, distance f32
-constexpr double kRowBytes = 8;                  // a CSR row offset per receiver
-constexpr double kLinkBuildBytes = 4;            // the link builder's pair lists, per link (8 bytes a pair)
-constexpr double kHierarchicalLinkBuildBytes = 10;  // the hierarchical builder's records (20 bytes a pair
-                                                    // of links; 16 a link until 2026-11-26, when a wavy
-                                                    // sheet at 99k patches measured 15)
-constexpr double kOracleBytesPerNode = 16 * 24;  // the hierarchical builder's stored points, 16 a node
-constexpr double kTreeBytesPerNode = 100;        // a cluster tree node (bounds, cone, ranges, levels)
-constexpr double kPulseBytes = 64;               // a pulse (40 bytes) and the per-patch lists it was built in
-constexpr double kGatherBytesPerSample = 450;    // sensing point, neighbour lists, taps before and after assembly
-constexpr double kGatherBytesPerPatch = 100;     // FLANN's index over the centroids
-constexpr double kShortLinkBytes = 16;           // a link shorter than a block, in the solver's own list
-constexpr double kSameBinLinkBytes = 8;          // a link within one bin
-constexpr double kPackedLinkBytes = 12;          // a flat set's link packed for the march (solver_plan.cpp
-                                                 // pack_links): source and lag u32, two taps f32
-constexpr double kDenseRowLinks = 256;           // links a receiver from which the march packs them (kDenseRow)
-constexpr int kDenseWindowBins = 64;             // the windows packed links are read in (kDenseLongestWindow)
-const int kBlockBins = SolverOptions{}.block_bins;  // the solver's block (hierarchical sets: shorter)
-constexpr int kPointSourcePulses = 2;            // pulses per patch and point source: its 16 samples' pulses are
-                                                 // merged per bin (IlluminationOptions::merge_bins), 1-2 bins
-// Area sources: a lit patch keeps a pulse per bin that the source's paths span from it (merged there).
+// The process before any stage: code, libraries, threads.
+constexpr double kBaseBytes = 16 * kMB;  // tprf_tiny_render: peak_bytes
+// A mesh file while it is loaded and triangulated, per face.
+constexpr double kMeshBytesPerFace = 150;  // BM_LoadBinaryStl: bytes_per_face
+// Embree's quads and BVH (RTC_BUILD_QUALITY_HIGH) at its peak, per patch.
+constexpr double kEmbreeBytesPerPatch = 180;  // BM_Visibility: bytes_per_patch
+// A pulse, with the per-patch lists it is built in.
+constexpr double kPulseBytes = 64;  // BM_Illuminate/area_light:0: bytes_per_pulse
+// The camera's gather per sample: sensing point, neighbour lists, taps before and after assembly.
+constexpr double kGatherBytesPerSample = 450;  // BM_PrepareCamera/96/0: bytes_per_sample
+// The camera's gather per patch: the neighbour index over the centroids.
+constexpr double kGatherBytesPerPatch = 100;  // BM_NeighbourIndex: bytes_per_patch
 
-// Link counts.
-constexpr std::size_t kPairSamples = 1024;       // patches sampled to estimate which pairs face each other
-/// Hierarchical links: c N^0.45 sqrt(0.003 / tolerance), a fit to what the builder made (bench/RESULTS.md,
-/// third step): the Cornell box from 4k to 1M patches at tolerance 0.003 (1 cm bins: 2.7M to 51.5M
-/// links, the fit within 0.6x-1.6x; at 5 mm bins up to 1.7x more), the statue at 0.01-0.001 (within
-/// 1.3x). The count grows slower than N: far apart, the same cluster links serve finer patches.
-constexpr double kHierarchicalLinksScale = 1.03e5;
+// Counts.
+// Patches sampled to estimate which pairs face each other (a parameter of the estimate).
+constexpr std::size_t kPairSamples = 1024;
+// Pulses per patch and point source: a patch's samples' pulses merged per bin
+// (IlluminationOptions::merge_bins). An area source's lit patch keeps a pulse per bin its paths span.
+constexpr double kPointSourcePulses = 2;  // BM_Illuminate/area_light:0: pulses_per_patch_source
+// Taps of a camera sample (its neighbouring patches), and of a pixel once its samples' are merged.
+constexpr double kTapsPerSample = 8;  // BM_PrepareCamera/96/1: taps_per_pixel
+constexpr double kTapsPerPixel = 32;  // BM_PrepareCamera/96/0: taps_per_pixel
+// Hierarchical links: c N^e sqrt(0.003 / tolerance). The exponent is a fit over 4k to 1M patches
+// (bench/scaling_sweep.py: the count grows slower than N, as far apart the same cluster links serve
+// finer patches); the scale is measured at one size.
 constexpr double kHierarchicalLinksExponent = 0.45;
-/// The share of a full ring (the scene's diagonal) that an average node of a hierarchical set keeps
-/// (its longest outgoing link): (N / 16k)^(-1/3), at most 1. Measured on the Cornell box: 0.84 (4k),
-/// 0.74 (16k), 0.47 (64k), 0.30 (256k), 0.20 (1M); the statue (57k): 0.9.
-double hierarchical_ring_share(double n) { return std::min(1.0, std::cbrt(16000.0 / std::max(n, 1.0))); }
+constexpr double kHierarchicalLinksScale = 1.03e5;  // BM_HierarchicalLinkStage/near_field:0: links_scale
+// The share of a full ring (the scene's diagonal) that an average node of a hierarchical set keeps (its
+// longest outgoing link): (N / R)^(-1/3), at most 1, R patches being where it reaches 1. The exponent is
+// a fit over 4k to 1M patches (bench/scaling_sweep.py).
+constexpr double kRingSharePatches = 16000;  // BM_HierarchicalLinkStage/near_field:0: ring_share_patches
+double hierarchical_ring_share(double n) { return std::min(1.0, std::cbrt(kRingSharePatches / std::max(n, 1.0))); }
 
 // Seconds on 2 threads.
-constexpr double kPatchSeconds = 4e-7;               // per patch (110k patches in 0.04 s)
-constexpr double kMeshSecondsPerFace = 4.5e-7;       // reading a mesh file and cutting it (1M faces: 0.14 s
-                                                     // binary PLY to 0.42 s ASCII OFF, bench/RESULTS.md)
-constexpr double kEmbreeSeconds = 1.2e-6;            // per patch (110k patches in 0.12 s)
-constexpr double kPairsPerSecond = 4.2e6;            // flat links: unordered pairs considered (4.1-4.4 M/s)
-/// Hierarchical link stage: s N^0.74 sqrt(0.003 / tolerance) (the Cornell box: 3.7 s at 4k patches, 42 s at
-/// 64k, 262 s at 1M; the statue at 0.01: 12 s, 0.7x of it).
-constexpr double kHierarchicalLinkSecondsScale = 9.5e-3;
+constexpr double kPatchSeconds = 4e-7;  // BM_BuildPatches: seconds_per_patch
+// Reading a mesh file and cutting it, per face (ASCII OFF: the slowest reader).
+constexpr double kMeshSecondsPerFace = 4.5e-7;  // BM_LoadAsciiOff: seconds_per_face
+constexpr double kEmbreeSeconds = 1.2e-6;  // BM_Visibility: seconds_per_patch
+// Flat links: unordered pairs considered a second.
+constexpr double kPairsPerSecond = 4.2e6;  // BM_LinkStage/4000: pairs_per_s
+// Hierarchical link stage: s N^e sqrt(0.003 / tolerance); the exponent a fit as above.
 constexpr double kHierarchicalLinkSecondsExponent = 0.74;
-constexpr double kPulseSeconds = 2e-7;               // per pulse, shadow rays included
-constexpr double kAreaSourceSeconds = 4e-5;          // per patch and area source that face each other (the
-                                                     // Cornell box's light: 2.9e-5 at 4.5k patches and 5 mm
-                                                     // bins, 4.4e-5 at 1M patches and 1 cm)
-constexpr double kSampleSeconds = 2e-6;              // per camera sample (0.35-1.0 M samples/s)
-constexpr double kTapBinSeconds = 1.0 / 1.5e9;       // the film: one tap applied to one bin
-// camera.shift_second_bounce: the second bounce from the links, its shift and its own taps, per link
-// (measured on the Cornell box: 0.15 s for 2.9M links, 2.1 s for 46M).
-constexpr double kFirstLinkSecondsPerLink = 5e-8;
-// The solve: link-bin updates a second, grey / colour. Flat 4k Cornell box, 2 Zen 5 cores, 2026-11-28:
-// colour 11.6e9 with AVX-512, 7.8e9 with AVX2 (packed links); grey 19-22e9 with AVX-512. The AVX2
-// rates, for machines without AVX-512 (grey: the colour one's 1.7x, as with AVX-512).
-constexpr double kLinkBinSeconds[2] = {1.0 / 13e9, 1.0 / 7.5e9};
-constexpr double kShortLinkBinSeconds = 1.0 / 1e9;   // a short link applied bin by bin
-/// The hierarchical solve per patch and bin: 2.6e-7 to 1.4e-6 s on the Cornell box from 4k to 1M patches
-/// (3 channels), 4.3e-7 on the statue (1 channel).
-constexpr double kHierarchicalPatchBinSeconds = 5e-7;
-/// Hierarchical links in the near field (single patches, all of them refined to): a wavy sheet of 99k
-/// patches under 10 cm bins, 159M links in 88 s.
-constexpr double kNearLinkSeconds = 5.5e-7;
-constexpr double kWriteSeconds = 0.2;                // the images and render.json
-constexpr double kCubeBytesPerSecond = 0.7e9;        // writing back the memory-mapped cubes
-constexpr double kSpreadBuildBytes = 16;          // link_spread.cpp: each piece in its row's list while the CSR is made
-constexpr double kSpreadSecondsPerLink = 2e-7;     // link_spread.cpp: 0.6 s for the Cornell box's 2.9M flat links
-constexpr double kSteadySecondsPerLink = 3e-8;       // the steady state (BiCGSTAB on the links, 3 channels)
-constexpr int kTapsPerSample = 8;                    // neighbouring patches a camera sample interpolates between
-constexpr int kTapsPerPixel = 32;                    // at most, once the samples of a pixel are merged
+constexpr double kHierarchicalLinkSecondsScale = 9.5e-3;  // BM_HierarchicalLinkStage/near_field:0: seconds_scale
+// Hierarchical links in the near field (single patches, all of them refined to), per link.
+constexpr double kNearLinkSeconds = 5.5e-7;  // BM_HierarchicalLinkStage/near_field:1: seconds_per_link
+// Per pulse of a point source, shadow rays included.
+constexpr double kPulseSeconds = 2e-7;  // BM_Illuminate/area_light:0: seconds_per_pulse
+// Per patch and area source that face each other.
+constexpr double kAreaSourceSeconds = 4e-5;  // BM_Illuminate/area_light:1: seconds_per_patch_source
+constexpr double kSampleSeconds = 2e-6;  // BM_PrepareCamera/96/0: seconds_per_sample
+// The film: one tap applied to one bin.
+constexpr double kTapBinSeconds = 1.0 / 1.5e9;  // BM_FilmBlock/96/0: seconds_per_tap_bin
+// camera.shift_second_bounce: the second bounce from the links, its shift and its own taps, per link.
+constexpr double kSecondBounceSecondsPerLink = 5e-8;  // BM_SecondBounceLight: seconds_per_link
+// The solve's link-bin updates, flat sets, with the kernels every x86-64-v3 machine runs (AVX2).
+constexpr double kGreyLinkBinSeconds = 1.0 / 13e9;  // BM_TransientSolveGrey/wide:0: seconds_per_link_bin
+constexpr double kColourLinkBinSeconds = 1.0 / 7.5e9;  // BM_TransientSolve/wide:0: seconds_per_link_bin
+// A link shorter than a block, applied bin by bin (3 channels).
+constexpr double kShortLinkBinSeconds = 1.0 / 1e9;  // BM_MeshSceneSolve/wide:0: seconds_per_short_link_bin
+// The hierarchical solve per patch and bin.
+constexpr double kHierarchicalPatchBinSeconds = 5e-7;  // BM_MeshSceneSolve/wide:0: seconds_per_patch_bin
+// A march of B lanes costs 1 + (B - 1) x this many single marches.
+constexpr double kBatchLaneCost = 1.0 / 15.0;  // BM_TransientSolveBatch/K:16/grey:1: extra_cost_per_lane
+// The write phase's own work besides the cubes: the images, render.json, moving the files in place.
+constexpr double kWriteSeconds = 0.2;  // tprf_tiny_render: write_seconds
+// Writing back the memory-mapped cubes.
+constexpr double kCubeBytesPerSecond = 0.7e9;  // BM_WriteCube: bytes_per_s
+// links.spread_pieces, per link spread.
+constexpr double kSpreadSecondsPerLink = 2e-7;  // BM_SpreadPatchLinks: seconds_per_link
+// The steady state (BiCGSTAB on the links, 3 channels), per link.
+constexpr double kSteadySecondsPerLink = 3e-8;  // BM_SteadyState: seconds_per_link
+// Links through mirrors: ordered pairs of patches judged a second.
+constexpr double kMirrorPairsPerSecond = 1.0e6;  // BM_MirrorLinks: pairs_per_s
 
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
 
-bool grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
-
-// Whether the camera reads the second bounce at its samples' times (render.cpp, make_first_link_light):
+// Whether the camera reads the second bounce at its samples' times (render.cpp, make_second_bounce_light):
 // no mirror or glass.
 bool shifts_second_bounce(const Scene& scene) {
     return scene.camera && scene.camera->shift_second_bounce &&
@@ -185,20 +184,7 @@ bool shifts_second_bounce(const Scene& scene) {
 // Whether some mirror or glass reflects the channels unalike: its links are tinted (Links::tint).
 bool tinted_mirrors(const Scene& scene) {
     return std::any_of(scene.objects.begin(), scene.objects.end(),
-                       [](const Object& o) { return !grey(o.material.reflectance); });
-}
-
-// The solver marches one channel when every albedo, every source and every mirror's reflectance is grey
-// (as the solver decides).
-bool scene_grey(const Scene& scene) {
-    if (tinted_mirrors(scene)) return false;
-    for (const Object& o : scene.objects)
-        if (!grey(o.albedo) || !grey(o.emission)) return false;
-    for (const Light& l : scene.lights) {
-        if (const auto* p = std::get_if<PointLight>(&l); p && !grey(p->intensity)) return false;
-        if (const auto* p = std::get_if<Laser>(&l); p && !grey(p->power)) return false;
-    }
-    return true;
+                       [](const Object& o) { return !is_grey(o.material.reflectance); });
 }
 
 // A patch's circumradius from its area: about 0.75 sqrt(area) for the squares and near-equilateral
@@ -206,17 +192,20 @@ bool scene_grey(const Scene& scene) {
 double patch_size(double area) { return 0.75 * std::sqrt(area); }
 
 // What the sampled patch pairs say: the share that face each other, the same among pairs with an
-// emitter, and among the facing ones the share shorter than a block, within one bin, and in the near
-// field of a hierarchical set (gaps under near_gap_m, which is kept with them).
+// emitter, and among the facing ones the share shorter than a block, within one bin, between one and two
+// blocks (the long pass's shortest window), and in the near field of a hierarchical set (gaps under
+// near_gap_m, which is kept with them).
 struct PairShares {
-    double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0, near = 0.0;
+    double facing = 0.0, emitter_facing = 0.0, shorter_than_block = 0.0, same_bin = 0.0, first_window = 0.0;
+    double near = 0.0;
     double near_gap_m = 0.0;
 };
 
 PairShares pair_shares(const Scene& scene, const PatchCensus& census, double block_m, double bin_m, double gap_m) {
     PairShares s;
     s.near_gap_m = gap_m;
-    std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0, near = 0;
+    std::uint64_t pairs = 0, facing = 0, emitter_pairs = 0, emitter_facing = 0, shorter = 0, same = 0, window = 0;
+    std::uint64_t near = 0;
     const auto& v = census.samples;
     for (std::size_t i = 0; i < v.size(); ++i) {
         const bool emits_i = (scene.objects[v[i].object].emission > 0.0).any();
@@ -232,6 +221,7 @@ PairShares pair_shares(const Scene& scene, const PatchCensus& census, double blo
             emitter_facing += emits;
             shorter += r < block_m;
             same += r < bin_m;
+            window += r >= block_m && r < 2.0 * block_m;
             near += r < gap_m + patch_size(v[i].area) + patch_size(v[j].area);
         }
     }
@@ -240,6 +230,7 @@ PairShares pair_shares(const Scene& scene, const PatchCensus& census, double blo
     if (facing > 0) {
         s.shorter_than_block = double(shorter) / double(facing);
         s.same_bin = double(same) / double(facing);
+        s.first_window = double(window) / double(facing);
         s.near = double(near) / double(facing);
     }
     return s;
@@ -253,22 +244,31 @@ double median_extent(const PatchCensus& census) {
     return 2.0 * patch_size(areas[areas.size() / 2]);
 }
 
-// The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
-// cluster link (default_min_lag_bins: four median patch sizes in bins, 1 to 32) are refined, so
-// every facing pair of patches whose gap is shorter is a link of its own. The sampled patches' median
-// size stands for the set's.
-double near_gap_m(const PatchCensus& census, double bin_m) {
-    if (census.samples.empty() || !(bin_m > 0.0)) return 0.0;
-    return default_min_lag_bins(median_extent(census), bin_m) * bin_m;
+// The shortest cluster link of a hierarchical set, bins (LinkSet::block_bins; default_min_lag_bins: four
+// median patch sizes in bins, 1 to 32); 0 for flat links. The sampled patches' median size stands for
+// the set's.
+int cluster_block_bins(const PatchCensus& census, double bin_m) {
+    if (census.samples.empty() || !(bin_m > 0.0)) return 0;
+    return default_min_lag_bins(median_extent(census), bin_m);
 }
 
-// Solver layers and per-order terms, as the render asks for them (render.cpp bounce_terms, solver_plan.cpp
-// plan_layers): {layers, solver terms, per-bounce cubes}.
-std::array<int, 3> bounce_layout(const SolverSettings& s) {
-    const int cubes = s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0;
-    if (s.max_bounces >= 0) return {s.max_bounces + 1, cubes > 0 ? s.max_bounces + 1 : 0, cubes};
-    if (cubes > 1) return {cubes, cubes, cubes};
-    return {1, 0, cubes};
+// The gap under which a hierarchical set links single patches only: clusters nearer than the shortest
+// cluster link are refined, so every facing pair of patches whose gap is shorter is a link of its own.
+double near_gap_m(const PatchCensus& census, double bin_m) { return cluster_block_bins(census, bin_m) * bin_m; }
+
+// The options of the march a render runs: its camera's (per-bounce cubes as the solver's terms), or
+// without a camera its capture's.
+SolverOptions march_options(const Scene& scene, int threads) {
+    SolverOptions o;
+    o.delay = scene.solver.delay;
+    o.threads = threads;
+    if (scene.camera) {
+        o.max_bounces = scene.solver.max_bounces;
+        o.bounce_terms = bounce_cubes(scene.solver);
+    } else if (scene.capture) {
+        o.max_bounces = capture_march_bounces(*scene.capture);
+    }
+    return o;
 }
 
 // Whether a ray from `o` along `d` meets the object from its front (a rectangle exactly; a mesh: its
@@ -328,7 +328,8 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
     const double n = double(census.patches), others = std::max(n - 1.0, 0.0);
     const double flat = shares.facing * n * others;  // facing pairs, both directions (visibility not removed)
     double links = flat, rows = n, tree = 0.0, seconds = 0.5 * n * others / kPairsPerSecond;
-    double build_bytes = kLinkBuildBytes;
+    const LinkBuildSizes record = link_build_sizes();
+    double build_bytes = 0.5 * double(record.flat_pair);
     e.nodes = census.patches;
     if (scene.links.method == LinkMethod::Hierarchical) {
         const double tolerance_factor = std::sqrt(0.003 / scene.links.tolerance);
@@ -339,24 +340,24 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
         e.near_gap_m = shares.near_gap_m;
         links = std::min(flat, std::max(near, kHierarchicalLinksScale * std::pow(n, kHierarchicalLinksExponent) *
                                                   tolerance_factor));
-        build_bytes = kHierarchicalLinkBuildBytes;
+        build_bytes = 0.5 * double(record.hierarchical_pair);
         e.nodes = census.patches > 0 ? 2 * census.patches - 1 : 0;
         rows = double(e.nodes);
-        tree = kTreeBytesPerNode * rows;
+        tree = double(ClusterTree::bytes_for(census.patches, e.nodes));
         seconds = std::max(near * kNearLinkSeconds, kHierarchicalLinkSecondsScale *
                                                         std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor);
     }
-    double build = build_bytes * links + (tree > 0.0 ? kOracleBytesPerNode * rows : 0.0);
+    double build = build_bytes * links + (tree > 0.0 ? double(record.oracle_node) * rows : 0.0);
     // links.spread_pieces (transport/link_spread.cpp): each patch link becomes up to that many pieces.
     const double pieces = spread_pieces(scene, census);
     if (pieces > 0.0) {
         const double patch_links = scene.links.method == LinkMethod::Hierarchical ? std::min(links, shares.near * flat) : links;
         links += patch_links * (pieces - 1.0);
-        build = std::max(build, (kSpreadBuildBytes + kLinkBytes) * patch_links * pieces);
+        build = std::max(build, double(record.spread_link + Links::kLinkBytes) * patch_links * pieces);
         seconds += patch_links * kSpreadSecondsPerLink;
     }
     e.links = to_size(links);
-    e.link_bytes = to_size(kLinkBytes * links + kRowBytes * (rows + n) + tree);
+    e.link_bytes = to_size(double(Links::kLinkBytes) * links + double(Links::kRowBytes) * (rows + n) + tree);
     e.link_build_bytes = to_size(build);
     e.seconds.links = kEmbreeSeconds * n + seconds;
 }
@@ -364,8 +365,6 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
 // Links through mirrors and glass (transport/mirror_links.cpp): every pair of patches in front of a
 // specular rectangle's reflecting side, both facing it, is a link (one reflection; chains of more are
 // left out). The share of the patches there comes from the census' samples.
-constexpr double kMirrorPairsPerSecond = 1.0e6;   // ordered pairs (echo scene: 160k pairs in 0.15 s)
-constexpr double kMirrorBuildBytes = 28;          // the pair records (16 bytes) and the rows' rebuilt copy
 
 void estimate_mirror_links(const Scene& scene, const PatchCensus& census, ResourceEstimate& e) {
     if (census.samples.empty()) return;
@@ -385,8 +384,9 @@ void estimate_mirror_links(const Scene& scene, const PatchCensus& census, Resour
         }
     }
     e.links += to_size(pairs);
-    e.link_bytes += to_size(kLinkBytes * pairs);
-    e.link_build_bytes += to_size(kMirrorBuildBytes * pairs);
+    e.mirror_links = to_size(pairs);
+    e.link_bytes += to_size(double(Links::kLinkBytes) * pairs);
+    e.link_build_bytes += to_size(double(link_build_sizes().mirror_link) * pairs);
     e.seconds.links += pairs / kMirrorPairsPerSecond;
 }
 
@@ -428,69 +428,104 @@ void estimate_camera(const Scene& scene, const PatchCensus& census, const PairSh
         e.samples = to_size(pixels * spp);
         const double taps = pixels * std::min(kTapsPerSample * spp, kTapsPerPixel);
         e.gather_bytes = to_size(kGatherBytesPerSample * double(e.samples) + kGatherBytesPerPatch * n);
-        const int films = 1 + bounce_layout(scene.solver)[2];
+        const int films = 1 + bounce_cubes(scene.solver);
         seconds += kSampleSeconds * double(e.samples) + kTapBinSeconds * taps * scene.time.bins * films;
-        if (shifts_second_bounce(scene)) seconds += kFirstLinkSecondsPerLink * double(e.links);
+        if (shifts_second_bounce(scene)) seconds += kSecondBounceSecondsPerLink * double(e.links);
     }
     e.seconds.gather = seconds;
 }
 
-// The march: rings of every node that sends (the largest delay is the scene's diagonal), block buffers,
-// the lists of links shorter than a block and the films' block scratch. Returns the part that grows
-// with the lanes (rings, blocks, the blocks handed over): the bytes of one illumination's lanes.
-double estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
-    const auto [layers, terms, cubes] = bounce_layout(scene.solver);
-    const double bin_m = scene.time.bin_width_m();
-    const int max_lag = int(std::min(census.diagonal / bin_m, 1e8));
-    e.channels = scene_grey(scene) ? 1 : 3;
-    e.layers = layers;
-    e.ring_bins = int(std::bit_ceil(unsigned(max_lag + kBlockBins + 2)));
-    const double n = double(census.patches), nodes = double(e.nodes), C = e.channels, L = layers;
-    const double share = scene.links.method == LinkMethod::Hierarchical ? hierarchical_ring_share(n) : 1.0;
-    // Flat sets' dense rows: the march packs the links once more and reads them in longer windows,
-    // which the rings' mirrors and the accumulators hold (a render's one illumination: 1 or 3 lanes).
-    const bool packed = scene.links.method == LinkMethod::Flat && double(e.links) >= kDenseRowLinks * n;
-    const int window = packed ? std::max(kBlockBins, kDenseWindowBins) : kBlockBins;
-    const double rings = L * nodes * (share * e.ring_bins + window + 1) * C * 4;
-    const double blocks = L * nodes * (kBlockBins + window) * C * 4 + 2 * L * nodes * C * 4;
-    // The solver's blocks and the films' kept profiles (film_buffer_bytes).
-    // A film that reads the second bounce apart keeps it in rows of its own.
-    const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
-    // The blocks handed to the sink, each illumination's (kSinkBins bins at most); short blocks
-    // (hierarchical sets) are kept a second time until the sink takes them, at most kSinkBytes.
-    const double handed = (1.0 + terms) * n * kSinkBins * 3 * 4;
-    const double outputs = handed + std::min(handed, double(kSinkBytes)) +
-                           (1.0 + cubes) * film_rows * film_buffer_bytes(census.patches, kSinkBins);
-    double lists = double(e.links) * (shares.shorter_than_block * kShortLinkBytes +
-                                      shares.same_bin * kSameBinLinkBytes) + 2 * kRowBytes * n;
-    // Tinted mirrors: the march keeps its own copy of the grey links (solver_plan.cpp plan_windows), the
-    // packed one where it packs them.
-    if (tinted_mirrors(scene) && !packed) lists += double(e.links) * kLinkBytes;
-    if (packed) lists += double(e.links) * kPackedLinkBytes;
-    e.solver_bytes = to_size(rings + blocks + outputs + lists);
-    // Layers that gather from links (solver_plan.cpp plan_layers): all but the first order's, or the one total.
-    const double fed = (layers == 1 && scene.solver.max_bounces < 0) ? 1 : layers - 1;
-    const double link_bins = double(e.links) * scene.time.bins * fed;
-    e.seconds.solve = link_bins * (kLinkBinSeconds[e.channels == 1 ? 0 : 1] +
-                                   shares.shorter_than_block * kShortLinkBinSeconds * C / 3.0);
-    // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
-    if (scene.links.method == LinkMethod::Hierarchical)
-        e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * n * scene.time.bins);
-    return rings + blocks + handed;
+// The march as the solver would plan it: its inputs from the census and the estimated links, its shape
+// by the solver's own rule (march_shape), the lengths of its lists from the sampled pairs, its working
+// bytes by the solver's own sum (march_working_bytes). The largest delay is the scene's diagonal.
+struct MarchEstimate {
+    MarchInputs inputs;
+    MarchShape shape;
+    std::size_t working_bytes = 0;
+    int max_lag = 0;  // bins
+};
+
+MarchEstimate estimate_march(const Scene& scene, const PatchCensus& census, const PairShares& shares,
+                             const ResourceEstimate& e, const SolverOptions& options, int illuminations) {
+    const bool hierarchical = scene.links.method == LinkMethod::Hierarchical;
+    const double bin_m = scene.time.bin_width_m(), links = double(e.links);
+    MarchEstimate m;
+    m.max_lag = int(std::min(census.diagonal / bin_m, 1e8));
+    MarchInputs in;
+    in.patches = census.patches;
+    in.nodes = e.nodes;
+    in.links = e.links;
+    in.clusters = hierarchical && e.nodes > census.patches;
+    in.cluster_block_bins = hierarchical ? cluster_block_bins(census, bin_m) : 0;
+    in.longest_lag = m.max_lag;
+    in.illuminations = illuminations;
+    in.channels = e.channels;
+    m.inputs = in;
+    m.shape = march_shape(in, options);
+    const MarchShape& s = m.shape;
+    const bool packed = s.lag_bits > 0, tinted = tinted_mirrors(scene);
+    MarchLists l;
+    // Every node keeps a ring as long as its longest outgoing link needs (a share of the diagonal in a
+    // hierarchical set; packed links: every ring the longest), and a mirror for its long links' windows.
+    const double share = hierarchical && !packed ? hierarchical_ring_share(double(census.patches)) : 1.0;
+    l.ring_bins = to_size(double(s.nodes) * (share * ring_bins(m.max_lag, s.block_bins) + ring_mirror_bins(s.window_bins)));
+    l.short_links = to_size(shares.shorter_than_block * links);
+    l.same_bin_links = to_size(shares.same_bin * links);
+    l.sweep_rows = std::min(census.patches, l.same_bin_links);
+    l.chebyshev = s.layers.layers == 1 && s.layers.fed == 1;
+    l.tinted = tinted;
+    l.tinted_long = tinted ? e.mirror_links : 0;
+    // A copy of the grey links, by window: rows of a flat set are by source, a hierarchical set's by octave.
+    l.sorted = !packed && (tinted || (!hierarchical && s.windows > 1));
+    l.sorted_links = l.sorted ? e.links - l.tinted_long : 0;
+    l.near_links = s.near_list ? to_size(shares.first_window * links) : 0;
+    l.packed_links = packed ? to_size((1.0 - shares.shorter_than_block) * links) : 0;
+    m.working_bytes = march_working_bytes(s, l);
+    return m;
 }
 
-// The memory-mapped cubes the solve fills (the transient cube, per-bounce cubes, patch profiles), and
-// what the write phase adds: the steady state, the images, the sensor's measurements.
+// The march and the films' kept profiles; the seconds of the solve. Returns the march's inputs for one
+// illumination and the bytes that one more illumination of a batch adds (a capture's, which marches
+// its laser points in batches).
+std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares,
+                                               const SolverOptions& options, ResourceEstimate& e) {
+    e.channels = march_channels(scene_keeps_grey(scene));
+    const MarchEstimate one = estimate_march(scene, census, shares, e, options, 1);
+    const MarchShape& s = one.shape;
+    e.march = s;
+    e.layers = s.layers.layers;
+    e.ring_bins = ring_bins(one.max_lag, s.block_bins);
+    // The films' kept profiles (film_buffer_bytes); a film that reads the second bounce apart keeps it in
+    // rows of its own.
+    const double film_rows = shifts_second_bounce(scene) ? 2.0 : 1.0;
+    const double films = (1.0 + bounce_cubes(scene.solver)) * film_rows * film_buffer_bytes(census.patches, kSinkBins);
+    e.solver_bytes = to_size(double(one.working_bytes) + films);
+    const double link_bins = double(e.links) * scene.time.bins * s.layers.fed;
+    e.seconds.solve = link_bins * ((e.channels == 1 ? kGreyLinkBinSeconds : kColourLinkBinSeconds) +
+                                   shares.shorter_than_block * kShortLinkBinSeconds * s.lanes / 3.0);
+    // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
+    if (scene.links.method == LinkMethod::Hierarchical)
+        e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * double(census.patches) * scene.time.bins);
+    if (!scene.capture || scene.camera) return {one.inputs, 0.0};
+    const MarchEstimate all = estimate_march(scene, census, shares, e, options, kMaxBatch);
+    return {one.inputs, std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1)};
+}
+
+// The memory-mapped cubes the solve fills (render_cubes: the transient cube, per-bounce cubes, patch
+// profiles; a camera's only where its pixels see something), and what the write phase adds: the steady
+// state, the images, the sensor's measurements.
 void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_profiles, ResourceEstimate& e) {
-    const double n = double(census.patches), T = scene.time.bins;
+    const double n = double(census.patches);
     double cube = 0.0, image = 0.0, measurements = 0.0;
     if (scene.camera) {
+        for (const RenderCube& c : render_cubes(scene, census.patches, patch_profiles)) {
+            cube += double(c.floats()) * sizeof(float) * (c.kind == RenderCube::Kind::Patches ? 1.0 : e.lit_pixels);
+            e.cubes.push_back({c.name, c.shape});
+        }
         const double pixels = double(scene.camera->width) * double(scene.camera->height);
-        cube = (1.0 + bounce_layout(scene.solver)[2]) * pixels * e.lit_pixels * T * 3 * 4;
         image = 4.0 * pixels * 3 * 4;  // the steady image, its preview and the writers' copies
         if (scene.sensor) measurements = pixels * (measurement_count(*scene.sensor, scene.time) * 3 + 1) * 4;
     }
-    if (patch_profiles) cube += n * T * 3 * 4;
     e.cube_bytes = to_size(cube);
     const double steady = 12.0 * n * 8;  // BiCGSTAB's vectors, one channel at a time, and the N radiosities
     e.write_bytes = to_size(steady + image + measurements);
@@ -498,13 +533,12 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
                       kSteadySecondsPerLink * double(e.links);
 }
 
-// The peak: the largest sum of what is held at once, stage by stage in the order of a render.
 // A capture's H (and its time-first copy while it is written); a scene with only a capture that stops at
 // the third bounce builds no links and marches nothing. A capture that marches solves its laser points
 // in batches of B illuminations, as pipeline/capture.cpp chooses B: the most, up to kMaxBatch, whose
 // lanes fit in the limit beside everything else held then (B = 1 when none fit: the peak then exceeds
-// the limit and the render is refused). A march of B lanes costs about 1 + (B - 1) / 15 single marches
-// (a 16-lane march measured 2x one lane, bench/capture_bench.py); ceil(L / B) marches are run.
+// the limit and the render is refused). ceil(L / B) marches are run, each costing 1 + (B - 1) x
+// kBatchLaneCost single ones.
 void estimate_capture(const Scene& scene, const PipelineOptions& options, double per_illumination,
                       ResourceEstimate& e) {
     if (!scene.capture) return;
@@ -530,9 +564,10 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
     e.capture_batch = batch;
     e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
     e.solver_bytes = to_size(fixed + batch * per_illumination);
-    e.seconds.solve *= double(e.capture_marches) * (1.0 + (batch - 1) / 15.0);
+    e.seconds.solve *= double(e.capture_marches) * (1.0 + (batch - 1) * kBatchLaneCost);
 }
 
+// The peak: the largest sum of what is held at once, stage by stage in the order of a render.
 void sum_peak(ResourceEstimate& e) {
     const std::size_t held = e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes;
     const std::pair<std::size_t, const char*> stages[] = {
@@ -625,21 +660,29 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     e.meshes = census.meshes;
     e.base_bytes = to_size(kBaseBytes);
     e.mesh_bytes = to_size(kMeshBytesPerFace * double(census.mesh_faces));
-    e.patch_bytes = to_size(kPatchBytes * n + kCornerBytes * double(census.corners));
+    e.patch_bytes = PatchSet::bytes_for(census.patches, census.corners);
     e.visibility_bytes = to_size(kEmbreeBytesPerPatch * n);
     e.seconds.patches = kPatchSeconds * n + kMeshSecondsPerFace * double(census.mesh_faces);
     // The links and the march are on the march's bins (march_time: a capture's may be wider).
     Scene marched = scene;
     marched.time = march_time(scene);
     const double bin_m = marched.time.bin_width_m();
-    const PairShares shares = pair_shares(marched, census, kBlockBins * bin_m, bin_m, near_gap_m(census, bin_m));
+    const SolverOptions solver = march_options(scene, options.threads);
+    const bool hierarchical = scene.links.method == LinkMethod::Hierarchical;
+    const int block_bins = march_block_bins(solver, hierarchical ? cluster_block_bins(census, bin_m) : 0);
+    const PairShares shares = pair_shares(marched, census, block_bins * bin_m, bin_m, near_gap_m(census, bin_m));
     e.facing_fraction = shares.facing;
     estimate_links(marched, census, shares, e);
     estimate_mirror_links(marched, census, e);
     estimate_camera(scene, census, shares, e);
-    const double per_illumination = estimate_solver(marched, census, shares, e);
+    const auto [march, per_illumination] = estimate_solver(marched, census, shares, solver, e);
     estimate_outputs(scene, census, patch_profiles, e);
     estimate_capture(scene, options, per_illumination, e);
+    if (e.capture_batch > 1) {
+        MarchInputs batch = march;
+        batch.illuminations = e.capture_batch;
+        e.march = march_shape(batch, solver);
+    }
     sum_peak(e);
     // The throughputs are for 2 threads; every stage but loading the meshes runs in parallel.
     const double scale = 2.0 / double(thread_count(options.threads));

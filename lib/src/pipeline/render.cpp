@@ -2,6 +2,7 @@
 
 #include "arrays.h"
 #include "capture_outputs.h"
+#include "cubes.h"
 #include "staging.h"
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
@@ -19,7 +20,7 @@
 #include "tprf/pipeline/ranks.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/light_sources.h"
 #include "tprf/transport/link_set.h"
@@ -69,7 +70,7 @@ struct Transport {
     LightSources sources;
     Illumination illumination;
     /// The second bounce, read at each sample's own time (camera.shift_second_bounce), or null.
-    std::unique_ptr<FirstLinkLight> first_link;
+    std::unique_ptr<SecondBounceLight> second_bounce;
     Gather gather;
 };
 
@@ -125,14 +126,14 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
     if (scene.camera->shift_second_bounce) {
-        t.first_link = make_first_link_light(t.patches, t.links, t.illumination, scene.time,
-                                             {.delay = scene.solver.delay,
-                                              .max_bounces = scene.solver.max_bounces,
-                                              .threads = options.threads},
-                                             !t.visibility->chains().empty());
-        gather_options.first_link = t.first_link.get();
+        t.second_bounce = make_second_bounce_light(t.patches, t.links, t.illumination, scene.time,
+                                                   {.delay = scene.solver.delay,
+                                                    .max_bounces = scene.solver.max_bounces,
+                                                    .threads = options.threads},
+                                                   !t.visibility->chains().empty());
+        gather_options.second_bounce = t.second_bounce.get();
     }
-    report.second_bounce_shifted = t.first_link != nullptr;
+    report.second_bounce_shifted = t.second_bounce != nullptr;
     t.gather = prepare_camera(*scene.camera, t.patches, t.sources, *t.visibility, gather_options);
     report.seconds.gather = seconds_since(start);
 }
@@ -147,29 +148,25 @@ struct Cubes {
     float* patch_cube = nullptr;
 };
 
-// Per-bounce terms asked for by `solver.bounces`: every order up to max_bounces, or orders 0..3 and
-// the tail of all later ones.
-int bounce_terms(const SolverSettings& s) { return s.bounces ? (s.max_bounces >= 0 ? s.max_bounces + 1 : 5) : 0; }
-
 void open_cubes(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays, Cubes& c) {
-    const Camera& camera = *scene.camera;
-    const std::size_t T = std::size_t(scene.time.bins), H = std::size_t(camera.height), W = std::size_t(camera.width);
-    c.cube = arrays.open("transient", {H, W, T, 3});
-    c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, c.cube,
-                                             FilmOptions{.delay = scene.solver.delay, .threads = options.threads});
-    c.film->read_first_link_apart(t.first_link.get());
-    if (options.patch_profiles) c.patch_cube = arrays.open("patch_transient", {t.patches.size(), T, 3});
-    const int terms = bounce_terms(scene.solver);
-    for (int k = 0; k < terms; ++k) {
-        float* term = arrays.open("transient_bounce_" + std::to_string(k), {H, W, T, 3});
-        const bool tail = scene.solver.max_bounces < 0 && k == terms - 1;
-        c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, term,
-                                                               FilmOptions{.delay = scene.solver.delay,
-                                                                           .order = k,
-                                                                           .last_is_tail = tail,
-                                                                           .threads = options.threads,
-                                                                           .taps = c.film->taps()}));
-        c.term_films.back()->read_first_link_apart(t.first_link.get(), c.film->shifted_taps());
+    for (const RenderCube& cube : render_cubes(scene, t.patches.size(), options.patch_profiles)) {
+        float* data = arrays.open(cube.name, cube.shape);
+        if (cube.kind == RenderCube::Kind::Patches) {
+            c.patch_cube = data;
+        } else if (cube.kind == RenderCube::Kind::Transient) {
+            c.cube = data;
+            c.film = std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, data,
+                                                     FilmOptions{.delay = scene.solver.delay, .threads = options.threads});
+            c.film->read_second_bounce_apart(t.second_bounce.get());
+        } else {  // after the transient cube: its film's taps serve every order's
+            c.term_films.push_back(std::make_unique<TransientFilm>(t.gather, t.illumination, scene.time, data,
+                                                                   FilmOptions{.delay = scene.solver.delay,
+                                                                               .order = cube.order,
+                                                                               .last_is_tail = cube.tail,
+                                                                               .threads = options.threads,
+                                                                               .taps = c.film->taps()}));
+            c.term_films.back()->read_second_bounce_apart(t.second_bounce.get(), c.film->shifted_taps());
+        }
     }
 }
 
@@ -204,7 +201,7 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
     SolverOptions solver_options;
     solver_options.delay = scene.solver.delay;
     solver_options.max_bounces = scene.solver.max_bounces;
-    solver_options.bounce_terms = bounce_terms(scene.solver);
+    solver_options.bounce_terms = bounce_cubes(scene.solver);
     solver_options.threads = options.threads;
     solver_options.progress = options.progress;
     // The patches' light from `lead` bins before the window on (the films read those bins too).
@@ -283,7 +280,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     r.time = scene.time;
     r.camera = scene.camera;
     r.solver = scene.solver;
-    r.bounce_terms = bounce_terms(scene.solver);
+    r.bounce_terms = bounce_cubes(scene.solver);
     r.stats = stats;
     r.seconds = report.seconds;
     if (scene.sensor) r.sensor = scene.sensor->exposure.type;

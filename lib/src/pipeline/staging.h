@@ -3,7 +3,7 @@
 // steps that `tprf render` and `tprf sensor` share.
 
 #include "tprf/core/time_axis.h"
-#include "tprf/pipeline/info.h"
+#include "tprf/pipeline/options.h"
 #include "tprf/scene/sensor_settings.h"
 
 #include <array>

@@ -76,6 +76,11 @@ struct PairSamples {
     double k_min = 0.0, k_max = 0.0, k_sum = 0.0;
 };
 
+// A node's point stored for the oracle's first look: where and which way it faces, in float.
+struct StoredPoint {
+    Eigen::Vector3f x, n;
+};
+
 class Builder {
 public:
     Builder(const PatchSet& patches, const Visibility& vis, const LinkOptions& options, const HierarchyOptions& h,
@@ -223,9 +228,6 @@ private:
     std::vector<double> m_cone_angle;  // per node: its normal cone's half-angle (facing, millions of times)
     int m_samples;
     int m_pieces;
-    struct StoredPoint {
-        Eigen::Vector3f x, n;
-    };
     std::vector<StoredPoint> m_points;  // per node, m_samples points (look)
 };
 
@@ -590,6 +592,12 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
         }
     }
     return set;
+}
+
+std::size_t hierarchical_pair_bytes() { return sizeof(LinkRecord); }
+
+std::size_t oracle_node_bytes(const HierarchyOptions& options) {
+    return std::size_t(std::clamp(options.samples, 4, kMaxSamples)) * sizeof(StoredPoint);
 }
 
 }  // namespace tprf

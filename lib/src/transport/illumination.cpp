@@ -122,9 +122,9 @@ Pulse self_pulse(const PatchSet& patches, std::size_t i) {
 // Merges the pulses of one patch that share a bin of `time`, an order, a source and a propagation.
 void merge_by_bin(std::vector<Pulse>& pulses, const TimeAxis& time) {
     if (pulses.size() < 2) return;
-    const double inv_bin = 1.0 / time.bin_width_m(), start = time.start_m();
+    const BinMap bins = time.bin_map();
     auto key = [&](const Pulse& p) {
-        return std::make_tuple(std::floor((p.path - start) * inv_bin), p.order, p.propagates, p.point_source,
+        return std::make_tuple(bins.bin_floor(p.path), p.order, p.propagates, p.point_source,
                                p.area_source);
     };
     std::stable_sort(pulses.begin(), pulses.end(), [&](const Pulse& a, const Pulse& b) { return key(a) < key(b); });

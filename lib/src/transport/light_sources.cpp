@@ -411,8 +411,8 @@ double arrive_area_centroid(const AreaSource& a, const Vec3& x, const Vec3& n, c
 
 std::vector<AreaPair> merge_pairs_by_bin(const std::vector<AreaPair>& pairs, double bin_m, double start_m) {
     if (pairs.empty()) return {};
-    const double inv_bin = 1.0 / bin_m;
-    const auto bin = [&](double path) { return std::floor((path - start_m) * inv_bin); };
+    const BinMap bins{start_m, 1.0 / bin_m};
+    const auto bin = [&](double path) { return bins.bin_floor(path); };
     double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
     for (const AreaPair& q : pairs) {
         lowest = std::min(lowest, bin(q.path));

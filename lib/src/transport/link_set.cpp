@@ -1,5 +1,6 @@
 #include "tprf/transport/link_set.h"
 
+#include "patch_pairs.h"
 #include "tprf/geometry/patches.h"
 
 namespace tprf {
@@ -29,6 +30,16 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
     if (settings.spread_pieces > 0 && bin_width_m > 0.0)
         spread_patch_links(set, patches, bin_width_m, settings.spread_pieces, options.threads);
     return set;
+}
+
+LinkBuildSizes link_build_sizes(const HierarchyOptions& options) {
+    LinkBuildSizes s;
+    s.flat_pair = flat_pair_bytes();
+    s.hierarchical_pair = hierarchical_pair_bytes();
+    s.oracle_node = oracle_node_bytes(options);
+    s.spread_link = sizeof(RowLink);
+    s.mirror_link = mirror_link_bytes();
+    return s;
 }
 
 }  // namespace tprf

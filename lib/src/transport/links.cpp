@@ -266,4 +266,6 @@ Links compute_links(const PatchSet& patches, const Visibility& vis, const LinkOp
     return links;
 }
 
+std::size_t flat_pair_bytes() { return sizeof(PairLink); }
+
 }  // namespace tprf

@@ -257,4 +257,6 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
     return added;
 }
 
+std::size_t mirror_link_bytes() { return sizeof(Extra) + Links::kLinkBytes; }
+
 }  // namespace tprf

@@ -12,6 +12,8 @@
 
 namespace tprf {
 
+struct HierarchyOptions;
+
 struct PairFormFactors {
     double ij = 0.0;  ///< F_ij, visibility included
     double ji = 0.0;  ///< F_ji = F_ij A_i / A_j
@@ -56,6 +58,12 @@ bool near_pair(const PatchSet& patches, const std::vector<double>& radius, doubl
 inline bool inert(const PatchSet& patches, std::size_t i) {
     return !(patches.albedo[i] > 0.0).any() && !(patches.emission[i] > 0.0).any();
 }
+
+/// The link builders' record sizes (link_build_sizes), each from the file that holds its record.
+std::size_t flat_pair_bytes();                                       // links.cpp
+std::size_t hierarchical_pair_bytes();                               // hierarchy.cpp
+std::size_t oracle_node_bytes(const HierarchyOptions& options);      // hierarchy.cpp
+std::size_t mirror_link_bytes();                                     // mirror_links.cpp
 
 /// Most weighted paths delay_pieces takes.
 constexpr int kMaxPiecePaths = 256;

@@ -29,25 +29,36 @@ namespace {
 // The march: ring buffers of every layer's recent radiosity, the block's accumulators, and the
 // steps that advance them one block at a time. Steps marked "in a region" are called by every thread
 // of one OpenMP parallel region and share their loops among them.
+// Per lane, the largest change of a Jacobi sweep and the largest new value so far (arrays of lanes).
+struct SweepMaxima {
+    float* change;
+    float* largest;
+};
+
 class March {
 public:
     March(std::span<const Illumination* const> batch, const SolvePlan& plan)
         : m_links(*plan.links), m_batch(batch), m_plan(plan),
-          m_rings(std::size_t(plan.L), std::vector<float>(plan.ring_floats + kRingSlackFloats, 0.0f)),
-          m_acc(std::size_t(plan.L), std::vector<float>(plan.acc_values(), 0.0f)),
-          m_recent(std::size_t(plan.L),
-                   std::vector<float>(std::size_t(plan.recent_bins) * plan.m * std::size_t(plan.C), 0.0f)),
-          m_emit(std::size_t(plan.L), std::vector<float>(plan.n * std::size_t(plan.bt) * std::size_t(plan.C))),
-          m_base(std::size_t(plan.L) * plan.n * std::size_t(plan.C)),
-          m_same(plan.same_bin() ? std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C) : 0, 0.0f),
+          m_rings(std::size_t(plan.layer_count), std::vector<float>(plan.ring_floats + kRingSlackFloats, 0.0f)),
+          m_acc(std::size_t(plan.layer_count), std::vector<float>(plan.acc_values(), 0.0f)),
+          m_recent(std::size_t(plan.layer_count),
+                   std::vector<float>(std::size_t(plan.recent_bins) * plan.nodes * std::size_t(plan.lanes), 0.0f)),
+          m_emit(std::size_t(plan.layer_count),
+                 std::vector<float>(plan.patches * std::size_t(plan.block_bins) * std::size_t(plan.lanes))),
+          m_base(std::size_t(plan.layer_count) * plan.patches * std::size_t(plan.lanes)),
+          m_same(plan.same_bin() ? std::size_t(plan.layer_count) * plan.sweep_rows.size() * std::size_t(plan.lanes) : 0,
+                 0.0f),
           m_same_before(m_same.size(), 0.0f),
-          m_kept(plan.emit_blocks > 1 ? (1 + std::size_t(plan.layers.terms)) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3 : 0),
-          m_out_total(plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3),
-          m_out_terms(std::size_t(plan.layers.terms) * plan.n * std::size_t(plan.emit_bins()) * std::size_t(plan.K) * 3),
+          m_kept(plan.emit_blocks > 1 ? (1 + std::size_t(plan.layers.terms)) * plan.patches *
+                                            std::size_t(plan.emit_bins()) * std::size_t(plan.illuminations) * 3
+                                      : 0),
+          m_out_total(plan.patches * std::size_t(plan.emit_bins()) * std::size_t(plan.illuminations) * 3),
+          m_out_terms(std::size_t(plan.layers.terms) * plan.patches * std::size_t(plan.emit_bins()) *
+                      std::size_t(plan.illuminations) * 3),
           m_tile_sums(std::size_t(plan.threads), std::vector<float>(plan.tile_sum_floats())) {
         if (plan.same_bin())
             for (int k = 0; k < plan.sweep_buffers(); ++k)
-                m_sweep[k].assign(std::size_t(plan.L) * plan.sweep_rows.size() * std::size_t(plan.C), 0.0f);
+                m_sweep[k].assign(std::size_t(plan.layer_count) * plan.sweep_rows.size() * std::size_t(plan.lanes), 0.0f);
     }
 
     // Step 1 (in a region): per receiver, the block's emission and, for every window that starts at
@@ -58,7 +69,7 @@ public:
     void push_block(std::int64_t b0);
     // Step 2 (in a region): bin by bin, short links, then the same-bin system by Jacobi iteration.
     void short_pass(std::int64_t b0) {
-        with_lanes(m_plan.C, [&](auto lanes) { short_pass_lanes<decltype(lanes)::value>(b0); });
+        with_lanes(m_plan.lanes, [&](auto lanes) { short_pass_lanes<decltype(lanes)::value>(b0); });
     }
     // Step 2b (in a region, clusters only): every cluster's radiosity over the block from its children's.
     void pull_block(std::int64_t b0);
@@ -74,13 +85,14 @@ private:
     }
     // The bin-by-bin state of the patch at position q (m_base).
     std::size_t state_at(int layer, std::size_t q) const {
-        return (std::size_t(layer) * m_plan.n + q) * std::size_t(m_plan.C);
+        return (std::size_t(layer) * m_plan.patches + q) * std::size_t(m_plan.lanes);
     }
     float* ring_at(int layer, std::size_t patch, std::int64_t bin) {
         const RingSlot& slot = m_plan.slots[patch];
-        return m_rings[std::size_t(layer)].data() + slot.offset + std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.C);
+        return m_rings[std::size_t(layer)].data() + slot.offset +
+               std::size_t(int(bin & slot.mask)) * std::size_t(m_plan.lanes);
     }
-    // Node `node`'s value at `bin` into its ring; CT lanes (0: m_plan.C, counted at run time), as the
+    // Node `node`'s value at `bin` into its ring; CT lanes (0: m_plan.lanes, counted at run time), as the
     // bin-by-bin steps below: a copy of a run-time count of floats is a library call (memmove), made
     // for every node and bin.
     template <int CT>
@@ -88,7 +100,7 @@ private:
     // The value at `bin` of the node at slot q (its lanes) into the recent bins.
     template <int CT>
     void store_recent(int layer, std::size_t q, std::int64_t bin, const float* v) {
-        const int C = CT > 0 ? CT : m_plan.C;
+        const int C = CT > 0 ? CT : m_plan.lanes;
         float* r = m_recent[std::size_t(layer)].data() + m_plan.recent_at(q, bin);
         for (int c = 0; c < C; ++c) r[c] = v[c];
     }
@@ -97,7 +109,7 @@ private:
     void load_emission(std::size_t i, std::int64_t b0);
     void gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0);
     void gather_tinted(std::size_t i, const float* ring, std::int64_t b0, float* acc) const;
-    // The bin-by-bin steps for CT lanes (0: m_plan.C lanes, counted at run time): with the lane count
+    // The bin-by-bin steps for CT lanes (0: m_plan.lanes lanes, counted at run time): with the lane count
     // known at compile time the sums stay in registers.
     template <int CT>
     void short_pass_lanes(std::int64_t b0);
@@ -119,8 +131,7 @@ private:
     template <int CT>
     bool jacobi_sweep(int iteration);
     template <int CT>
-    void sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega, float* change,
-                   float* largest);
+    void sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega, SweepMaxima maxima);
     bool sweeps_converged(int parity) const;
     template <int CT>
     void block_totals(std::size_t q, std::int64_t lo, int count, int offset);
@@ -130,7 +141,7 @@ private:
     std::span<const Illumination* const> m_batch;
     const SolvePlan& m_plan;
     std::vector<std::vector<float>> m_rings;    // per layer: M x (ring + mirror) x C, and kRingSlackFloats
-    std::vector<std::vector<float>> m_acc;      // per layer: acc_bins x M x C, long links' sums (a ring)
+    std::vector<std::vector<float>> m_acc;      // per layer: accumulator_bins x nodes x lanes, long links' sums (a ring)
     std::vector<std::vector<float>> m_recent;   // per layer: recent_bins x M x C (SolvePlan::recent_at)
     std::vector<std::vector<float>> m_emit;     // per layer: N x bt x C by position, the block's emission
     // L x N x C by position (state_at): the bin's value before the same-bin sweeps, the last bin's
@@ -164,7 +175,7 @@ private:
 
 template <int CT>
 void March::store(int layer, std::size_t node, std::int64_t bin, const float* v) {
-    const int C = CT > 0 ? CT : m_plan.C;
+    const int C = CT > 0 ? CT : m_plan.lanes;
     const RingSlot& slot = m_plan.slots[node];
     const int pos = int(bin & slot.mask);
     float* r = m_rings[std::size_t(layer)].data() + slot.offset;
@@ -175,10 +186,11 @@ void March::store(int layer, std::size_t node, std::int64_t bin, const float* v)
 
 // Patch i's pulses of every illumination within the block, each into its illumination's lanes.
 void March::load_emission(std::size_t i, std::int64_t b0) {
-    const int bt = m_plan.bt, C = m_plan.C, channels = m_plan.channels;
-    if (i >= m_plan.n) return;  // clusters emit nothing of their own
+    const int bt = m_plan.block_bins, C = m_plan.lanes, channels = m_plan.channels;
+    if (i >= m_plan.patches) return;  // clusters emit nothing of their own
     const std::size_t q = m_plan.position[i];
-    for (int l = 0; l < m_plan.L; ++l) std::fill_n(m_emit[std::size_t(l)].data() + q * std::size_t(bt * C), bt * C, 0.0f);
+    for (int l = 0; l < m_plan.layer_count; ++l)
+        std::fill_n(m_emit[std::size_t(l)].data() + q * std::size_t(bt * C), bt * C, 0.0f);
     for (std::size_t e = 0; e < m_batch.size(); ++e) {
         const Illumination& illumination = *m_batch[e];
         for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
@@ -209,27 +221,27 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
     // window 0, always is).
     const int span = p.window_bins(due[count - 1]);
     const bool tiled = p.tile_sum_floats() > 0;
-    const std::size_t row = std::size_t(span) * std::size_t(p.C);
+    const std::size_t row = std::size_t(span) * std::size_t(p.lanes);
     float* sums = tiled ? m_tile_sums[std::size_t(omp_get_thread_num())].data() : nullptr;
-    for (int l = 0; l < p.L; ++l) {
+    for (int l = 0; l < p.layer_count; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         if (src < 0) continue;
         if (tiled) std::fill_n(sums, (i1 - i0) * row, 0.0f);
         const float* ring_src = m_rings[std::size_t(src)].data();
-        const RecentView recent_src{m_recent[std::size_t(src)].data(), p.m * std::size_t(p.C), p.recent_bins - 1};
+        const RecentView recent_src{m_recent[std::size_t(src)].data(), p.nodes * std::size_t(p.lanes), p.recent_bins - 1};
         for (std::size_t i = i0; i < i1; ++i)
             for (int d = 0; d < count; ++d) cursor[i - i0][d] = p.segments[i * (S + 1) + std::size_t(due[d])];
-        for (std::size_t s0 = 0; s0 < p.m; s0 += p.source_tile) {
-            const std::uint32_t s1 = std::uint32_t(std::min(p.m, s0 + p.source_tile));
+        for (std::size_t s0 = 0; s0 < p.nodes; s0 += p.source_tile) {
+            const std::uint32_t s1 = std::uint32_t(std::min(p.nodes, s0 + p.source_tile));
             const std::uint64_t key_end = std::uint64_t(s1) << p.lag_bits;  // packed links: the tile's end
             for (std::size_t i = i0; i < i1; ++i) {
                 // Tiled sources add into the tile's own sums (receiver-major, so a kernel's sums add
                 // as one contiguous stream), which go to the accumulators once, after the last tile.
                 float* a = tiled ? sums + (i - i0) * row : m_acc[std::size_t(l)].data() + p.acc_at(i, b0);
-                const std::size_t stride = tiled ? std::size_t(p.C) : p.acc_stride();
+                const std::size_t stride = tiled ? std::size_t(p.lanes) : p.acc_stride();
                 // The shortest window's links, from their own list, with the first source tile.
                 if (p.recent_kernel && s0 == 0)
-                    p.recent_kernel(p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0, p.C, a, stride);
+                    p.recent_kernel({&p.near, p.near.row[i], p.near.row[i + 1], recent_src, b0, p.lanes, a, stride});
                 for (int d = 0; d < count; ++d) {
                     const int s = due[d];
                     const std::uint64_t end = p.segments[i * (S + 1) + std::size_t(s) + 1];
@@ -240,17 +252,18 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
                     if (p.packed_kernel[s]) {
                         // Many pairs of a receiver and a source tile have no link (a wall and itself).
                         if (p.packed[cursor[i - i0][d]].key >= key_end) continue;
-                        p.packed_kernel[s](p.packed.data(), cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
-                                           p.packed_ring, p.ring - 1, b0, a, stride);
-                    } else if (p.kernel[s])
-                        p.kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                    p.slots.data(), b0, a, stride);
+                        p.packed_kernel[s]({p.packed.data(), &cursor[i - i0][d], end, key_end, p.lag_bits, ring_src,
+                                            p.packed_ring_floats, p.longest_ring - 1, b0, a, stride});
+                        continue;
+                    }
+                    const LongCall call{&m_links, &cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
+                                        p.slots.data(), b0, p.lanes, p.window_bins(s), a, stride};
+                    if (p.kernel[s])
+                        p.kernel[s](call);
                     else if (p.lane_kernel[s])
-                        p.lane_kernel[s](m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                         p.slots.data(), b0, p.C, a, stride);
+                        p.lane_kernel[s](call);
                     else
-                        gather_long_any(m_links, cursor[i - i0][d], end, s1, p.inv_bin_f, p.delay, ring_src,
-                                        p.slots.data(), b0, p.C, p.window_bins(s), a, stride);
+                        gather_long_any(call);
                 }
             }
         }
@@ -258,12 +271,12 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
         if (tiled)
             for (int b = 0; b < span; ++b)
                 for (std::size_t i = i0; i < i1; ++i) {
-                    const float* from = sums + (i - i0) * row + std::size_t(b * p.C);
+                    const float* from = sums + (i - i0) * row + std::size_t(b * p.lanes);
                     float* to = m_acc[std::size_t(l)].data() + p.acc_at(i, b0 + b);
-                    for (int c = 0; c < p.C; ++c) to[c] += from[c];
+                    for (int c = 0; c < p.lanes; ++c) to[c] += from[c];
                 }
         if (!p.tinted_long.empty())
-            for (std::size_t i = i0; i < std::min(i1, p.n); ++i)
+            for (std::size_t i = i0; i < std::min(i1, p.patches); ++i)
                 gather_tinted(i, ring_src, b0, m_acc[std::size_t(l)].data() + p.acc_at(i, b0));
     }
 }
@@ -272,26 +285,26 @@ void March::gather_tile(std::size_t i0, std::size_t i1, std::int64_t b0) {
 // per tap and colour over the block, reading final history from the ring of its source (`ring`).
 void March::gather_tinted(std::size_t i, const float* ring, std::int64_t b0, float* acc) const {
     const SolvePlan& p = m_plan;
-    const std::size_t C = std::size_t(p.C), stride = p.acc_stride();
+    const std::size_t C = std::size_t(p.lanes), stride = p.acc_stride();
     for (std::uint64_t k = p.tinted_long_row[i]; k < p.tinted_long_row[i + 1]; ++k) {
         const TintedLink& t = p.tinted_long[k];
         const RingSlot& slot = p.slots[t.source];
         const float* h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
-        for (std::size_t b = 0; b < std::size_t(p.bt); ++b) {  // two accumulations, as in gather_long
-            add_tinted(acc + b * stride, t.w0, h + (b + 1) * C, p.C, p.channels);
-            add_tinted(acc + b * stride, t.w1, h + b * C, p.C, p.channels);
+        for (std::size_t b = 0; b < std::size_t(p.block_bins); ++b) {  // two accumulations, as in gather_long
+            add_tinted(acc + b * stride, t.w0, h + (b + 1) * C, p.lanes, p.channels);
+            add_tinted(acc + b * stride, t.w1, h + b * C, p.lanes, p.channels);
         }
     }
 }
 
 void March::long_pass(std::int64_t b0) {
-    const std::size_t tiles = (m_plan.m + kReceiverTile - 1) / kReceiverTile;
+    const std::size_t tiles = (m_plan.nodes + kReceiverTile - 1) / kReceiverTile;
 #pragma omp for schedule(dynamic, 1)
     for (std::size_t tile = 0; tile < tiles; ++tile) {
         // A cancelled run skips the rest of the pass (a long block of a large flat set takes seconds);
         // solve_transient throws after the region.
         if (cancel_requested()) continue;
-        const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.m, i0 + kReceiverTile);
+        const std::size_t i0 = tile * kReceiverTile, i1 = std::min(m_plan.nodes, i0 + kReceiverTile);
         for (std::size_t i = i0; i < i1; ++i) load_emission(i, b0);
         gather_tile(i0, i1, b0);
     }
@@ -302,7 +315,7 @@ void March::long_pass(std::int64_t b0) {
 template <int CT>
 void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) const {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     float sum[CT > 0 ? CT : kMaxLanes];
     std::fill_n(sum, C, 0.0f);
     for (std::uint64_t k = p.short_row[q]; k < p.short_row[q + 1]; ++k) {
@@ -327,7 +340,7 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
 template <int CT>
 void March::add_same_links(const float* x, int src, std::size_t r, float* g) const {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     float sum[CT > 0 ? CT : kMaxLanes];
     std::fill_n(sum, C, 0.0f);
     for (std::uint64_t k = p.same_row[r]; k < p.same_row[r + 1]; ++k) {
@@ -343,13 +356,13 @@ void March::add_same_links(const float* x, int src, std::size_t r, float* g) con
 template <int CT>
 void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     const std::int64_t bin = b0 + o;
     const float* albedo = p.albedo.data() + std::size_t(C) * q;
-    for (int l = 0; l < p.L; ++l) {
+    for (int l = 0; l < p.layer_count; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         float g[CT > 0 ? CT : kMaxLanes];
-        const std::size_t at = q * std::size_t(p.bt * C) + std::size_t(o * C);
+        const std::size_t at = q * std::size_t(p.block_bins * C) + std::size_t(o * C);
         // The long links' sums for this bin, taken (the accumulator ring's slot is free again).
         float* acc = m_acc[std::size_t(l)].data() + p.acc_at_slot(q, bin);
         for (int c = 0; c < C; ++c) {
@@ -382,11 +395,11 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
 // Node i's long-link sums over the block plus its parent's (after the parent's own push).
 template <int CT>
 void March::push_node(std::uint32_t i, std::int64_t b0) {
-    const int C = CT > 0 ? CT : m_plan.C;
+    const int C = CT > 0 ? CT : m_plan.lanes;
     const std::uint32_t up = m_plan.tree->parent[i];
     if (up == kNoNode) return;
-    for (int l = 0; l < m_plan.L; ++l)
-        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
+    for (int l = 0; l < m_plan.layer_count; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.block_bins; ++bin) {
             float* own = m_acc[std::size_t(l)].data() + m_plan.acc_at(i, bin);
             const float* from = m_acc[std::size_t(l)].data() + m_plan.acc_at(up, bin);
             for (int c = 0; c < C; ++c) own[c] += from[c];
@@ -397,17 +410,17 @@ void March::push_node(std::uint32_t i, std::int64_t b0) {
 // sums for the block, pushed to its children by now, are cleared.
 template <int CT>
 void March::pull_node(std::uint32_t c, std::int64_t b0) {
-    const int C = CT > 0 ? CT : m_plan.C;
+    const int C = CT > 0 ? CT : m_plan.lanes;
     const ClusterTree& t = *m_plan.tree;
     const auto [a, b] = t.children[c - t.leaves];
     const float wa = float(t.area[a] / t.area[c]), wb = float(t.area[b] / t.area[c]);
-    for (int l = 0; l < m_plan.L; ++l)
-        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin)
+    for (int l = 0; l < m_plan.layer_count; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.block_bins; ++bin)
             std::fill_n(m_acc[std::size_t(l)].data() + m_plan.acc_at(c, bin), C, 0.0f);
     // The children's bins from the recent bins (by node slot: a cluster's children are near there).
     auto value = [&](int l, std::uint32_t node, std::int64_t bin) { return recent(l, m_plan.node_slot(node), bin); };
-    for (int l = 0; l < m_plan.L; ++l)
-        for (std::int64_t bin = b0; bin < b0 + m_plan.bt; ++bin) {
+    for (int l = 0; l < m_plan.layer_count; ++l)
+        for (std::int64_t bin = b0; bin < b0 + m_plan.block_bins; ++bin) {
             const float* va = value(l, a, bin);
             const float* vb = value(l, b, bin);
             float v[kMaxLanes];
@@ -446,13 +459,13 @@ void March::over_tree(bool down, NodeFn visit) {
 }
 
 void March::push_block(std::int64_t b0) {
-    with_lanes(m_plan.C, [&](auto lanes) {
+    with_lanes(m_plan.lanes, [&](auto lanes) {
         over_tree(true, [&](std::uint32_t i) { push_node<decltype(lanes)::value>(i, b0); });
     });
 }
 
 void March::pull_block(std::int64_t b0) {
-    with_lanes(m_plan.C, [&](auto lanes) {
+    with_lanes(m_plan.lanes, [&](auto lanes) {
         over_tree(false, [&](std::uint32_t c) { pull_node<decltype(lanes)::value>(c, b0); });
     });
 }
@@ -465,9 +478,9 @@ void March::pull_block(std::int64_t b0) {
 template <int CT>
 bool March::jacobi_sweep(int iteration) {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     const bool extrapolate = p.same_radius > 0.0 && iteration > 1;
-    const float omega = extrapolate ? p.omega[std::size_t(std::min(iteration, kMaxSweeps) - 1)] : 1.0f;
+    const float omega = extrapolate ? p.chebyshev_weights[std::size_t(std::min(iteration, kMaxSweeps) - 1)] : 1.0f;
     const int B = p.sweep_buffers(), parity = iteration & 1;
     const float* x = m_sweep[(iteration - 1) % B].data();
     float* next = m_sweep[iteration % B].data();
@@ -481,7 +494,7 @@ bool March::jacobi_sweep(int iteration) {
     std::fill_n(change, C, 0.0f);
     std::fill_n(largest, C, 0.0f);
 #pragma omp for schedule(static) nowait
-    for (std::size_t r = 0; r < p.sweep_rows.size(); ++r) sweep_row<CT>(r, x, next, before, omega, change, largest);
+    for (std::size_t r = 0; r < p.sweep_rows.size(); ++r) sweep_row<CT>(r, x, next, before, omega, {change, largest});
 #pragma omp critical(tprf_jacobi_reduction)
     for (int c = 0; c < C; ++c) {
         m_change[parity][c] = std::max(m_change[parity][c], change[c]);
@@ -495,12 +508,14 @@ bool March::jacobi_sweep(int iteration) {
 // the one before it, `before`), and per lane the largest change from x and the largest new value so far.
 template <int CT>
 void March::sweep_row(std::size_t r, const float* x, float* next, const float* before, float omega,
-                      float* change, float* largest) {
+                      SweepMaxima maxima) {
+    float* change = maxima.change;
+    float* largest = maxima.largest;
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     const std::size_t q = p.sweep_rows[r];
     const float* albedo = p.albedo.data() + std::size_t(C) * q;
-    for (int l = 0; l < p.L; ++l) {
+    for (int l = 0; l < p.layer_count; ++l) {
         const int src = p.layers.source[std::size_t(l)];
         const float* keep = m_base.data() + state_at(l, q);
         const std::size_t at = p.sweep_at(l, r);
@@ -522,7 +537,7 @@ void March::sweep_row(std::size_t r, const float* x, float* next, const float* b
 // sweeps as long as it would alone, however bright the others.
 bool March::sweeps_converged(int parity) const {
     const int channels = m_plan.channels;
-    for (int k = 0; k < m_plan.K; ++k) {
+    for (int k = 0; k < m_plan.illuminations; ++k) {
         float change = 0.0f, largest = 0.0f;
         for (int c = k * channels; c < (k + 1) * channels; ++c) {
             change = std::max(change, m_change[parity][c]);
@@ -536,28 +551,28 @@ bool March::sweeps_converged(int parity) const {
 template <int CT>
 void March::short_pass_lanes(std::int64_t b0) {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C;
+    const int C = CT > 0 ? CT : p.lanes;
     const bool same = p.same_bin();
-    for (int o = 0; o < p.bt; ++o) {
+    for (int o = 0; o < p.block_bins; ++o) {
         // A cancelled run leaves the block here (solve_transient throws after the region): every
         // thread reads the one answer after the single's barrier, so all leave at the same bin.
 #pragma omp single
         {
             m_stop = cancel_requested();
-            std::fill_n(m_fixed, p.C, 0.0f);
+            std::fill_n(m_fixed, p.lanes, 0.0f);
         }
         if (m_stop) break;
         float fixed[kMaxLanes];
-        std::fill_n(fixed, p.C, 0.0f);
+        std::fill_n(fixed, p.lanes, 0.0f);
         // Each thread its share of the positions, balanced by their links (SolvePlan::short_split).
         const std::size_t threads = std::size_t(omp_get_num_threads()), t = std::size_t(omp_get_thread_num());
         const bool split = threads + 1 == p.short_split.size();
-        const std::size_t q0 = split ? p.short_split[t] : p.n * t / threads;
-        const std::size_t q1 = split ? p.short_split[t + 1] : p.n * (t + 1) / threads;
+        const std::size_t q0 = split ? p.short_split[t] : p.patches * t / threads;
+        const std::size_t q1 = split ? p.short_split[t + 1] : p.patches * (t + 1) / threads;
         for (std::size_t q = q0; q < q1; ++q) short_links_of<CT>(q, b0, o, fixed);
         if (same) {
 #pragma omp critical(tprf_jacobi_reduction)
-            for (int c = 0; c < p.C; ++c) m_fixed[c] = std::max(m_fixed[c], fixed[c]);
+            for (int c = 0; c < p.lanes; ++c) m_fixed[c] = std::max(m_fixed[c], fixed[c]);
         }
 #pragma omp barrier
         int last = 0;  // the sweep whose iterate is the bin's value
@@ -577,7 +592,7 @@ void March::short_pass_lanes(std::int64_t b0) {
         const float* converged = m_sweep[last % p.sweep_buffers()].data();
 #pragma omp for schedule(static)
         for (std::size_t r = 0; r < p.sweep_rows.size(); ++r)
-            for (int l = 0; l < p.L; ++l) {
+            for (int l = 0; l < p.layer_count; ++l) {
                 const std::size_t q = p.sweep_rows[r], s = p.sweep_at(l, r);
                 const float* v = converged + s;
                 store_recent<CT>(l, q, b0 + o, v);
@@ -592,9 +607,9 @@ void March::short_pass_lanes(std::int64_t b0) {
     // line or two), its bins of one time far apart. Nothing reads a patch's ring at the block's bins
     // before the next block's long pass: the bin-by-bin passes and the pull read the recent bins.
 #pragma omp for schedule(static)
-    for (std::size_t q = 0; q < p.n; ++q)
-        for (int l = 0; l < p.L; ++l)
-            for (std::int64_t bin = b0; bin < b0 + p.bt; ++bin) store<CT>(l, p.order[q], bin, recent(l, q, bin));
+    for (std::size_t q = 0; q < p.patches; ++q)
+        for (int l = 0; l < p.layer_count; ++l)
+            for (std::int64_t bin = b0; bin < b0 + p.block_bins; ++bin) store<CT>(l, p.order[q], bin, recent(l, q, bin));
 }
 
 // The total and per-order terms of the patch at position q for the bins [lo, lo + count), into its
@@ -603,12 +618,12 @@ void March::short_pass_lanes(std::int64_t b0) {
 template <int CT>
 void March::block_totals(std::size_t q, std::int64_t lo, int count, int offset) {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.C, L = p.L, K = p.K;
+    const int C = CT > 0 ? CT : p.lanes, L = p.layer_count, K = p.illuminations;
     const LayerPlan& plan = p.layers;
     // Kept rows (by position) are emit_bins long; rows written for the sink directly (one block per
     // hand-over, offset 0) `count`.
     const bool kept = !m_kept.empty();
-    const std::size_t row = std::size_t(kept ? p.emit_bins() : count) * std::size_t(K) * 3, part = p.n * row;
+    const std::size_t row = std::size_t(kept ? p.emit_bins() : count) * std::size_t(K) * 3, part = p.patches * row;
     // Short blocks from the recent bins (which hold the whole block; compact, and in cache), long ones
     // from the ring, where a patch's bins are contiguous.
     const std::size_t i = p.order[q];
@@ -658,7 +673,7 @@ void March::block_totals(std::size_t q, std::int64_t lo, int count, int offset) 
 void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
     const SolvePlan& p = m_plan;
     const LayerPlan& plan = p.layers;
-    const std::size_t count = std::size_t(hi - lo), K = std::size_t(p.K);
+    const std::size_t count = std::size_t(hi - lo), K = std::size_t(p.illuminations);
     for (std::size_t e = 0; e < m_batch.size(); ++e) {
         const Illumination& illumination = *m_batch[e];
         for (std::uint64_t k = illumination.row[i]; k < illumination.row[i + 1]; ++k) {
@@ -671,7 +686,7 @@ void March::block_spots(std::size_t i, std::int64_t lo, std::int64_t hi) {
                 m_out_total[at + std::size_t(c)] += float(pulse.energy[c]);
                 if (plan.terms > 0) {
                     const std::size_t term = std::size_t(std::min<int>(pulse.order, plan.terms - 1));
-                    m_out_terms[term * p.n * count * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
+                    m_out_terms[term * p.patches * count * K * 3 + at + std::size_t(c)] += float(pulse.energy[c]);
                 }
             }
         }
@@ -682,39 +697,39 @@ void March::emit_block(std::int64_t b0, const BlockSink& sink) {
     const SolvePlan& p = m_plan;
     const int stride = p.emit_bins();
     const std::int64_t lo = std::max<std::int64_t>(b0, p.first_emitted);
-    const std::int64_t hi = std::min<std::int64_t>(b0 + p.bt, p.T);
+    const std::int64_t hi = std::min<std::int64_t>(b0 + p.block_bins, p.bins);
     if (lo < hi) {
         if (m_out_bins == 0) m_out_lo = lo;
         TPRF_CHECK_EQ(lo, m_out_lo + m_out_bins);
         const int offset = m_out_bins, count = int(hi - lo);
         // By position, the order of the recent bins, the rings and the kept rows.
-        with_lanes(p.C, [&](auto lanes) {
-            parallel_for(p.n, {p.threads, 1, false},
+        with_lanes(p.lanes, [&](auto lanes) {
+            parallel_for(p.patches, {p.threads, 1, false},
                          [&](std::size_t q) { block_totals<decltype(lanes)::value>(q, lo, count, offset); });
         });
         m_out_bins += count;
     }
     // The kept bins go when the next block's would not fit, and at the last block: each patch's rows
     // (total, then terms) where SolveBlock has them, with the spots.
-    if (m_out_bins == 0 || (m_out_bins + p.bt <= stride && b0 + p.bt < p.T)) return;
+    if (m_out_bins == 0 || (m_out_bins + p.block_bins <= stride && b0 + p.block_bins < p.bins)) return;
     const int count = m_out_bins;
-    const std::size_t lanes = std::size_t(p.K) * 3, kept_row = std::size_t(stride) * lanes;
+    const std::size_t lanes = std::size_t(p.illuminations) * 3, kept_row = std::size_t(stride) * lanes;
     const std::size_t row = std::size_t(count) * lanes;
-    parallel_for(p.n, {p.threads, 1, false}, [&](std::size_t i) {
+    parallel_for(p.patches, {p.threads, 1, false}, [&](std::size_t i) {
         if (!m_kept.empty()) {
             const std::size_t q = p.position[i];
             std::copy_n(m_kept.data() + q * kept_row, row, m_out_total.data() + i * row);
             for (int k = 0; k < p.layers.terms; ++k)
-                std::copy_n(m_kept.data() + (std::size_t(1 + k) * p.n + q) * kept_row, row,
-                            m_out_terms.data() + (std::size_t(k) * p.n + i) * row);
+                std::copy_n(m_kept.data() + (std::size_t(1 + k) * p.patches + q) * kept_row, row,
+                            m_out_terms.data() + (std::size_t(k) * p.patches + i) * row);
         }
         block_spots(i, m_out_lo, m_out_lo + count);
     });
     SolveBlock block;
     block.first_bin = int(m_out_lo);
     block.bins = count;
-    block.patches = p.n;
-    block.illuminations = p.K;
+    block.patches = p.patches;
+    block.illuminations = p.illuminations;
     block.radiosity = m_out_total.data();
     block.terms = p.layers.terms;
     block.per_order = p.layers.terms > 0 ? m_out_terms.data() : nullptr;
@@ -742,12 +757,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, const Il
 
 std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, const TimeAxis& time,
                                 const SolverOptions& options, int illuminations, int channels) {
-    TPRF_CHECK_LE(1, illuminations);
-    TPRF_CHECK_LE(illuminations, kMaxBatch);
-    TPRF_CHECK(channels == 1 || channels == 3);
-    TPRF_CHECK_EQ(set.patches(), patches.size());
-    check_tints(set.links);
-    return working_bytes(make_plan(patches, set, time, options, illuminations, channels, true));
+    return solve_sizing(patches, set, time, options, illuminations, channels).working_bytes;
 }
 
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
@@ -763,22 +773,23 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
     }
     check_tints(links);
     SolvePlan plan =
-        make_plan(patches, set, time, options, int(batch.size()), scene_is_grey(patches, links, batch) ? 1 : 3);
+        make_plan(patches, set, time, options,
+                  {int(batch.size()), march_channels(keeps_grey(patches, links) && pulses_grey(batch))});
     TPRF_CHECK_LE(options.first_bin, 0);
     plan.first_emitted = options.first_bin;
     plan_blocks(plan, batch);
     March march(batch, plan);
     SolveStats stats;
-    stats.block_bins = plan.bt;
+    stats.block_bins = plan.block_bins;
     stats.wide_kernels = plan.wide;
     stats.packed_links = plan.packed_count;
-    stats.ring_bins = plan.ring;
+    stats.ring_bins = plan.longest_ring;
     stats.channels = plan.channels;
-    stats.illuminations = plan.K;
-    stats.lanes = plan.C;
+    stats.illuminations = plan.illuminations;
+    stats.lanes = plan.lanes;
     stats.working_bytes = working_bytes(plan);
     for (std::int64_t blk = 0; blk < plan.blocks; ++blk) {
-        const std::int64_t b0 = plan.b_begin + blk * plan.bt;
+        const std::int64_t b0 = plan.start_bin + blk * plan.block_bins;
         auto since = std::chrono::steady_clock::now();
         double long_seconds = 0.0;
         // One parallel region per block, so that the sink below runs outside it and can use every
@@ -800,7 +811,7 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::spa
         stats.seconds_sink += lap(since);
     }
     stats.link_bin_updates = std::uint64_t(links.size()) * std::uint64_t(plan.fed_layers) *
-                             std::uint64_t(plan.blocks) * std::uint64_t(plan.bt);
+                             std::uint64_t(plan.blocks) * std::uint64_t(plan.block_bins);
     stats.max_jacobi_iterations = march.worst_jacobi_iterations();
     stats.jacobi_sweeps = march.jacobi_sweeps();
     stats.short_links = plan.short_links.size() + plan.tinted_short.size();

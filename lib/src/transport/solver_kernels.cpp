@@ -70,15 +70,24 @@ LaneKernel lane_kernel_for(int bins, bool wide) { return TPRF_FROM_TABLE(lane_ta
 
 // The same for windows longer than kLongestWindow without a specialisation (long blocks): summed
 // straight into the accumulators, a bin's lanes at a time.
-void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
-                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0,
-                     int C, int bt, float* __restrict acc, std::size_t stride) {
+void gather_long_any(const LongCall& call) {
+    const Links& links = *call.links;
+    const std::uint64_t end = call.end;
+    const std::uint32_t source_end = call.source_end;
+    const float inv_bin = call.inv_bin;
+    const DelayMode mode = call.mode;
+    const float* const ring = call.ring;
+    const RingSlot* const slots = call.slots;
+    const std::int64_t b0 = call.b0;
+    const int C = call.lanes, bt = call.bins;
+    float* __restrict acc = call.acc;
+    const std::size_t stride = call.stride;
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
     const float* __restrict ff = links.ff.data();
-    std::uint64_t k = cursor;
+    std::uint64_t k = *call.cursor;
     for (; k < end && source[k] < source_end; ++k) {
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < bt) continue;
         const float* __restrict h =
             ring + slots[source[k]].offset + std::size_t(int((b0 - t.lag - 1) & slots[source[k]].mask)) * std::size_t(C);
@@ -91,7 +100,7 @@ void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t en
             }
         }
     }
-    cursor = k;
+    *call.cursor = k;
 }
 
 }  // namespace tprf::solver_detail

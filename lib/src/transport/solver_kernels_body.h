@@ -24,11 +24,18 @@ constexpr std::uint64_t kAhead = 8;
 // The long-link kernel for one receiver and one source tile: the block's sums stay in registers
 // (C * BT floats) across all the receiver's links, and go to memory once at the end.
 template <int C, int BT>
-TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end, float inv_bin,
-                 DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, float* acc,
-                 std::size_t stride) {
-    // Locals, not the reference and the vectors: a store through `cursor` would make the compiler
-    // reload every array pointer once per link.
+TPRF_KERNEL_TARGET void gather_long(const LongCall& call) {
+    // Locals, not the call's fields, the reference and the vectors: a store through `cursor` or `acc`
+    // would make the compiler reload them once per link.
+    const Links& links = *call.links;
+    std::uint64_t& cursor = *call.cursor;
+    const std::uint64_t end = call.end;
+    const std::uint32_t source_end = call.source_end;
+    const float inv_bin = call.inv_bin;
+    const DelayMode mode = call.mode;
+    const float* const ring = call.ring;
+    const RingSlot* const slots = call.slots;
+    const std::int64_t b0 = call.b0;
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
     const float* __restrict ff = links.ff.data();
@@ -40,12 +47,12 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
         if (k + 2 * kAhead < end) {
             __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
             const RingSlot& next = slots[source[k + kAhead]];
-            const int lag = int(distance[k + kAhead] * inv_bin);
+            const int lag = delay_bins_f(distance[k + kAhead], inv_bin);
             const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * C;
             for (int line = 0; line < (C * (BT + 1) * 4 + 63) / 64 && line < 4; ++line)
                 __builtin_prefetch(at + 16 * line);
         }
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const RingSlot& slot = slots[source[k]];
         const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * C;
@@ -58,7 +65,7 @@ TPRF_KERNEL_TARGET void gather_long(const Links& links, std::uint64_t& cursor, s
     }
     if (k == cursor) return;  // no link of this window in this source tile: nothing to add
     cursor = k;
-    add_sums(acc, stride, local, C, BT);
+    add_sums(call.acc, call.stride, local, C, BT);
 }
 
 // The packed kernel's vectors: 16 floats for AVX-512, 8 for the library's own set (AVX2). Each sum is
@@ -98,9 +105,15 @@ constexpr int packed_parts(int C, int BT) {
 // load of a window (at a lag times C floats) spans two cache lines. A window too long for the
 // registers is summed in parts, each over all the tile's links.
 template <int C, int BT>
-TPRF_KERNEL_TARGET void gather_packed(const PackedLink* __restrict links, std::uint64_t& cursor, std::uint64_t end,
-                                      std::uint64_t key_end, int lag_bits, const float* ring, std::size_t ring_floats,
-                                      int mask, std::int64_t b0, float* acc, std::size_t stride) {
+TPRF_KERNEL_TARGET void gather_packed(const PackedCall& call) {
+    const PackedLink* __restrict links = call.links;
+    std::uint64_t& cursor = *call.cursor;
+    const std::uint64_t end = call.end, key_end = call.key_end;
+    const int lag_bits = call.lag_bits, mask = call.mask;
+    const float* const ring = call.ring;
+    const std::size_t ring_floats = call.ring_floats, stride = call.stride;
+    const std::int64_t b0 = call.b0;
+    float* const acc = call.acc;
     constexpr int W = kPackedWidth, P = packed_parts(C, BT), BP = BT / P;
     static_assert(P > 0, "no packed kernel for these lanes and window");
     constexpr int NA = C * BP / W, NB = (C * (BP + 1) + W - 1) / W;
@@ -199,9 +212,17 @@ PackedKernel packed_table(int C, int bins) {
 // The same for any lane count C and windows of BT bins: the sums (C * BT floats) in a local array,
 // each link one contiguous multiply-add over it, which vectorises over bins and lanes alike.
 template <int BT>
-TPRF_KERNEL_TARGET void gather_lanes(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
-                  float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
-                  float* acc, std::size_t stride) {
+TPRF_KERNEL_TARGET void gather_lanes(const LongCall& call) {
+    const Links& links = *call.links;
+    std::uint64_t& cursor = *call.cursor;
+    const std::uint64_t end = call.end;
+    const std::uint32_t source_end = call.source_end;
+    const float inv_bin = call.inv_bin;
+    const DelayMode mode = call.mode;
+    const float* const ring = call.ring;
+    const RingSlot* const slots = call.slots;
+    const std::int64_t b0 = call.b0;
+    const int C = call.lanes;
     const std::uint32_t* __restrict source = links.source.data();
     const float* __restrict distance = links.distance.data();
     const float* __restrict ff = links.ff.data();
@@ -213,11 +234,11 @@ TPRF_KERNEL_TARGET void gather_lanes(const Links& links, std::uint64_t& cursor, 
         if (k + 2 * kAhead < end) {  // as in gather_long
             __builtin_prefetch(&slots[source[k + 2 * kAhead]]);
             const RingSlot& next = slots[source[k + kAhead]];
-            const int lag = int(distance[k + kAhead] * inv_bin);
+            const int lag = delay_bins_f(distance[k + kAhead], inv_bin);
             const float* at = ring + next.offset + std::size_t(int((b0 - lag - 1) & next.mask)) * std::size_t(C);
             for (int line = 0; line < 4; ++line) __builtin_prefetch(at + 16 * line);
         }
-        const Taps t = link_taps(distance[k], inv_bin, mode, ff[k]);
+        const DelayTaps t = delay_taps_f(distance[k], inv_bin, mode, ff[k]);
         if (t.lag < BT) continue;
         const RingSlot& slot = slots[source[k]];
         const float* __restrict h = ring + slot.offset + std::size_t(int((b0 - t.lag - 1) & slot.mask)) * std::size_t(C);
@@ -228,18 +249,20 @@ TPRF_KERNEL_TARGET void gather_lanes(const Links& links, std::uint64_t& cursor, 
     }
     if (k == cursor) return;
     cursor = k;
-    add_sums(acc, stride, local, C, BT);
+    add_sums(call.acc, call.stride, local, C, BT);
 }
 
 // The shortest window's links (SolvePlan::recent_kernel) of one receiver, [k0, k1) of the
 // near list, for CT lanes (0: C, counted at run time): as gather_long, each bin of a source's window read
 // from the recent bins instead of its ring, with the taps the plan made.
 template <int CT, int BT>
-TPRF_KERNEL_TARGET void gather_recent(const NearLinks& near, std::uint64_t k0, std::uint64_t k1, const RecentView& recent,
-                   std::int64_t b0, int lanes, float* acc, std::size_t stride) {
+TPRF_KERNEL_TARGET void gather_recent(const RecentCall& call) {
+    const std::uint64_t k0 = call.first, k1 = call.last;
     if (k0 == k1) return;
-    const TapLink* __restrict links = near.links.data();
-    const int C = CT > 0 ? CT : lanes;
+    const TapLink* __restrict links = call.near->links.data();
+    const RecentView recent = call.recent;
+    const std::int64_t b0 = call.b0;
+    const int C = CT > 0 ? CT : call.lanes;
     float local[(CT > 0 ? CT : kMaxLanes) * BT];
     std::fill_n(local, C * BT, 0.0f);
     auto at = [&](std::int64_t bin, std::uint32_t q) {
@@ -263,7 +286,7 @@ TPRF_KERNEL_TARGET void gather_recent(const NearLinks& near, std::uint64_t k0, s
             h = next;
         }
     }
-    add_sums(acc, stride, local, C, BT);
+    add_sums(call.acc, call.stride, local, C, BT);
 }
 
 template <int BT>

@@ -29,26 +29,7 @@ namespace solver_detail {
 // Most values marched per patch and bin: the three colours of kMaxBatch illuminations.
 constexpr int kMaxLanes = 3 * kMaxBatch;
 
-// A link's delay as two taps: B_src[t - lag] * w0 + B_src[t - lag - 1] * w1. Nearest rounds the delay
-// to a whole bin; linear spreads a bin of the source (taken as uniform over the bin) over the two
-// bins it overlaps once shifted, so that the mean arrival time is exact and no energy is lost.
-struct Taps {
-    int lag;
-    float w0;
-    float w1;
-};
-
-// In single precision: it runs once per link and block in the hot loop. Delays stay below 2^24 bins, so
-// the fraction keeps at least a few thousandths of a bin.
-inline Taps link_taps(float distance, float inv_bin, DelayMode mode, float ff) {
-    const float d = distance * inv_bin;
-    if (mode == DelayMode::Nearest) return {int(d + 0.5f), ff, 0.0f};
-    const int lag = int(d);  // d >= 0: truncation is the floor
-    const float frac = d - float(lag);
-    return {lag, ff * (1.0f - frac), ff * frac};
-}
-
-// A grey link with its taps (link_taps), made once when the plan is, for the lists the march visits at
+// A grey link with its taps (delay_taps_f), made once when the plan is, for the lists the march visits at
 // every bin or block: the bin-by-bin pass's links shorter than a block (lag < block length; lag 0 keeps
 // only its w1 tap there, w0 is in the same-bin list), and the shortest window's (SolvePlan::near: lags
 // of one to two blocks), whose taps' arithmetic would otherwise sit between each link and its loads.
@@ -65,7 +46,7 @@ struct SameBinLink {
 };
 
 // A link through tinted mirrors or glass (Links::tint), between patches: its taps in each colour, ff x
-// tints[t][c] split as link_taps splits a grey link's. The long-pass kernels and the lists above keep
+// tints[t][c] split as delay_taps_f splits a grey link's. The long-pass kernels and the lists above keep
 // to grey links, whose one weight serves every lane; the few tinted ones have lists of their own.
 struct TintedLink {
     std::uint32_t source;  // long list: the source patch; bin-by-bin list: its position
@@ -118,11 +99,42 @@ struct PackedLink {
     float w0;
     float w1;
 };
-using PackedKernel = void (*)(const PackedLink*, std::uint64_t&, std::uint64_t, std::uint64_t, int, const float*,
-                              std::size_t, int, std::int64_t, float*, std::size_t);
 
-using GatherKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                              const float*, const RingSlot*, std::int64_t, float*, std::size_t);
+// One call of a long-link kernel (GatherKernel, LaneKernel, gather_long_any): one receiver's links of one
+// window, from `cursor` on while their sources lie in the source tile, applied to the block.
+struct LongCall {
+    const Links* links;        // the grey links, by receiver (SolvePlan::links)
+    std::uint64_t* cursor;     // in: the receiver's next link of the window; out: past the tile's last
+    std::uint64_t end;         // the end of the receiver's links of the window
+    std::uint32_t source_end;  // the source tile's end
+    float inv_bin;             // SolvePlan::inv_bin_f, for delay_taps_f
+    DelayMode mode;            // SolvePlan::delay
+    const float* ring;         // the rings of the layer gathered from
+    const RingSlot* slots;     // every node's ring in them (SolvePlan::slots)
+    std::int64_t b0;           // the block's first bin
+    int lanes;                 // C (LaneKernel and gather_long_any; a GatherKernel is compiled for its own)
+    int bins;                  // the window's bins (gather_long_any; the others are compiled for theirs)
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+
+// One call of a packed kernel (PackedKernel): one receiver's packed links of one window in one source tile.
+struct PackedCall {
+    const PackedLink* links;   // SolvePlan::packed
+    std::uint64_t* cursor;     // in: the receiver's next link of the window; out: past the tile's last
+    std::uint64_t end;         // the end of the receiver's links of the window
+    std::uint64_t key_end;     // the source tile's end as a key (source << lag_bits)
+    int lag_bits;              // SolvePlan::lag_bits
+    const float* ring;         // the rings of the layer gathered from, `ring_floats` each
+    std::size_t ring_floats;   // SolvePlan::packed_ring
+    int mask;                  // bins of a ring less one (before its mirror)
+    std::int64_t b0;           // the block's first bin
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+
+using PackedKernel = void (*)(const PackedCall&);
+using GatherKernel = void (*)(const LongCall&);
 // Where the shortest window's links read their sources' history: the recent bins, bin-major by node slot
 // (SolvePlan::recent_at), `slice` floats a bin, `mask` = recent_bins - 1.
 struct RecentView {
@@ -137,10 +149,19 @@ struct NearLinks {
     std::vector<TapLink> links;
     std::size_t bytes() const { return row.size() * sizeof(std::uint64_t) + links.size() * sizeof(TapLink); }
 };
-using RecentKernel = void (*)(const NearLinks&, std::uint64_t, std::uint64_t, const RecentView&, std::int64_t, int,
-                              float*, std::size_t);
-using LaneKernel = void (*)(const Links&, std::uint64_t&, std::uint64_t, std::uint32_t, float, DelayMode,
-                            const float*, const RingSlot*, std::int64_t, int, float*, std::size_t);
+// One call of the shortest window's kernel (RecentKernel): one receiver's near links.
+struct RecentCall {
+    const NearLinks* near;     // SolvePlan::near
+    std::uint64_t first;       // the receiver's links: near->links[first, last)
+    std::uint64_t last;
+    RecentView recent;         // the recent bins of the layer gathered from
+    std::int64_t b0;           // the block's first bin
+    int lanes;                 // C (a kernel compiled for a lane count ignores it)
+    float* acc;                // the sums: bin b's lanes at acc + b * stride
+    std::size_t stride;        // floats from one bin's sums to the next's
+};
+using RecentKernel = void (*)(const RecentCall&);
+using LaneKernel = void (*)(const LongCall&);
 
 // Calls fn with the lane count C as a std::integral_constant where the bin-by-bin passes are
 // specialised for it (as pick_kernel), else with 0: lanes counted at run time.
@@ -168,6 +189,12 @@ constexpr std::size_t kDenseRow = 256;
 // source tile's rings. Three lanes in windows of 32 bins take 96 KiB; a batch of 48 lanes would take
 // 1.5 MiB, where they measured no faster than adding into the accumulators (bench/RESULTS.md).
 constexpr std::size_t kTileSumBytes = std::size_t(512) << 10;
+// Floats of a thread's receiver-tile sums: a tile's receivers x the longest window x lanes, where the
+// sources are tiled (fewer a tile than the nodes) and that fits in kTileSumBytes; else none.
+inline std::size_t receiver_tile_floats(std::size_t source_tile, std::size_t nodes, int window_bins, int lanes) {
+    const std::size_t floats = std::min(nodes, kReceiverTile) * std::size_t(window_bins) * std::size_t(lanes);
+    return source_tile < nodes && floats * sizeof(float) <= kTileSumBytes ? floats : 0;
+}
 // Most same-bin sweeps in one bin.
 constexpr int kMaxSweeps = 200;
 // The long pass's longest window, bins: links at least this long are applied this many bins at a
@@ -188,8 +215,10 @@ constexpr std::size_t kShortPatchLinks = 4;
 // Everything about the march that is fixed before it starts: sizes, link lists, ring geometry and
 // the range of blocks. Computed once; the march only executes it.
 struct SolvePlan {
-    std::size_t n = 0;              // patches (the leaves: they emit, reflect and are output)
-    std::size_t m = 0;              // nodes: patches, then clusters (rings, gathers)
+    /// Patches: the tree's leaves, which emit, reflect and are output.
+    std::size_t patches = 0;
+    /// Nodes: the patches, then the clusters (each keeps a ring and gathers).
+    std::size_t nodes = 0;
     const ClusterTree* tree = nullptr;
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the
@@ -199,32 +228,38 @@ struct SolvePlan {
     // (hierarchical links), whose rows would otherwise be walked once per empty tile.
     std::size_t source_tile = kSourceTile;
     int threads = 1;
-    int bt = 0;                     // block length, bins (a power of two)
+    /// The march's block, bins (a power of two).
+    int block_bins = 0;
     int emit_blocks = 1;            // blocks per SolveBlock handed to the sink (a power of two)
-    int emit_bins() const { return bt * emit_blocks; }
-    // Windows of the long pass: window s is bt << s bins long and is applied at the blocks that
-    // start at its multiples, to the links of delay >= its length (and below the next window's;
-    // the last takes every longer one). The accumulators hold the next `acc_bins` bins.
+    int emit_bins() const { return block_bins * emit_blocks; }
+    // Windows of the long pass: window s is block_bins << s bins long and is applied at the blocks
+    // that start at its multiples, to the links of delay >= its length (and below the next window's;
+    // the last takes every longer one).
     int windows = 1;
-    int acc_bins = 0;               // the last window's length: bt << (windows - 1)
+    /// The accumulators' bins, the next ones the long pass adds into: the last window's length,
+    /// block_bins << (windows - 1).
+    int accumulator_bins = 0;
     // Per receiver: where its links of each window start, then where its row ends (windows + 1
     // offsets); with one window, the whole row (the kernel skips links shorter than the block).
     std::vector<std::uint64_t> segments;
     const Links* links = nullptr;   // the set's links, or `sorted` (plan_windows): the grey ones, by window
     Links sorted;
     // Lanes: every value the march keeps per node and bin (rings, accumulators, recent bins, emission,
-    // sweep state) is C floats, illumination k's colour c in lane k * channels + c.
-    int K = 1;                      // illuminations marched together
+    // sweep state) is `lanes` floats, illumination k's colour c in lane k * channels + c.
+    /// Illuminations marched together.
+    int illuminations = 1;
     int channels = 3;               // per illumination: 1 for a grey scene (every albedo and pulse), else 3
-    int C = 3;                      // lanes, K x channels
+    /// Values per node and bin: illuminations x channels.
+    int lanes = 3;
     // The lane that holds illumination k's colour c (a grey lane serves all three).
     int lane(int k, int c) const { return k * channels + (channels == 1 ? 0 : c); }
     DelayMode delay = DelayMode::Linear;
     bool wide = false;              // a long-link kernel for AVX-512 runs (SolverOptions::wide_vectors)
-    double start_m = 0.0, inv_bin = 0.0;
-    float inv_bin_f = 0.0f;
+    BinMap bin_map;                 // the time axis's bins in metres (pulse_bin)
+    float inv_bin_f = 0.0f;         // its reciprocal bin width in float, as the kernels take it (delay_taps_f)
     LayerPlan layers;
-    int L = 0;                      // layers
+    /// Rings per node: layers.layers().
+    int layer_count = 0;
     // Links shorter than a block, applied bin by bin, and the same-bin ones (CSR by receiver).
     std::vector<std::uint64_t> short_row, same_row;  // by receiver position
     std::vector<TapLink> short_links;
@@ -234,7 +269,7 @@ struct SolvePlan {
     // 4k Cornell box's in the first half.
     std::vector<std::size_t> short_split;
     std::vector<SameBinLink> same_links;
-    // Tinted links: those of lag >= bt by receiver patch, applied a block at a time (March::gather_tinted);
+    // Tinted links: those of lag >= block_bins by receiver patch, applied a block at a time (March::gather_tinted);
     // shorter ones and the same-bin pieces by receiver position, as the lists above. All empty, their
     // rows too, when no link is tinted.
     std::vector<std::uint64_t> tinted_long_row, tinted_short_row, tinted_same_row;
@@ -244,11 +279,11 @@ struct SolvePlan {
     // The same-bin system's rows: the patches that receive or send a same-bin link, by position (most
     // of a scene's patches have none: their values are final before the sweeps). Once the plan is
     // made, same_row and tinted_same_row are by row and the same-bin links name their source's row, so
-    // that the sweeps read and write compact iterates (L x rows x C).
+    // that the sweeps read and write compact iterates (layer_count x rows x lanes).
     std::vector<std::uint32_t> sweep_rows;   // row -> position
     std::vector<std::int32_t> sweep_row_of;  // position -> row, or -1 outside the system
     std::size_t sweep_at(int layer, std::size_t row) const {
-        return (std::size_t(layer) * sweep_rows.size() + row) * std::size_t(C);
+        return (std::size_t(layer) * sweep_rows.size() + row) * std::size_t(lanes);
     }
     // Iterates the sweeps rotate through: the current and the next, and with Chebyshev the one before.
     int sweep_buffers() const { return same_radius > 0.0 ? 3 : 2; }
@@ -256,27 +291,34 @@ struct SolvePlan {
     // and keep their state by position in it: short and same-bin links name their source's position.
     std::vector<std::uint32_t> order;     // position -> patch
     std::vector<std::uint32_t> position;  // patch -> position
-    std::vector<float> albedo;            // by position, C per patch: each lane's colour
+    std::vector<float> albedo;            // by position, `lanes` per patch: each lane's colour
     // Where node i's values are kept in arrays over nodes that the bin-by-bin passes read: patches
     // by position, clusters by id.
-    std::size_t node_slot(std::size_t i) const { return i < n ? position[i] : i; }
+    std::size_t node_slot(std::size_t i) const { return i < patches ? position[i] : i; }
     // Chebyshev acceleration of the same-bin sweeps: an upper bound of the spectral radius of the
     // same-bin operator (albedo x weights), or 0 to sweep plain Jacobi.
     double same_radius = 0.0;
-    std::vector<float> omega;  // Chebyshev weights of sweeps 1..kMaxSweeps
+    /// The Chebyshev weights of sweeps 1..kMaxSweeps.
+    std::vector<float> chebyshev_weights;
     int max_lag = 0;
     // Rings: the window [t - lag - 1, t] of every read from a node must fit, plus one block; mirrored
-    // so that any window of bt + 1 bins is contiguous. Each node's as long as its longest outgoing
+    // so that any window of block_bins + 1 bins is contiguous. Each node's as long as its longest outgoing
     // link needs: most patches of a hierarchical set send only to near ones (or not at all).
     std::vector<int> send_lag;      // per node: its longest outgoing link's lag, bins
     std::vector<int> send_window;   // per node: its longest outgoing long link's window, bins (0: none)
     std::vector<RingSlot> slots;    // per node
     std::size_t ring_floats = 0;    // per layer
-    int ring = 0;                   // longest ring
-    std::int64_t T = 0, b_begin = 0, blocks = 0;
+    /// The longest ring, bins.
+    int longest_ring = 0;
+    /// The time axis's bins.
+    std::int64_t bins = 0;
+    /// The march's first bin: the window's first, or before it the batch's earliest pulse's, aligned to
+    /// the longest window (plan_blocks).
+    std::int64_t start_bin = 0;
+    std::int64_t blocks = 0;        // blocks marched from start_bin
     std::int64_t first_emitted = 0;  // first bin handed to the sink (SolverOptions::first_bin)
     int fed_layers = 0;             // layers that gather from links
-    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (C, length), or null (generic)
+    GatherKernel kernel[kMaxWindows] = {};  // per window: its kernel for (lanes, length), or null (generic)
     LaneKernel lane_kernel[kMaxWindows] = {};  // per window without one: the generic kernel, or null (any)
     // Dense rows of a flat set whose lanes have packed kernels (SolvePlan::lag_bits > 0): their grey
     // links of at least a block packed, by row and window (`segments` index them, not `links`), and per
@@ -285,58 +327,64 @@ struct SolvePlan {
     std::uint64_t packed_count = 0;  // their number (also in a plan made for sizing only, which has none)
     int lag_bits = 0;               // a packed key's bits for the lag (the source's above them)
     bool packs() const { return lag_bits > 0; }
-    std::size_t packed_ring = 0;    // with packed links every ring is `ring` bins and one mirror: floats a node
+    /// With packed links every ring is longest_ring bins and one mirror: the floats of a node's.
+    std::size_t packed_ring_floats = 0;
     PackedKernel packed_kernel[kMaxWindows] = {};
-    // The shortest window's links (lags bt to 2 bt - 1) read the sources' last 2 bt bins, which the
-    // recent bins hold then, instead of their rings: near links have near sources, whose values share
-    // cache lines there, where each source's ring is a line of its own (bench/RESULTS.md, 2026-11-27).
+    // The shortest window's links (lags block_bins to 2 block_bins - 1) read the sources' last
+    // 2 block_bins bins, which the recent bins hold then, instead of their rings: near links have near
+    // sources, whose values share cache lines there, where each source's ring is a line of its own
+    // (bench/RESULTS.md).
     // Null with one window (blocks of the longest window).
     RecentKernel recent_kernel = nullptr;
     NearLinks near;  // the links it applies (taken out of `segments`: the first window is empty)
 
-    std::size_t acc_values() const { return m * std::size_t(acc_bins) * std::size_t(C); }
+    std::size_t acc_values() const { return nodes * std::size_t(accumulator_bins) * std::size_t(lanes); }
     // Where node i's long-link sums for `bin` are: the accumulators are bin-major (a bin's values of
     // every node together), so that the bin-by-bin passes read them contiguously.
     std::size_t acc_at(std::size_t i, std::int64_t bin) const { return acc_at_slot(node_slot(i), bin); }
     std::size_t acc_at_slot(std::size_t slot, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(acc_bins - 1)) * m + slot) * std::size_t(C);
+        return (std::size_t(bin & std::int64_t(accumulator_bins - 1)) * nodes + slot) * std::size_t(lanes);
     }
-    std::size_t acc_stride() const { return m * std::size_t(C); }
+    std::size_t acc_stride() const { return nodes * std::size_t(lanes); }
     // Floats of a thread's receiver-tile sums in the long pass: a tile's receivers x the longest window
     // x lanes, where the sources are tiled (dense rows) and that fits in kTileSumBytes; none otherwise
     // (the kernels then add into the accumulators directly).
-    std::size_t tile_sum_floats() const {
-        const std::size_t floats = std::min(m, kReceiverTile) * std::size_t(acc_bins) * std::size_t(C);
-        return source_tile < m && floats * sizeof(float) <= kTileSumBytes ? floats : 0;
-    }
+    std::size_t tile_sum_floats() const { return receiver_tile_floats(source_tile, nodes, accumulator_bins, lanes); }
     // Every node's radiosity of the last `recent_bins` bins, bin-major like the accumulators, by
     // node_slot (patches by position, then clusters): what the bin-by-bin passes, the pull and the
     // shortest window read (a few bins of near nodes together), besides the rings.
     int recent_bins = 0;
     std::size_t recent_at(std::size_t slot, std::int64_t bin) const {
-        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * m + slot) * std::size_t(C);
+        return (std::size_t(bin & std::int64_t(recent_bins - 1)) * nodes + slot) * std::size_t(lanes);
     }
-    int window_bins(int s) const { return bt << s; }
+    int window_bins(int s) const { return block_bins << s; }
     // The window of a link `lag` bins long: -1 below the block.
     int window_of(int lag) const {
-        if (lag < bt) return -1;  // bt is a power of two: a shift, not a division (once per link in the plan)
-        return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(bt)))) - 1, windows - 1);
+        if (lag < block_bins) return -1;  // block_bins is a power of two: a shift, not a division (once per link in the plan)
+        return std::min(int(std::bit_width(unsigned(lag) >> std::countr_zero(unsigned(block_bins)))) - 1, windows - 1);
     }
     // Bin of a pulse (exact containment: a delta at path p lies in the bin that holds p).
-    std::int64_t pulse_bin(const Pulse& p) const { return std::int64_t(std::floor((p.path - start_m) * inv_bin)); }
+    std::int64_t pulse_bin(const Pulse& p) const { return bin_map.bin(p.path); }
 };
 
-/// The plan of a march of `illuminations` illuminations of `channels` channels each, from the window's
-/// first block (plan_blocks moves the start to the batch's earliest pulse). `sizing_only`: a plan for
-/// working_bytes alone, whose packed links are counted, not made.
+/// What a plan is made for: a march of `illuminations` illuminations of `channels` channels each;
+/// `sizing_only`: a plan for working_bytes alone, whose packed links are counted, not made.
+struct PlanFor {
+    int illuminations = 1;
+    int channels = 3;
+    bool sizing_only = false;
+};
+
+/// The plan of a march, from the window's first block (plan_blocks moves the start to the batch's
+/// earliest pulse).
 SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
-                    int illuminations, int channels, bool sizing_only = false);
+                    const PlanFor& what);
 /// Moves the march's start to the batch's earliest pulse, aligned to the longest window.
 void plan_blocks(SolvePlan& plan, std::span<const Illumination* const> batch);
 /// Bytes of the ring buffers, block buffers and short-link lists of a march on this plan.
 std::size_t working_bytes(const SolvePlan& p);
-/// Whether the march can run on one channel: every albedo, link tint and pulse grey.
-bool scene_is_grey(const PatchSet& patches, const Links& links, std::span<const Illumination* const> batch);
+/// Whether every pulse of the batch is grey (with keeps_grey: the march runs on one channel).
+bool pulses_grey(std::span<const Illumination* const> batch);
 
 /// Whether this build has the kernels compiled for AVX-512 (512-bit vectors) and this CPU runs them.
 bool cpu_has_wide_kernels();
@@ -353,9 +401,7 @@ RecentKernel recent_kernel_for(int C, int bins, bool wide);
 /// one does not depend on `wide`, and the wide one gives the same bits.
 PackedKernel packed_kernel_for(int C, int bins, bool wide);
 /// Any lane count and window length, summed straight into the accumulators.
-void gather_long_any(const Links& links, std::uint64_t& cursor, std::uint64_t end, std::uint32_t source_end,
-                     float inv_bin, DelayMode mode, const float* ring, const RingSlot* slots, std::int64_t b0, int C,
-                     int bins, float* acc, std::size_t stride);
+void gather_long_any(const LongCall& call);
 
 }  // namespace solver_detail
 }  // namespace tprf

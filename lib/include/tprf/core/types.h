@@ -12,6 +12,9 @@ using Vec3 = Eigen::Vector3d;
 /// An RGB triple (albedo, emission, intensity or power per channel).
 using Rgb = Eigen::Array3d;
 
+/// Whether a colour is grey: its three channels equal.
+inline bool is_grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
+
 /// Speed of light, m/s (SPEC: the same in every medium of v1).
 inline constexpr double kSpeedOfLight = 299792458.0;
 

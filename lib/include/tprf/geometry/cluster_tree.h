@@ -41,6 +41,12 @@ struct ClusterTree {
     std::uint32_t root() const { return nodes() == 0 ? kNoNode : (clusters() > 0 ? std::uint32_t(leaves) : 0u); }
     /// Bytes held by the tree.
     std::size_t bytes() const;
+    /// Bytes of a tree of `nodes` nodes over `leaves` patches (as bytes() counts them).
+    static std::size_t bytes_for(std::size_t leaves, std::size_t nodes) {
+        return nodes * (sizeof(std::uint32_t) * 3 + sizeof(double) * 3 + sizeof(Vec3) * 2) +
+               (nodes - leaves) * sizeof(std::array<std::uint32_t, 2>) + leaves * sizeof(std::uint32_t) +
+               (leaves + 1) * sizeof(double);
+    }
 };
 
 /// A tree whose nodes are the patches only (the flat method's link set).

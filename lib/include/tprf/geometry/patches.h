@@ -31,6 +31,11 @@ struct PatchSet {
     std::size_t corners(std::size_t i) const { return first[i + 1] - first[i]; }
     /// First corner of patch i.
     const Vec3* polygon(std::size_t i) const { return vertices.data() + first[i]; }
+    /// Bytes of a set of `patches` patches with `corners` corners in all (its arrays).
+    static std::size_t bytes_for(std::size_t patches, std::size_t corners) {
+        return corners * sizeof(Vec3) + (patches + 1) * sizeof(std::uint32_t) +
+               patches * (2 * sizeof(Vec3) + sizeof(double) + 2 * sizeof(Rgb) + sizeof(std::uint32_t));
+    }
 };
 
 /// One mesh file of a scene as it was loaded.

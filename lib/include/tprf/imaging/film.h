@@ -19,7 +19,7 @@ namespace tprf {
 struct Gather;
 struct Illumination;
 struct SolveBlock;
-class FirstLinkLight;
+class SecondBounceLight;
 
 /// A gather's taps as the films apply them: one short delay kernel per patch (and tint) a pixel
 /// reads. Each gather tap is split between two bins as the delay mode says (or put in the nearest),
@@ -111,12 +111,12 @@ public:
     /// The taps this film applies (to share with the other films of the same gather).
     const std::shared_ptr<const FilmTaps>& taps() const { return m_taps; }
 
-    /// Reads the light one link after its pulse (`light`: FirstLinkLight::fill of the orders this film
+    /// Reads the light one link after its pulse (`light`: SecondBounceLight::fill of the orders this film
     /// takes) apart from the rest of each profile, at each tap's leg plus its shift: `shifted` is
     /// film_taps(..., true) of the same gather, when another film has them (made here when null).
     /// Call before the first block. The light filmed is the same; only its timing at each sample moves.
-    void read_first_link_apart(const FirstLinkLight* light, std::shared_ptr<const FilmTaps> shifted = nullptr);
-    /// The shifted taps (null unless read_first_link_apart was called).
+    void read_second_bounce_apart(const SecondBounceLight* light, std::shared_ptr<const FilmTaps> shifted = nullptr);
+    /// The shifted taps (null unless read_second_bounce_apart was called).
     const std::shared_ptr<const FilmTaps>& shifted_taps() const { return m_shifted; }
 
     /// Adds the exact direct-light arrivals (once).
@@ -157,9 +157,9 @@ private:
     std::size_t m_capacity = 0;   ///< bins a row holds (0 until the first block)
     std::shared_ptr<const FilmTaps> m_taps;
     std::int64_t m_pad = 0;
-    /// read_first_link_apart: the light one link after its pulse, in rows laid out as m_indirect's
+    /// read_second_bounce_apart: the light one link after its pulse, in rows laid out as m_indirect's
     /// (which then hold the rest), and the taps that read it.
-    const FirstLinkLight* m_first_link = nullptr;
+    const SecondBounceLight* m_second_bounce = nullptr;
     std::shared_ptr<const FilmTaps> m_shifted;
     std::vector<float> m_first;
     std::vector<char> m_first_lit;  // per patch: whether its row of m_first holds any light

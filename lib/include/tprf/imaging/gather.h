@@ -23,7 +23,7 @@ namespace tprf {
 struct PatchSet;
 struct LightSources;
 class Visibility;
-class FirstLinkLight;
+class SecondBounceLight;
 
 /// One patch's share of one output: radiance = weight * B_patch (t - leg), weight including 1/pi,
 /// the interpolation weight and the point's weight.
@@ -38,7 +38,7 @@ struct PixelTap {
     /// could have arrived.
     float earliest = 0.0f;
     std::uint16_t tint = 0;   ///< index into Gather::tints: the weight per channel is weight * tints[tint]
-    /// Metres of path added to the light one link after its pulse (FirstLinkLight::shift at the
+    /// Metres of path added to the light one link after its pulse (SecondBounceLight::shift at the
     /// point): the film reads that part of the profile at leg + shift, the rest at leg.
     float shift = 0.0f;
 };
@@ -70,8 +70,8 @@ struct GatherOptions {
     const TimeAxis* time = nullptr;
     int emitter_rays = kAreaShadowRays;     ///< shadow rays from a sensing point to an area source
     int penumbra_rays = kAreaPenumbraRays;  ///< where those disagree
-    /// When given, each tap's shift is first_link->shift(patch, point) (camera.shift_second_bounce).
-    const FirstLinkLight* first_link = nullptr;
+    /// When given, each tap's shift is second_bounce->shift(patch, point) (camera.shift_second_bounce).
+    const SecondBounceLight* second_bounce = nullptr;
 };
 
 /// One output's taps merged where a film on `time` cannot tell them apart: one patch and tint, legs in

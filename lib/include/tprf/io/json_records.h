@@ -4,6 +4,7 @@
 /// data of sensor_plot.png). All appear
 /// atomically under their final name. The JSON library stays inside this file's source.
 
+#include "tprf/core/phase_seconds.h"
 #include "tprf/core/time_axis.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/imaging/sensor_model.h"
@@ -20,12 +21,6 @@
 #include <vector>
 
 namespace tprf {
-
-/// Seconds spent in each phase of a render (render.json's `seconds`).
-struct PhaseSeconds {
-    double load = 0, patches = 0, links = 0, solve = 0, gather = 0, write = 0, total = 0;
-    double illumination = 0;  ///< the part of `gather` that lights the patches (illuminate())
-};
 
 /// One rank's part of a capture split across ranks (docs/mpi.md): its laser points and what it spent.
 struct CaptureShare {
@@ -71,7 +66,7 @@ struct RenderRecord {
     int measurements = 0;                 ///< the sensor's measurements per pixel and channel
     double peak_rss_mb = 0.0;
     std::vector<MeshReport> meshes;       ///< one per mesh object
-    bool second_bounce_shifted = false;   ///< camera.shift_second_bounce applied (FirstLinkLight)
+    bool second_bounce_shifted = false;   ///< camera.shift_second_bounce applied (SecondBounceLight)
 };
 
 /// render.json's text (JSON, indented, ending in a newline).

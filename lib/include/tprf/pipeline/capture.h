@@ -90,4 +90,10 @@ TimeAxis march_time(const Scene& scene);
 /// lattice of every S-th grid point along each side and the last (the others take their light, moved).
 std::size_t marched_laser_points(const Capture& capture);
 
+/// The orders a capture's march solves (SolverOptions::max_bounces): the patch orders, one less than
+/// the sensor's (the last leg to the sensor point is one of capture.max_bounces), or all.
+inline int capture_march_bounces(const Capture& capture) {
+    return capture.max_bounces < 0 ? -1 : capture.max_bounces - 1;
+}
+
 }  // namespace tprf

@@ -1,35 +1,18 @@
 #pragma once
-/// `tprf info`: a scene's size without rendering it, and what every pipeline entry point shares.
+/// `tprf info`: a scene's size without rendering it, and its resource estimate.
 
-#include "tprf/core/progress.h"
+#include "tprf/core/phase_seconds.h"
 #include "tprf/core/time_axis.h"
 #include "tprf/geometry/patches.h"
-#include "tprf/io/json_records.h"
-#include "tprf/scene/parse_mitsuba.h"
+#include "tprf/pipeline/options.h"
 #include "tprf/scene/scene.h"
+#include "tprf/transport/solver.h"
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
 namespace tprf {
-
-/// Options shared by the pipeline entry points.
-struct PipelineOptions {
-    int threads = 0;        ///< 0: all cores
-    ProgressFn progress;    ///< may be empty
-    /// Draw figures (sensor_plot.png) with python/tprf_plots.py in a child process. Off: only their
-    /// data is written (sensor_plot.json), for callers that must not fork or draw themselves.
-    bool draw_plots = true;
-    /// A render whose estimated peak memory (estimate_resources) exceeds this many GB (1e9 bytes) is
-    /// refused before anything heavy is allocated (check_memory); 0: 80% of the memory available
-    /// (MemAvailable in /proc/meminfo).
-    double max_memory_gb = 0.0;
-    /// `--max-edge L`: replaces the scene's patches.max_edge (metres) when > 0.
-    double max_edge = 0.0;
-    /// `-D name=value`: parameters of a Mitsuba XML scene (scene/parse_mitsuba.h); must be empty for JSON.
-    XmlDefines defines;
-};
 
 /// What `tprf info` prints: the scene's size without rendering it.
 struct SceneSummary {
@@ -58,6 +41,12 @@ std::string describe(const MeshReport& mesh);
 /// Builds patches and links of a scene and measures them.
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options = {});
 
+/// An array the solve fills, as a camera render opens it: its name (the .npy file's stem) and shape.
+struct CubeShape {
+    std::string name;
+    std::vector<std::size_t> shape;
+};
+
 /// What a render will cost, estimated from the scene alone before anything heavy runs: patches are
 /// counted by build_patches' rules (mesh files are loaded to count their triangles), links are
 /// modelled, nothing is built. Bytes are what each stage holds once it has run (the builders' scratch
@@ -70,10 +59,15 @@ struct ResourceEstimate {
     std::size_t links = 0;               ///< estimated links (flat: facing pairs, both directions)
     std::size_t near_links = 0;          ///< hierarchical: facing patch pairs nearer than its shortest cluster link
     double near_gap_m = 0.0;             ///< hierarchical: that distance, metres
+    std::size_t mirror_links = 0;        ///< of `links`, those through mirrors and glass
     double facing_fraction = 0.0;        ///< share of sampled patch pairs that face each other
     int channels = 3;                    ///< 1 for a grey scene
     int ring_bins = 0;                   ///< history per node and layer
     int layers = 1;                      ///< solver layers (bounce orders kept apart)
+    /// The march as the solver would plan it (march_shape) from the estimated sizes: a camera render's
+    /// one illumination, or a capture's batch of capture_batch.
+    MarchShape march;
+    std::vector<CubeShape> cubes;        ///< the cubes a camera render fills (and their shapes)
     double lit_pixels = 1.0;             ///< share of pixels that see an object (occlusion left out)
     std::size_t samples = 0;             ///< camera samples that meet the scene (lit pixels x spp)
 

@@ -1,7 +1,7 @@
 #pragma once
 /// `tprf sensor OUTDIR SENSOR.json`: a sensor block applied to an earlier render.
 
-#include "tprf/pipeline/info.h"
+#include "tprf/pipeline/options.h"
 
 #include <array>
 #include <filesystem>

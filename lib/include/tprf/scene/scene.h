@@ -31,7 +31,7 @@ struct Camera {
     /// sample's light at its own exact path (beyond SPEC; docs/scene.md).
     bool footprint = true;
     /// Read the second bounce (the light one link after its pulse) at each sample's own time rather
-    /// than its patch centroid's (FirstLinkLight; beyond SPEC, docs/scene.md): what patch-to-patch
+    /// than its patch centroid's (SecondBounceLight; beyond SPEC, docs/scene.md): what patch-to-patch
     /// links carry, without mirrors or glass; ignored with them.
     bool shift_second_bounce = true;
 };
@@ -96,9 +96,6 @@ struct Object {
     bool two_sided = false;
     std::string json_path;             ///< e.g. "objects[2]", for error messages; "" means objects[its index]
 };
-
-/// How a delay that falls between two bins is placed.
-enum class DelayMode { Nearest, Linear };
 
 /// The optional `solver` block.
 struct SolverSettings {

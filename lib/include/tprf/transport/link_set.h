@@ -23,7 +23,7 @@ namespace tprf {
 
 class Visibility;
 
-/// Delay octaves: a link of delay d bins (floor of distance * inv_bin, in float, as the solver
+/// Delay octaves: a link of delay d bins (delay_bins_f: distance * inv_bin in float, as the solver
 /// computes it) is in octave 0 when d < 1, else 1 + floor(log2 d), at most kDelayOctaves - 1. The
 /// solver applies the links of octave k >= 1 in windows of 2^(k-1) bins, and every link of 32 bins
 /// or more (the last octave) in its longest window, so a row sorted by octave splits into one range
@@ -137,5 +137,16 @@ struct LinkSetStats {
 /// through mirrors are the caller's next step (add_mirror_links), so that it can report them.
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
                       double bin_width_m, const LinkOptions& options = {}, LinkSetStats stats = {});
+
+/// What the link stage holds per item while it builds, bytes (the sizes of its records), for sizing a
+/// build without running it (tprf info).
+struct LinkBuildSizes {
+    std::size_t flat_pair = 0;          ///< a facing pair (both links) in the flat builder's lists
+    std::size_t hierarchical_pair = 0;  ///< a pair of links (both directions) in the hierarchical builder's records
+    std::size_t oracle_node = 0;        ///< a node's points stored for the hierarchical oracle
+    std::size_t spread_link = 0;        ///< a spread link's piece in its row's list (spread_patch_links)
+    std::size_t mirror_link = 0;        ///< a link through mirrors in its pair list and its row's rebuilt copy
+};
+LinkBuildSizes link_build_sizes(const HierarchyOptions& options = {});
 
 }  // namespace tprf

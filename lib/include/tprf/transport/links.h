@@ -44,6 +44,9 @@ struct Links {
     std::size_t receivers() const { return row.empty() ? 0 : row.size() - 1; }
     /// Bytes held by the link arrays.
     std::size_t bytes() const;
+    /// Bytes of a grey link in the arrays (source, form factor, distance) and of a row offset.
+    static constexpr std::size_t kLinkBytes = sizeof(std::uint32_t) + 2 * sizeof(float);
+    static constexpr std::size_t kRowBytes = sizeof(std::uint64_t);
 };
 
 /// Checks that `links.tint` is empty or holds one index per link into `tints`, whose entry 0 is

@@ -30,6 +30,7 @@ namespace tprf {
 struct PatchSet;
 struct LinkSet;
 struct Illumination;
+struct Links;
 
 /// Most illuminations one march takes.
 inline constexpr int kMaxBatch = 16;
@@ -112,11 +113,112 @@ SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, const 
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& links, std::span<const Illumination* const> batch,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink);
 
+/// The layers of a march on `options` (max_bounces, bounce_terms): rings kept apart per bounce order.
+struct MarchLayers {
+    int layers = 1;  ///< rings per node (orders kept apart, and the total of the later ones)
+    int terms = 0;   ///< per-order terms handed to the sink (SolveBlock::terms)
+    int fed = 1;     ///< layers that gather from links (the first order's only takes the pulses)
+};
+MarchLayers march_layers(const SolverOptions& options);
+
+/// The channels a march keeps per illumination (SolveStats::channels): 1 when its light stays grey
+/// (every albedo, every link tint and every source's colour grey), else 3.
+constexpr int march_channels(bool grey) { return grey ? 1 : 3; }
+
+/// Whether the patches and links keep grey light grey: every albedo and the tint of every link
+/// (Links::tint) is grey. With grey sources, a march of them keeps one channel (march_channels).
+bool keeps_grey(const PatchSet& patches, const Links& links);
+
+/// Whether a march of the scene as written stays grey (march_channels), before anything is built: every
+/// object's albedo, emission and mirror or glass reflectance, every light's colour and a capture's
+/// laser power grey. What keeps_grey and the pulses find once the scene is built.
+bool scene_keeps_grey(const Scene& scene);
+
 /// Working bytes (SolveStats::working_bytes) of a march of `illuminations` (1..kMaxBatch) illuminations
 /// of `channels` channels each (1 for a grey scene, else 3) over these patches, links and time axis:
 /// the plan is built (the link lists sorted), nothing is marched. For choosing a batch from a memory
 /// budget; the links themselves are not counted.
 std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& links, const TimeAxis& time,
                                 const SolverOptions& options, int illuminations, int channels);
+
+// ---- Sizing a march without building it ----
+//
+// A march's working memory follows from its shape, which the plan decides from the sizes of its inputs
+// alone (march_shape), and from the lengths of the lists it makes, which its links' delays decide. The
+// plan counts its own (solve_sizing); an estimate that builds nothing (tprf info) models the inputs and
+// the lengths, takes the shape from march_shape, and both add them up by one rule (march_working_bytes).
+
+/// The sizes a plan decides its march's shape from.
+struct MarchInputs {
+    std::size_t patches = 0;     ///< N
+    std::size_t nodes = 0;       ///< N and the clusters (LinkSet::nodes)
+    std::size_t links = 0;       ///< the set's links
+    bool clusters = false;       ///< the set has clusters (push and pull run)
+    int cluster_block_bins = 0;  ///< LinkSet::block_bins: the shortest cluster link, bins (0: none)
+    int longest_lag = 0;         ///< the longest link's delay, whole bins (delay_taps_f's lag)
+    int illuminations = 1;       ///< K, 1..kMaxBatch
+    int channels = 3;            ///< per illumination (march_channels)
+};
+
+/// What a plan decides from MarchInputs and the options: the march's shape.
+struct MarchShape {
+    std::size_t patches = 0;          ///< N
+    std::size_t nodes = 0;            ///< N and the clusters
+    int threads = 1;                  ///< worker threads
+    int illuminations = 1;            ///< K
+    int channels = 3;                 ///< per illumination
+    int lanes = 3;                    ///< values per node and bin: K x channels
+    MarchLayers layers;               ///< rings per node, terms handed out, layers fed by links
+    int block_bins = 0;               ///< the march's block, bins (a power of two)
+    int emit_blocks = 1;              ///< blocks per hand-over to the sink (a power of two)
+    std::size_t source_tile = 0;      ///< sources per tile of the long pass (all of them: not tiled)
+    int lag_bits = 0;                 ///< > 0: dense rows' links packed, the lag in this many bits of a key
+    int windows = 1;                  ///< windows of the long pass
+    int window_bins = 0;              ///< the longest window, bins: the accumulators' length
+    int recent_bins = 0;              ///< bins of every node's recent radiosity
+    bool near_list = false;           ///< the shortest window's links in a list of their own (read from the recent bins)
+    std::size_t tile_sum_floats = 0;  ///< a thread's receiver-tile sums in the long pass
+};
+MarchShape march_shape(const MarchInputs& inputs, const SolverOptions& options);
+/// The march's block (MarchShape::block_bins): options.block_bins as a power of two, no longer than the
+/// shortest cluster link (`cluster_block_bins`, LinkSet::block_bins; 0: no limit).
+int march_block_bins(const SolverOptions& options, int cluster_block_bins);
+
+/// The lengths of a march's lists and rings, which its links' delays decide.
+struct MarchLists {
+    std::size_t ring_bins = 0;       ///< every node's ring and its mirror, bins, summed over the nodes
+    std::size_t short_links = 0;     ///< grey links applied bin by bin (a cluster link as its patches' links)
+    std::size_t same_bin_links = 0;  ///< grey links within one bin (the same-bin system)
+    std::size_t sweep_rows = 0;      ///< the same-bin system's rows: patches that send or receive such a link
+    bool chebyshev = false;          ///< the same-bin sweeps keep a third iterate (Chebyshev acceleration)
+    bool sorted = false;             ///< the long pass reads a copy of the grey links (by window; tinted ones left out)
+    std::size_t sorted_links = 0;    ///< ... of this many links
+    std::size_t near_links = 0;      ///< the shortest window's links (MarchShape::near_list)
+    std::size_t packed_links = 0;    ///< dense rows' links packed (MarchShape::lag_bits)
+    bool tinted = false;             ///< some link is tinted: the tinted lists exist
+    std::size_t tinted_long = 0;     ///< tinted links of at least a block
+    std::size_t tinted_short = 0;    ///< tinted links shorter than a block
+    std::size_t tinted_same = 0;     ///< tinted links within one bin
+};
+
+/// Working bytes of a march of this shape and these lists (SolveStats::working_bytes).
+std::size_t march_working_bytes(const MarchShape& shape, const MarchLists& lists);
+
+/// A plan's own inputs, shape and lists, as solve_working_bytes plans the march (nothing marched):
+/// what an estimate of the march is checked against.
+struct MarchSizing {
+    MarchInputs inputs;
+    MarchShape shape;
+    MarchLists lists;
+    std::size_t working_bytes = 0;  ///< march_working_bytes(shape, lists)
+};
+MarchSizing solve_sizing(const PatchSet& patches, const LinkSet& links, const TimeAxis& time,
+                         const SolverOptions& options, int illuminations, int channels);
+
+/// Bins of a node's ring whose longest outgoing link is `lag` bins, in a march of blocks of
+/// `block_bins` (a power of two: the window [t - lag - 1, t] and one block).
+int ring_bins(int lag, int block_bins);
+/// Bins mirrored after a ring whose longest long link is read in windows of `window_bins` (0: none).
+int ring_mirror_bins(int window_bins);
 
 }  // namespace tprf

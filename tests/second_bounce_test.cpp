@@ -1,8 +1,8 @@
-// The second bounce read at each sample's own time (FirstLinkLight, camera.shift_second_bounce): the
+// The second bounce read at each sample's own time (SecondBounceLight, camera.shift_second_bounce): the
 // light it separates is exactly the solver's second bounce, and each pixel's second-bounce light
 // arrives at the mean path its visible point has, as a quadrature over the other plane gives it.
 
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
@@ -87,8 +87,8 @@ LinkSet patch_links_only(const LinkSet& set) {
     return out;
 }
 
-TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
-    // Flat links: FirstLinkLight's light is the solver's whole second bounce. Hierarchical links: it
+TEST(SecondBounceLight, HoldsExactlyTheSolversSecondBounce) {
+    // Flat links: SecondBounceLight's light is the solver's whole second bounce. Hierarchical links: it
     // is what their patch-to-patch links carry (the solver's second bounce on those links alone), and
     // what cluster links bring stays in the profiles: nowhere more than the solver's whole second bounce.
     for (const LinkMethod method : {LinkMethod::Flat, LinkMethod::Hierarchical}) {
@@ -111,7 +111,7 @@ TEST(FirstLinkLight, HoldsExactlyTheSolversSecondBounce) {
             const char* mode = delay == DelayMode::Linear ? "linear" : "nearest";
             const std::vector<float> second = solver_second_bounce(patches, own, light, scene.time, delay);
             const std::vector<float> whole = solver_second_bounce(patches, links, light, scene.time, delay);
-            const FirstLinkLight first(patches, links, light, scene.time, {.delay = delay});
+            const SecondBounceLight first(patches, links, light, scene.time, {.delay = delay});
             std::vector<float> rows(n * T * 3, 1.0f);  // fill overwrites every bin
             std::vector<char> lit;
             // In two pieces, as films ask for it: the first ends inside the second bounce's bins.
@@ -216,7 +216,7 @@ double quantile(std::vector<double> v, double q) {
     return v[std::size_t(q * double(v.size() - 1))];
 }
 
-TEST(FirstLinkLight, PixelsSeeTheSecondBounceAtTheirOwnPointsMeanPath) {
+TEST(SecondBounceLight, PixelsSeeTheSecondBounceAtTheirOwnPointsMeanPath) {
     // Patches of 0.1 m (circumradius 71 mm): read at their centroid's time, a pixel's second bounce is
     // off by its sender-weighted |x - c_j| - |c_k - c_j|, up to a few cm. Read with the shift to second
     // order, what is left is the senders' own discretisation (their light weighed at centroids). At

@@ -16,7 +16,7 @@
 ///
 /// Only patch-to-patch links are taken apart: in a hierarchical set, what reaches a patch through a
 /// cluster link (its light shared by all the cluster's members, sent from a cluster's mean) stays in
-/// the profile with the centroid's timing. No mirrors (make_first_link_light says when it applies).
+/// the profile with the centroid's timing. No mirrors (make_second_bounce_light says when it applies).
 
 #include "tprf/core/types.h"
 #include "tprf/core/time_axis.h"
@@ -37,7 +37,7 @@ struct Illumination;
 
 /// How the light one link after its pulse is taken: as the solver places a delay between bins, of the
 /// pulses that max_bounces lets on.
-struct FirstLinkOptions {
+struct SecondBounceOptions {
     DelayMode delay = DelayMode::Linear;
     int max_bounces = -1;  ///< the solver's: -1 for all
     int threads = 0;       ///< 0: all cores
@@ -49,10 +49,10 @@ struct BinSpan {
     std::size_t count = 0;
 };
 
-class FirstLinkLight {
+class SecondBounceLight {
 public:
-    FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
-                   const TimeAxis& time, const FirstLinkOptions& options = {});
+    SecondBounceLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
+                      const TimeAxis& time, const SecondBounceOptions& options = {});
 
     /// Writes into `rows` the light of the bins `span` that every patch receives through one
     /// patch-to-patch link from a propagating pulse whose onward order `takes(order)` accepts, times the
@@ -109,11 +109,11 @@ private:
     bool m_any = false;
 };
 
-/// The first-link light of a camera render, or null when it does not apply: mirrors (a link through
+/// The second bounce's light of a camera render, or null when it does not apply: mirrors (a link through
 /// one does not run from c_j), tinted links, or no light sent through a patch-to-patch link as pulses
 /// that max_bounces lets on.
-std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
-                                                      const Illumination& illumination, const TimeAxis& time,
-                                                      const FirstLinkOptions& options, bool mirrors);
+std::unique_ptr<SecondBounceLight> make_second_bounce_light(const PatchSet& patches, const LinkSet& links,
+                                                            const Illumination& illumination, const TimeAxis& time,
+                                                            const SecondBounceOptions& options, bool mirrors);
 
 }  // namespace tprf

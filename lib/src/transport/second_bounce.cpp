@@ -1,4 +1,4 @@
-#include "tprf/transport/first_link.h"
+#include "tprf/transport/second_bounce.h"
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
@@ -6,16 +6,14 @@
 #include "tprf/transport/illumination.h"
 #include "tprf/transport/link_set.h"
 
-#include "solver_plan.h"
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
 namespace tprf {
 
-FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
-                               const TimeAxis& time, const FirstLinkOptions& options)
+SecondBounceLight::SecondBounceLight(const PatchSet& patches, const LinkSet& links, const Illumination& illumination,
+                               const TimeAxis& time, const SecondBounceOptions& options)
     : m_patches(patches), m_links(links), m_time(time), m_delay(options.delay), m_threads(options.threads) {
     const int max_bounces = options.max_bounces, threads = options.threads;
     const std::size_t n = patches.size();
@@ -31,9 +29,9 @@ FirstLinkLight::FirstLinkLight(const PatchSet& patches, const LinkSet& links, co
     m_any = std::any_of(any.begin(), any.end(), [](char a) { return a != 0; });
 }
 
-FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumination, int max_bounces) {
+SecondBounceLight::Senders SecondBounceLight::take_pulses(const Illumination& illumination, int max_bounces) {
     const std::size_t n = m_patches.size();
-    const double inv_bin = 1.0 / m_time.bin_width_m(), start = m_time.start_m();
+    const BinMap bins = m_time.bin_map();
     Senders s;
     s.weight.assign(n, 0.0);
     s.first.assign(n, std::numeric_limits<std::int64_t>::max());
@@ -46,7 +44,7 @@ FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumina
             const Pulse& p = illumination.pulses[k];
             if (!p.propagates || !(p.energy > 0.0).any()) continue;
             if (max_bounces >= 0 && p.order + 1 > max_bounces) continue;
-            const std::int64_t bin = std::int64_t(std::floor((p.path - start) * inv_bin));  // SolvePlan::pulse_bin
+            const std::int64_t bin = bins.bin(p.path);  // as SolvePlan::pulse_bin
             pulses.push_back({bin, &p});
             s.weight[j] += p.energy.mean();
             s.first[j] = std::min(s.first[j], bin);
@@ -71,9 +69,9 @@ FirstLinkLight::Senders FirstLinkLight::take_pulses(const Illumination& illumina
     return s;
 }
 
-bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
+bool SecondBounceLight::plan_receiver(std::size_t i, const Senders& senders) {
     const Links& l = m_links.links;
-    const float inv_bin_f = float(1.0 / m_time.bin_width_m());
+    const float inv_bin_f = m_time.inv_bin_f();
     std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
     Vec3 d = Vec3::Zero();
     Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
@@ -81,7 +79,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
         const std::uint32_t j = l.source[k];
         if (j >= m_patches.size() || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
-        const int lag = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, 1.0f).lag;
+        const int lag = delay_taps_f(l.distance[k], inv_bin_f, m_delay, 1.0f).lag;
         lo = std::min(lo, senders.first[j] + lag);
         hi = std::max(hi, senders.last[j] + lag + 2);
         const double c = double(l.ff[k]) * senders.weight[j];  // the light this link brings
@@ -105,7 +103,7 @@ bool FirstLinkLight::plan_receiver(std::size_t i, const Senders& senders) {
     return true;
 }
 
-void FirstLinkLight::fill(BinSpan span, const std::function<bool(int)>& takes, float* rows, std::size_t stride,
+void SecondBounceLight::fill(BinSpan span, const std::function<bool(int)>& takes, float* rows, std::size_t stride,
                           std::vector<char>& lit, const std::vector<char>* wanted) const {
     const std::int64_t first_bin = span.first;
     const std::size_t bins = span.count;
@@ -116,7 +114,7 @@ void FirstLinkLight::fill(BinSpan span, const std::function<bool(int)>& takes, f
     bool taken[256];
     for (int o = 0; o < 256; ++o) taken[o] = takes(o + 1);
     const Links& l = m_links.links;
-    const float inv_bin_f = float(1.0 / m_time.bin_width_m());
+    const float inv_bin_f = m_time.inv_bin_f();
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {
         float* row = rows + i * stride;
         std::fill_n(row, bins * 3, 0.0f);
@@ -126,7 +124,7 @@ void FirstLinkLight::fill(BinSpan span, const std::function<bool(int)>& takes, f
         for (std::uint64_t k = l.row[i]; k < l.row[i + 1]; ++k) {
             const std::uint32_t j = l.source[k];
             if (j >= n || m_row[j] == m_row[j + 1]) continue;  // a cluster, or sends nothing
-            const solver_detail::Taps t = solver_detail::link_taps(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
+            const DelayTaps t = delay_taps_f(l.distance[k], inv_bin_f, m_delay, l.ff[k]);
             for (std::uint64_t r = m_row[j]; r < m_row[j + 1]; ++r) {
                 const Run& run = m_runs[r];
                 if (!taken[run.order]) continue;
@@ -157,7 +155,7 @@ void FirstLinkLight::fill(BinSpan span, const std::function<bool(int)>& takes, f
     });
 }
 
-double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
+double SecondBounceLight::shift(std::uint32_t k, const Vec3& x) const {
     const Vec3 d = x - m_patches.centroid[k];
     const std::array<float, 3>& g = m_gradient[k];
     const std::array<float, 6>& h = m_hessian[k];
@@ -167,11 +165,11 @@ double FirstLinkLight::shift(std::uint32_t k, const Vec3& x) const {
     return linear + 0.5 * quadratic;
 }
 
-std::unique_ptr<FirstLinkLight> make_first_link_light(const PatchSet& patches, const LinkSet& links,
+std::unique_ptr<SecondBounceLight> make_second_bounce_light(const PatchSet& patches, const LinkSet& links,
                                                       const Illumination& illumination, const TimeAxis& time,
-                                                      const FirstLinkOptions& options, bool mirrors) {
+                                                      const SecondBounceOptions& options, bool mirrors) {
     if (mirrors || links.links.tinted() || patches.size() == 0) return nullptr;
-    auto light = std::make_unique<FirstLinkLight>(patches, links, illumination, time, options);
+    auto light = std::make_unique<SecondBounceLight>(patches, links, illumination, time, options);
     if (light->empty()) return nullptr;
     return light;
 }
