@@ -3,7 +3,7 @@
 
 Usage: scripts/make_sample_meshes.py [OUTPUT_DIR]   (default: meshes/ beside this script's folder)
 
-Every face is counter-clockwise seen from outside, so the front side (SPEC: the side the winding faces)
+Every face is counter-clockwise seen from outside, so the front side (docs/scene.md: the side the winding faces)
 points away from the solid. Coordinates are written with 6 decimals; the output is deterministic.
 """
 

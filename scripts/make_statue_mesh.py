@@ -16,7 +16,7 @@ marching cubes do), with no two faces alike. It is built from
     onto the zero set.
 
 Units: the bust is 1.0 tall (z up, base at z = 0, centred on the z axis), faces -y. Every face is
-counter-clockwise seen from outside (SPEC: the front side is the side the winding faces). The noise
+counter-clockwise seen from outside (docs/scene.md: the front side is the side the winding faces). The noise
 uses an integer hash, not a random generator, so the file is the same on every machine and numpy
 version (up to the last bit of float32 rounding of transcendental functions, which numpy takes from
 the C library). Needs numpy (Debian: python3-numpy).

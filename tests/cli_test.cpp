@@ -1,4 +1,4 @@
-// The command line's contract (SPEC.md, "Command line"): exit status 2 and one message for bad input,
+// The command line's contract (docs/cli.md): exit status 2 and one message for bad input,
 // and nothing written for it.
 #include "test_process.h"
 #include "tprf/io/npy.h"

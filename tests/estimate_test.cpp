@@ -1,4 +1,4 @@
-// The resource estimate (SPEC.md v2, "Links and scale"): `tprf info` prints it, and `--max-memory`
+// The resource estimate (docs/resources.md): `tprf info` prints it, and `--max-memory`
 // refuses a render whose estimate exceeds the limit, with exit status 2, before anything is allocated.
 #include "test_process.h"
 #include "test_scenes.h"

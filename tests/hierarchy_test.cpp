@@ -441,7 +441,7 @@ TEST(Hierarchy, EveryPatchPairIsCoveredExactlyOnceAndReciprocally) {
 TEST(Hierarchy, FurnaceTotalRadiosityIsEmissionOverOneMinusAlbedo) {
     // A closed cube of albedo a lit by a point light: all the power E that the light puts into the
     // patches (after their albedo) bounces on until absorbed, so sum_i A_i B_i = E / (1 - a), within
-    // 0.1% (issue 12), at the default tolerance (0.001, SPEC's). A point light makes the total weigh
+    // 0.1% (issue 12), at the default tolerance (0.001). A point light makes the total weigh
     // the few patches near it, so this needs each patch's row sum right, not only their mean.
     // Measured (600 patches): flat 2.8e-5 (a = 0.5) and 1.0e-4 (a = 0.8); hierarchical at 0.001:
     // -0.030% and -0.046%. At tolerance 0.01 the hierarchy is -0.19% and -0.21% off: the tolerance

@@ -1,4 +1,4 @@
-// Mirrors and thin glass (SPEC.md v2, "Materials"; docs/materials.md), each checked against an answer
+// Mirrors and thin glass (docs/materials.md), each checked against an answer
 // fixed in advance: the paper's echo train (closed-form view factor of a plane and its mirror image),
 // energy conservation in a closed box with a mirror wall, the explicitly unfolded scene, and Tr times
 // the scene behind a glass sheet.

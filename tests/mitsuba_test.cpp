@@ -1,4 +1,4 @@
-// Mitsuba 3 XML scenes (SPEC.md v2, "Mitsuba 3 scenes"; docs/mitsuba.md): every element and attribute of
+// Mitsuba 3 XML scenes (docs/mitsuba.md): every element and attribute of
 // the subset against an answer fixed by Mitsuba's definitions, the errors, and meshes/cornell-box.xml
 // against meshes/cornell-box.json.
 #include "tprf/core/error.h"

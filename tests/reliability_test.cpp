@@ -1,6 +1,6 @@
 // Runs that are interrupted, that meet a full disk or a memory limit, or that race another run for
 // the same output directory (docs/reliability.md). Each starts the real `tprf` binary, and each
-// checks what SPEC.md promises: the exit status, one message naming the cause, and an output
+// checks what docs/cli.md promises: the exit status, one message naming the cause, and an output
 // directory that holds exactly the earlier run's files, byte for byte, with no staging folder left.
 #include "test_process.h"
 

@@ -1,6 +1,6 @@
 // Full renders through the command line (`tprf render`, `tprf sensor`), each output checked against a
 // number that geometry or physics fixes in advance: arrival bins from path lengths, closed-form view
-// factors, energy conservation, and the shapes and orientation SPEC.md gives. Scenes are small (a few
+// factors, energy conservation, and the shapes and orientation docs/outputs.md gives. Scenes are small (a few
 // hundred patches, images of at most 64 x 64), except the Cornell box.
 #include "test_process.h"
 #include "test_scenes.h"
@@ -142,7 +142,7 @@ Exr read_exr(const fs::path& file) {
     return im;
 }
 
-// The pinhole camera of SPEC.md: vertical fov in degrees, row 0 the top of the image; column 0 its left
+// The pinhole camera of docs/scene.md: vertical fov in degrees, row 0 the top of the image; column 0 its left
 // (right = forward x up). Written here from the spec, not taken from the library.
 struct Pinhole {
     Vec3 position, forward, right, up;
@@ -182,7 +182,7 @@ bool inside(const Vec3& x, const Vec3& origin, const Vec3& u, const Vec3& v) {
 }
 
 // Radiance a Lambertian point of albedo rho sends to the camera under an isotropic point light
-// (SPEC: irradiance I cos / r^2, radiance B / pi).
+// (docs/scene.md: irradiance I cos / r^2, radiance B / pi).
 double lambert_point(double rho, double intensity, const Vec3& light, const Vec3& x, const Vec3& normal) {
     const Vec3 d = light - x;
     return rho / M_PI * intensity * std::max(0.0, normal.dot(d) / d.norm()) / d.squaredNorm();
@@ -704,7 +704,7 @@ TEST_F(RenderOutputs, AFootprintSpreadsEachPixelOverThePathsOfItsSquare) {
 
 TEST_F(RenderOutputs, LaserSpotReturnsAtItsPathAndLightsTheWallAsALambertianPoint) {
     // A floor (z = 0) and a back wall (y = 1, facing -y). The laser hits the floor at the point that the
-    // centre pixel of the 31 x 31 image looks at. SPEC: the spot reflects as a Lambertian point of
+    // centre pixel of the 31 x 31 image looks at. docs/scene.md: the spot reflects as a Lambertian point of
     // intensity albedo P cos / pi, so the wall's direct light is exact: with max_bounces 2 (laser ->
     // spot -> wall), the wall's pixels show only that. Bins of 2 cm.
     const int N = 31, T = 350;
@@ -949,7 +949,7 @@ TEST_F(RenderOutputs, CornellBoxConservesEnergyAndLightsTheBackWallFirstWhereGeo
     const double q = band.back() / band[band.size() - 2];
     ASSERT_LT(q, 1.0);
     EXPECT_LT(band.back() * q / (1 - q), 1e-6 * total) << "light is still arriving at the end of the window";
-    // ... so every pixel's bins sum to its steady radiance (SPEC, by linearity): within float
+    // ... so every pixel's bins sum to its steady radiance (docs/scene.md, by linearity): within float
     // accumulation over 2048 bins (1e-5 of the pixel; measured 3e-7) and 1e-7 of the brightest pixel.
     float peak = 0.0f;
     for (float s : steady.a.data) peak = std::max(peak, s);

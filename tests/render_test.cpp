@@ -352,7 +352,7 @@ TEST(Render, EveryOutputHasTheSpecShape) {
     EXPECT_EQ(rows, N);
     EXPECT_NEAR(area[0], 1.0, 1e-6);  // 100 areas of 0.01 printed to at least 6 digits
     EXPECT_NEAR(area[1], 1.0, 1e-6);
-    // render.json (SPEC "Output directory"): counts, the scene's time axis, one entry per phase.
+    // render.json (docs/outputs.md): counts, the scene's time axis, one entry per phase.
     const nlohmann::json j = nlohmann::json::parse(std::ifstream(out / "render.json"));
     EXPECT_EQ(j["patches"].get<std::size_t>(), N);
     EXPECT_EQ(j["links"].get<std::size_t>(), L);

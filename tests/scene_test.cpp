@@ -24,7 +24,7 @@ struct TempDir : tprf::test::MeshDir {
     TempDir() : tprf::test::MeshDir("tprf_scene_test_") {}
 };
 
-// The SPEC example, with a mesh file that the test writes.
+// The reference example, with a mesh file that the test writes.
 json spec_scene() {
     return json::parse(R"({
       "time":    {"bins": 600, "bin_width": 0.01, "start": 0.0, "unit": "m"},
@@ -42,7 +42,7 @@ json spec_scene() {
     })");
 }
 
-// A valid gates exposure for the SPEC scene's window (600 bins of 0.01 m), with `changes` applied.
+// A valid gates exposure for the reference scene's window (600 bins of 0.01 m), with `changes` applied.
 json gates(const json& changes = json::object()) {
     json g = {{"type", "gates"}, {"start", 0.0}, {"width", 0.05}, {"step", 0.05}, {"count", 40}};
     g.update(changes);
@@ -57,7 +57,7 @@ TEST(Scene, SpecExampleParsesToItsValues) {
     TempDir dir;
     json j = spec_scene();
     j["solver"] = {{"max_bounces", 3}, {"delay", "nearest"}, {"bounces", true}};
-    // The SPEC's sensor example.
+    // The reference sensor example.
     j["sensor"] = json::parse(R"({"pulse": {"shape": "gaussian", "fwhm": 0.03},
         "exposure": {"type": "gates", "start": 0.0, "width": 0.05, "step": 0.05, "count": 40},
         "noise": {"sigma": 0.001, "seed": 7}, "clamp": true})");

@@ -1,4 +1,4 @@
-// The Python module `tprf` (SPEC.md v2, "Python"; docs/python.md): the library's entry points for
+// The Python module `tprf` (docs/python.md): the library's entry points for
 // scenes, estimates, renders and sensors, with numpy arrays that share the result's memory.
 //
 // Every long call runs on a thread of its own with the GIL released; the calling thread hands the
@@ -387,7 +387,7 @@ PYBIND11_MODULE(_tprf, m) {
     m.def("load_scene", &load_scene, py::arg("scene"), py::arg("max_edge") = py::none(), py::arg("base") = py::none(),
           py::arg("defines") = tprf::XmlDefines{},
           "Loads a scene from a file path (JSON, or Mitsuba 3 XML with `defines` as -D name=value) or a dict "
-          "(SPEC.md's scene JSON); `base`: the folder that a dict's relative mesh paths start from (default: the "
+          "(the scene JSON of docs/scene.md); `base`: the folder that a dict's relative mesh paths start from (default: the "
           "working directory). Raises tprf.Error (a ValueError).");
     m.def("info", &info, py::arg("scene"), py::arg("threads") = 0, py::arg("links") = true,
           py::arg("progress") = py::none(), py::arg("max_memory_gb") = 0.0,

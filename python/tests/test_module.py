@@ -1,5 +1,5 @@
-"""The Python module `tprf` (SPEC.md v2, "Python"; docs/python.md) as a user calls it: renders equal the
-command line's files bit for bit, arrays have the SPEC's shapes and dtypes and share the result's memory,
+"""The Python module `tprf` (docs/python.md) as a user calls it: renders equal the
+command line's files bit for bit, arrays have the documented shapes (docs/outputs.md) and dtypes and share the result's memory,
 bad input raises ValueError with the command line's message, progress arrives in order on the calling
 thread, and a render can be cancelled (from the callback and by Ctrl-C) and the next one still runs.
 

@@ -1,4 +1,4 @@
-"""A render's .npy files as a NumPy user reads them (SPEC.md, "Output directory" and "Sensor block"): each
+"""A render's .npy files as a NumPy user reads them (docs/outputs.md): each
 loads with numpy.load, also memory-mapped (mmap_mode='r'), as float32 in C order with the shape the spec
 gives, and the cube summed over time is the steady image when the window holds all the light.
 
@@ -112,7 +112,7 @@ def test_every_npy_loads_with_the_spec_shape(render):
 
 @needs_tprf
 def test_time_sums_are_the_steady_state(render):
-    # SPEC: with the window holding all the light, the bins sum to the steady value. The cube is summed
+    # docs/scene.md: with the window holding all the light, the bins sum to the steady value. The cube is summed
     # in float64 here; what is left is the film's float accumulation and the steady solve's 1e-8:
     # 1e-5 of each value plus 1e-6 of the peak.
     cube = np.load(render / "transient.npy", mmap_mode="r")

@@ -1,4 +1,4 @@
-// libFuzzer target: a sensor block (SPEC.md, "Sensor block") through its parser and its checks on
+// libFuzzer target: a sensor block (docs/scene.md, "Sensor") through its parser and its checks on
 // their own (parse_sensor_block), then against a time axis. Only tprf::Error may come out.
 #include "tprf/core/error.h"
 #include "tprf/scene/parse_json.h"

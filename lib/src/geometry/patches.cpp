@@ -243,7 +243,7 @@ void emit(PatchSet& patches, const Vec3* corners, std::size_t count, const Objec
           std::uint32_t id) {
     add_patch(patches, corners, count, object.albedo, object.emission, id);
     if (!object.two_sided) return;
-    // SPEC has emission leave from the front side; a two-sided object has two fronts, so the back copy
+    // Emission leaves from the front side (docs/scene.md); a two-sided object has two fronts, so the back copy
     // emits too. This makes a two-sided emitter a light seen from both sides, which is what a user who
     // asks for two sides on an emitter means.
     std::array<Vec3, 4> reversed;

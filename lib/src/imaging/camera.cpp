@@ -12,7 +12,7 @@
 namespace tprf {
 namespace {
 
-// Sub-pixel offsets: a g x g grid when spp is a square (spp = 1: the pixel centre, as SPEC says),
+// Sub-pixel offsets: a g x g grid when spp is a square (spp = 1: the pixel centre, docs/scene.md),
 // else the R2 low-discrepancy sequence, which stratifies any count.
 void subpixel(int s, int spp, double& sx, double& sy) {
     const int g = int(std::lround(std::sqrt(double(spp))));

@@ -26,9 +26,9 @@ void deposit_box(const CaptureBins& p, float* row, const PathBox& box) {
         deposit(p, row, lo, value);
         return;
     }
-    const double per_metre = value / (hi - lo), width = 1.0 / p.inv_bin;
+    const double per_metre = value / (hi - lo), width = 1.0 / p.scene.inv_bin;
     for (std::int64_t b = std::max<std::int64_t>(first, 0); b <= std::min<std::int64_t>(last, p.bins - 1); ++b) {
-        const double start = p.start + double(b) * width;
+        const double start = p.scene.start_m + double(b) * width;
         const double overlap = std::min(hi, start + width) - std::max(lo, start);
         if (overlap > 0.0) row[b] += float(per_metre * overlap);
     }
@@ -117,10 +117,9 @@ double CaptureFilm::add_tap(const SensorTap& tap, float* out, const SolveBlock& 
                             const std::vector<float>& indirect) const {
     const int first_bin = block.first_bin;
     const std::size_t bins = std::size_t(block.bins);
-    const double lag = tap.leg * m_bins.inv_bin;
-    const bool nearest = m_bins.delay == DelayMode::Nearest;
-    const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
-    const float f = nearest ? 0.0f : float(lag - double(whole));
+    const BinSplit split = m_bins.scene.split(tap.leg, m_bins.delay);
+    const std::int64_t whole = split.first;
+    const float f = float(split.frac);
     const float w[3] = {float(tap.weight[0] / 3.0), float(tap.weight[1] / 3.0), float(tap.weight[2] / 3.0)};
     // The march bin's light over scene bins [-(F - 1), F] about its path plus `whole`: the hat of
     // the march bin, h(m) = (F - |m|) / F^2, and the leg's split, (1 - f) h(m) + f h(m - 1). For F = 1

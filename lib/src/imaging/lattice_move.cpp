@@ -66,7 +66,6 @@ void add_moved(const LatticeLight& marched, const MovedPoint& to, const CaptureB
     const std::size_t nb = marched.bs.size(), T = std::size_t(bins.bins);
     const std::size_t corner[4] = {ia * nb + ib, (ia + 1) * nb + ib, ia * nb + ib + 1, (ia + 1) * nb + ib + 1};
     const double weight[4] = {(1.0 - wa) * (1.0 - wb), wa * (1.0 - wb), (1.0 - wa) * wb, wa * wb};
-    const bool nearest = bins.delay == DelayMode::Nearest;
     const std::vector<PatchLeg>& here = to.legs;
     for (int c = 0; c < 4; ++c) {
         if (weight[c] == 0.0) continue;  // (and the corner may lie beyond the last marched one)
@@ -85,11 +84,12 @@ void add_moved(const LatticeLight& marched, const MovedPoint& to, const CaptureB
         }
         if (!(moved > 0.0)) continue;  // the point sees none of the patches q's later light came from
         const double ratio = moved / marched.light[q];
-        const double lag = (2.0 * (moved_moment / moved - marched.mean_leg[q]) - (to.sensor_leg - marched.sensor_leg[q]) +
-                            (to.laser_leg - marched.laser_leg[q])) * bins.inv_bin;
+        const double leg = 2.0 * (moved_moment / moved - marched.mean_leg[q]) - (to.sensor_leg - marched.sensor_leg[q]) +
+                           (to.laser_leg - marched.laser_leg[q]);
         // Split between two bins as a tap splits its leg (or rounded, with solver.delay nearest).
-        const std::int64_t whole = std::int64_t(std::floor(nearest ? lag + 0.5 : lag));
-        const float f = nearest ? 0.0f : float(lag - double(whole)), w = float(weight[c] * ratio * ratio);
+        const BinSplit at = bins.scene.split(leg, bins.delay);
+        const std::int64_t whole = at.first;
+        const float f = float(at.frac), w = float(weight[c] * ratio * ratio);
         const float* from = marched.later.data() + q * T;
         const float split[2] = {w * (1.0f - f), w * f};
         for (int side = 0; side < 2; ++side) {

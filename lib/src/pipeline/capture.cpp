@@ -66,9 +66,8 @@ CaptureSetup make_capture_setup(const Scene& scene, const PatchSet& patches, con
     p.sensors = p.points.sensor.size();
     p.march = march_time(scene);
     p.bins = {.bins = scene.time.bins,
-              .start = scene.time.start_m(),
-              .inv_bin = 1.0 / scene.time.bin_width_m(),
-              .march_inv_bin = 1.0 / p.march.bin_width_m(),
+              .scene = scene.time.bin_map(),
+              .march = p.march.bin_map(),
               .march_factor = p.capture.march_bin_factor,
               .delay = scene.solver.delay};
     return p;
@@ -191,13 +190,12 @@ void solve_batch(const CaptureRun& run, const Batch& batch, CaptureResult& resul
 int choose_batch(const CaptureSetup& p, const LinkSet& links, const CaptureOptions& options) {
     if (options.batch > 0) return std::min(options.batch, kMaxBatch);
     if (options.memory_bytes == 0) return kMaxBatch;
-    bool grey = p.capture.laser_power[0] == p.capture.laser_power[1] && p.capture.laser_power[1] == p.capture.laser_power[2];
-    for (const Rgb& a : p.patches.albedo) grey = grey && a[0] == a[1] && a[1] == a[2];
-    for (const auto& t : links.links.tints) grey = grey && t[0] == t[1] && t[1] == t[2];  // tinted mirrors
+    const Rgb& power = p.capture.laser_power;
+    const int channels = march_channels(power[0] == power[1] && power[1] == power[2] && keeps_grey(p.patches, links.links));
     SolverOptions solver;
     solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;
-    const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, grey ? 1 : 3));
-    const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, grey ? 1 : 3));
+    const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, channels));
+    const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, channels));
     const double per_lane = std::max(0.0, (all - one) / (kMaxBatch - 1));
     const double room = double(options.memory_bytes) - one;
     if (room < 0.0)
@@ -207,7 +205,7 @@ int choose_batch(const CaptureSetup& p, const LinkSet& links, const CaptureOptio
     int batch = per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
     // The lane count also picks the march's kernels (a flat set's links are packed for 1, 3, 8, 16 and 24
     // lanes, not for 48), so the straight line is checked where it lands.
-    while (batch > 1 && double(solve_working_bytes(p.patches, links, p.march, solver, batch, grey ? 1 : 3)) >
+    while (batch > 1 && double(solve_working_bytes(p.patches, links, p.march, solver, batch, channels)) >
                             double(options.memory_bytes))
         --batch;
     return batch;

@@ -41,7 +41,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // Everything a render writes, so that a later run in the same directory can remove what it did not
-// write again (SPEC.md, "Output directory").
+// write again (docs/outputs.md).
 std::vector<std::string> render_outputs() {
     std::vector<std::string> all = {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json",
                                     "patches.csv", "patch_transient.npy", "patch_steady.npy", "frames", "streaks",

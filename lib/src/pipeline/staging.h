@@ -53,7 +53,7 @@ private:
     bool m_earlier_run = false;
 };
 
-/// What a sensor run writes (SPEC.md, "Output directory"; docs/sensor.md).
+/// What a sensor run writes (docs/sensor.md).
 const std::vector<std::string>& sensor_outputs();
 
 /// The plot pixel: the image centre by default; one outside the image is a bad flag.

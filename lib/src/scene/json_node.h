@@ -49,7 +49,7 @@ struct JsonNode {
     bool boolean() const;
     std::string string() const;
     Vec3 vec3() const;
-    /// A colour: a grey number or an RGB triple (SPEC, "Scene file").
+    /// A colour: a grey number or an RGB triple (docs/scene.md).
     Rgb rgb() const;
     /// A member named `key` of this object.
     JsonNode member(std::string_view key, const nlohmann::json& value) const;

@@ -85,15 +85,16 @@ Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const s
                          const TimeAxis& time) {
     const Rgb exitance = patches.albedo[spot.patch] * spot.power / (M_PI * kViewSamples);
     const double leg = spot.path;
-    const double start = time.start_m(), inv_bin = 1.0 / time.bin_width_m();
-    const double bin_width = 1.0 / inv_bin;
+    const BinMap map = time.bin_map();
+    const double start = map.start_m, bin_width = 1.0 / map.inv_bin;
     Illumination out;
     out.row.assign(patches.size() + 1, 0);
     for (const PatchView& v : views) {
         const MeanView m = mean_view(v);
         if (!(m.sum > 0.0)) continue;
-        const double at = (leg + m.path - start) * inv_bin;
-        const double whole = std::floor(at), f = at - whole;
+        // Split linearly between the two bins about its path, whatever solver.delay says.
+        const BinSplit at = split_lag(map.position(leg + m.path), DelayMode::Linear);
+        const double whole = double(at.first), f = at.frac;
         for (int side = 0; side < 2; ++side) {
             const double share = side == 0 ? 1.0 - f : f;
             if (!(share > 0.0)) continue;

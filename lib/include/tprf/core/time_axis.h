@@ -1,5 +1,5 @@
 #pragma once
-/// The scene's time axis (SPEC.md, "Scene file": `time`), and the one rule that places an optical path
+/// The scene's time axis (docs/scene.md: `time`), and the one rule that places an optical path
 /// or a delay on its bins: every stage that bins light (pulses, arrivals, taps, links) calls these.
 
 #include <cmath>

@@ -15,7 +15,7 @@ using Rgb = Eigen::Array3d;
 /// Whether a colour is grey: its three channels equal.
 inline bool is_grey(const Rgb& c) { return c[0] == c[1] && c[1] == c[2]; }
 
-/// Speed of light, m/s (SPEC: the same in every medium of v1).
+/// Speed of light, m/s (docs/scene.md: the same in every medium).
 inline constexpr double kSpeedOfLight = 299792458.0;
 
 }  // namespace tprf

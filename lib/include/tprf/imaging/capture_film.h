@@ -27,16 +27,15 @@ class Visibility;
 /// march_factor times wider, from the same start), and how a leg between two bins is placed.
 struct CaptureBins {
     int bins = 0;                 ///< T: H's bins per (laser point, sensor point) pair
-    double start = 0.0;           ///< metres: the path at which bin 0 starts
-    double inv_bin = 0.0;         ///< 1 / H's bin width, per metre
-    double march_inv_bin = 0.0;   ///< 1 / the march's bin width, per metre
+    BinMap scene;                 ///< H's bins (the scene's time axis)
+    BinMap march;                 ///< the march's bins: the same start, march_factor times wider
     int march_factor = 1;         ///< Capture::march_bin_factor
     DelayMode delay = DelayMode::Linear;
 
     /// H's bin of a path, metres.
-    std::int64_t bin(double path) const { return std::int64_t(std::floor((path - start) * inv_bin)); }
+    std::int64_t bin(double path) const { return scene.bin(path); }
     /// The march's bin of a path, metres.
-    std::int64_t march_bin(double path) const { return std::int64_t(std::floor((path - start) * march_inv_bin)); }
+    std::int64_t march_bin(double path) const { return march.bin(path); }
 };
 
 /// Adds light at exact paths to a row of H (bins.bins bins), in order: a box's value spread evenly over

@@ -1,5 +1,5 @@
 #pragma once
-/// The sensing points of an NLOS capture (SPEC.md v2, "Capture"; docs/capture.md): the grid points on
+/// The sensing points of an NLOS capture (docs/capture.md): the grid points on
 /// the relay wall as their devices see them, as a camera's pinhole samples are its pixels' points.
 ///
 /// A wall point is both a laser spot (a Lambertian point that sends on what the laser deposits) and a

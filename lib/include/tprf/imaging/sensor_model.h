@@ -1,5 +1,5 @@
 #pragma once
-/// The TPRF sensor model (transient rendering paper, section 6; SPEC.md, "Sensor block"):
+/// The TPRF sensor model (transient rendering paper, section 6; docs/scene.md, "Sensor"):
 ///
 ///     M_k = max(0, noise + integral of (TPRF * pulse)(t) exposure_k(t) dt)
 ///

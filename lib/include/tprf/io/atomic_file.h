@@ -2,7 +2,7 @@
 /// Atomic output files: write under a temporary name, then rename over the final name.
 ///
 /// A render that is interrupted (Ctrl-C, out of memory, a crash) must never leave a truncated file
-/// under a final name (SPEC, "Output directory"). rename(2) within one directory is atomic, so a
+/// under a final name (docs/outputs.md). rename(2) within one directory is atomic, so a
 /// reader sees either the old file, or no file, or the complete new one.
 
 #include <filesystem>

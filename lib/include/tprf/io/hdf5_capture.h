@@ -1,6 +1,6 @@
 #pragma once
-/// capture.hdf5: an NLOS capture in the layout of the `tal` toolkit's NLOSCaptureData (SPEC.md v2,
-/// "Capture"; every field, unit and axis order in docs/capture.md), through the HDF5 C++ library.
+/// capture.hdf5: an NLOS capture in the layout of the `tal` toolkit's NLOSCaptureData (every
+/// field, unit and axis order in docs/capture.md), through the HDF5 C++ library.
 
 #include "tprf/core/types.h"
 

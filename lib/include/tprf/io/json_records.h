@@ -1,6 +1,5 @@
 #pragma once
-/// The JSON records of an output directory: render.json (what a render did, SPEC.md "Output
-/// directory"), sensor.json (what each sensor measurement is, docs/sensor.md) and sensor_plot.json (the
+/// The JSON records of an output directory: render.json (what a render did, docs/outputs.md), sensor.json (what each sensor measurement is, docs/sensor.md) and sensor_plot.json (the
 /// data of sensor_plot.png). All appear
 /// atomically under their final name. The JSON library stays inside this file's source.
 

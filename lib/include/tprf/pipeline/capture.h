@@ -1,5 +1,5 @@
 #pragma once
-/// The NLOS capture (SPEC.md v2, "Capture"; docs/capture.md): H[t, laser point, sensor point] of a
+/// The NLOS capture (docs/capture.md): H[t, laser point, sensor point] of a
 /// relay-wall scan, every illumination a laser spot on the wall, solved in batches that share one
 /// read of the links per block.
 ///

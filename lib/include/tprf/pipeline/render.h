@@ -17,7 +17,7 @@ namespace tprf {
 
 class RankGroup;
 
-/// What `tprf render` writes besides the cube and the steady image (SPEC.md, "Output directory").
+/// What `tprf render` writes besides the cube and the steady image (docs/outputs.md).
 struct RenderOptions : PipelineOptions {
     std::filesystem::path output;   ///< the output directory (created if missing)
     bool patch_profiles = false;    ///< patches.csv, patch_transient.npy, patch_steady.npy
@@ -58,7 +58,7 @@ struct FloatArray {
 };
 
 /// What render_scene computes, kept in memory: the arrays that render_file writes as .npy files, by
-/// the files' names without ".npy" (SPEC.md, "Output directory"): "transient" (H, W, T, 3), "steady"
+/// the files' names without ".npy" (docs/outputs.md): "transient" (H, W, T, 3), "steady"
 /// (H, W, 3), "transient_bounce_K" (solver.bounces), "patch_transient" (N, T, 3) and "patch_steady"
 /// (N, 3) (RenderOptions::patch_profiles), "capture" (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s), and
 /// for a sensor block "measurements" (H, W, K, 3) and "depth" (H, W, amcw). The values are those of

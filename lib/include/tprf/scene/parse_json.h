@@ -1,5 +1,5 @@
 #pragma once
-/// Scene and sensor files (SPEC.md, "Scene file", "Sensor block") read into plain data. Parsing goes in
+/// Scene and sensor files (docs/scene.md, "Sensor block") read into plain data. Parsing goes in
 /// stages: JSON text -> JSON document -> Scene, then validate() (scene/validate.h). The parser checks
 /// only what is about the JSON (syntax, unknown keys, types, array lengths, enum names, the files it
 /// reads); validate() checks the values, so that a Scene built any other way gets the same checks.

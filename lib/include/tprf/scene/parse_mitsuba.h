@@ -1,5 +1,5 @@
 #pragma once
-/// Mitsuba 3 XML scenes (SPEC.md v2, "Mitsuba 3 scenes"; docs/mitsuba.md) read into the same Scene as a
+/// Mitsuba 3 XML scenes (docs/mitsuba.md) read into the same Scene as a
 /// JSON scene file. Only the subset that describes what tprf renders is read: diffuse (and twosided)
 /// BSDFs, obj/ply/rectangle/cube shapes with area emitters, point emitters, a perspective sensor with
 /// mitransient's transient_hdr_film, and the transient_path or path integrator. Anything else (another

@@ -1,5 +1,5 @@
 #pragma once
-/// A scene as plain data: what a scene file (SPEC.md, "Scene file") says, in SI units. No JSON here:
+/// A scene as plain data: what a scene file (docs/scene.md) says, in SI units. No JSON here:
 /// scene/parse_json.h builds a Scene from a file, scene/validate.h checks one however it was built.
 
 #include "tprf/core/types.h"
@@ -16,7 +16,7 @@
 
 namespace tprf {
 
-/// Pinhole camera (SPEC: vertical fov in degrees, row 0 at the top).
+/// Pinhole camera (docs/scene.md: vertical fov in degrees, row 0 at the top).
 struct Camera {
     Vec3 position = Vec3::Zero();   ///< metres
     Vec3 look_at = Vec3::UnitX();   ///< metres, != position
@@ -28,10 +28,10 @@ struct Camera {
     bool unwarp = false;            ///< leave the camera leg out of every sample's time
     /// Spread each sample's direct light over the paths of its share of the pixel (SensingPoint::du,
     /// dv): a pixel integrates its footprint in time, not spp instants. False: point samples, each
-    /// sample's light at its own exact path (beyond SPEC; docs/scene.md).
+    /// sample's light at its own exact path (docs/scene.md).
     bool footprint = true;
     /// Read the second bounce (the light one link after its pulse) at each sample's own time rather
-    /// than its patch centroid's (SecondBounceLight; beyond SPEC, docs/scene.md): what patch-to-patch
+    /// than its patch centroid's (SecondBounceLight; docs/scene.md): what patch-to-patch
     /// links carry, without mirrors or glass; ignored with them.
     bool shift_second_bounce = true;
 };
@@ -66,7 +66,7 @@ struct MeshShape {
     Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();
 };
 
-/// What an object's surface does with light (SPEC.md v2, "Materials"; docs/materials.md).
+/// What an object's surface does with light (docs/materials.md).
 enum class MaterialType {
     Diffuse,  ///< Lambertian only (`albedo`)
     Mirror,   ///< perfect specular reflection of `reflectance` on the front side, plus `albedo` diffuse
@@ -103,11 +103,11 @@ struct SolverSettings {
     DelayMode delay = DelayMode::Linear;
     bool bounces = false;               ///< also write the per-bounce terms
     /// Most specular reflections (mirror or glass) on one leg between two diffuse points, on a camera
-    /// or laser ray, or from a light (`solver.max_specular`, beyond SPEC: docs/materials.md); >= 0.
+    /// or laser ray, or from a light (`solver.max_specular`, docs/materials.md); >= 0.
     int max_specular = 4;
 };
 
-/// How light is exchanged between patches (SPEC.md v2, "Links and scale").
+/// How light is exchanged between patches (docs/links.md).
 enum class LinkMethod {
     Flat,          ///< every facing, visible pair of patches: the reference
     Hierarchical,  ///< links between clusters of patches wherever the error stays under `tolerance`
@@ -118,18 +118,18 @@ inline constexpr int kMaxSpreadPieces = 8;
 
 /// The optional `links` block.
 struct LinkSettings {
-    LinkMethod method = LinkMethod::Hierarchical;  ///< SPEC's default; flat is the reference (docs/links.md)
+    LinkMethod method = LinkMethod::Hierarchical;  ///< the default; flat is the reference (docs/links.md)
     double tolerance = 1e-3;               ///< > 0: largest accepted form-factor error of one cluster link
     /// >= 0: refine a cluster link whose form factor times its members' timing offset in bins exceeds
-    /// time_bins x tolerance (HierarchyOptions::time_bins); 0: off. Beyond SPEC (docs/links.md).
+    /// time_bins x tolerance (HierarchyOptions::time_bins); 0: off (docs/links.md).
     double time_bins = 4.0;
     /// 0: every patch-to-patch link at its centroid delay; n in 1..8: spread over the paths from the
-    /// receiver to the points of the sender, in at most n pieces (spread_patch_links). Beyond SPEC
+    /// receiver to the points of the sender, in at most n pieces (spread_patch_links)
     /// (docs/links.md).
     int spread_pieces = 0;
 };
 
-/// A grid of points on a relay surface (SPEC.md v2, "Capture"): point (a, b) is
+/// A grid of points on a relay surface (docs/capture.md): point (a, b) is
 /// origin + (a + 0.5) / nu * u + (b + 0.5) / nv * v, for a in [0, nu) and b in [0, nv).
 struct CaptureGrid {
     Vec3 origin = Vec3::Zero();     ///< metres
@@ -149,7 +149,7 @@ enum class CaptureType {
     Exhaustive,  ///< every laser point of `laser_grid` with every sensor point of `sensor_grid`
 };
 
-/// The optional `capture` block: an NLOS scan of a relay wall (SPEC.md v2, "Capture"; docs/capture.md).
+/// The optional `capture` block: an NLOS scan of a relay wall (docs/capture.md).
 struct Capture {
     CaptureType type = CaptureType::Confocal;
     Vec3 laser_position = Vec3::Zero();    ///< the laser device, metres; in front of the wall, in no object

@@ -1,5 +1,5 @@
 #pragma once
-/// A sensor block as plain data (SPEC.md, "Sensor block"): what the TPRF sensor model of
+/// A sensor block as plain data (docs/scene.md, "Sensor"): what the TPRF sensor model of
 /// imaging/sensor_model.h applies. Parsed by scene/parse_json.h, checked by scene/validate.h.
 
 #include "tprf/core/time_kernel.h"

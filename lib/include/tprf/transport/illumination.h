@@ -1,7 +1,7 @@
 #pragma once
 /// Illumination: the light that enters the patch system, as sparse pulses with exact arrival times.
 ///
-/// Every emitter fires one delta pulse at t = 0 (SPEC). What reaches patch i is a handful of pulses,
+/// Every emitter fires one delta pulse at t = 0 (docs/scene.md). What reaches patch i is a handful of pulses,
 /// each at its own exact optical path (not the patch centroid's): a point source (transport/
 /// light_sources.h: a point light, or a laser's spot seen as a Lambertian point) reaches each
 /// stratified sample point x of a patch at its path plus |source - x|; a laser spot's own patch
