@@ -198,7 +198,7 @@ double colour_spread(const Marched& run, std::size_t n) {
 }
 
 // Why 2e-6: colour c of a tinted link has the very taps that a grey link of form factor ff x tint[c]
-// has (the same float product, split by the same link_taps), and every other link is the same in both
+// has (the same float product, split by the same delay_taps_f), and every other link is the same in both
 // solves. What differs is the order of the float sums: the tinted links are summed after the grey ones
 // of their row, in lists of their own. A sum of a row's 64 positive terms in another order moves by a
 // few units of float epsilon (1.2e-7), and that compounds over the bounces (measured: at most 8.7e-7 of
