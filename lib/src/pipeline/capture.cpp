@@ -133,7 +133,7 @@ SolverOptions batch_solver(const CaptureSetup& p, const std::vector<std::vector<
                            const std::vector<std::vector<SensorTap>>& sensor_taps, int threads) {
     SolverOptions solver;
     solver.delay = p.scene.solver.delay;
-    solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;  // patch orders: one less than the sensor's
+    solver.max_bounces = capture_march_bounces(p.capture);
     solver.threads = threads;
     // Patch light from before the window still reaches the sensor points inside it, a tap's leg later.
     double longest = 0.0;
@@ -193,7 +193,7 @@ int choose_batch(const CaptureSetup& p, const LinkSet& links, const CaptureOptio
     const Rgb& power = p.capture.laser_power;
     const int channels = march_channels(power[0] == power[1] && power[1] == power[2] && keeps_grey(p.patches, links.links));
     SolverOptions solver;
-    solver.max_bounces = p.max_bounces < 0 ? -1 : p.max_bounces - 1;
+    solver.max_bounces = capture_march_bounces(p.capture);
     const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, channels));
     const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, channels));
     const double per_lane = std::max(0.0, (all - one) / (kMaxBatch - 1));
