@@ -336,6 +336,54 @@ TEST(EstimateRules, AgreeWithTheCaptureMarch) {
     }
 }
 
+// Under a memory budget the capture chooses its batch by the rule the estimate applies (batch_that_fits),
+// each to its own sizes of the march: a budget of one illumination's march and 5.5 more lanes is 6 for both.
+TEST(EstimateRules, CaptureBatchUnderABudget) {
+    tprf::Scene scene = tprf::load_scene(std::string(TPRF_SOURCE_DIR) + "/examples/nlos/letter.json");
+    scene.max_edge = 0.1;
+    scene.links.tolerance = 0.01;
+    scene.time.bins = 64;
+    scene.time.bin_width = 0.05;
+    scene.capture->laser_grid.nu = scene.capture->laser_grid.nv = 4;
+    scene.capture->sensor_grid = scene.capture->laser_grid;
+    scene.capture->max_bounces = 6;
+    tprf::PipelineOptions roomy;
+    roomy.threads = 2;
+    roomy.max_memory_gb = 1000.0;
+    const tprf::ResourceEstimate e = tprf::estimate_resources(scene, roomy);
+    tprf::SolverOptions solver;
+    solver.delay = scene.solver.delay;
+    solver.max_bounces = tprf::capture_march_bounces(*scene.capture);
+    solver.threads = 2;
+    const double one = double(planned_march(scene, solver, 1, e.channels).working_bytes);
+    const double full = double(planned_march(scene, solver, tprf::kMaxBatch, e.channels).working_bytes);
+    ASSERT_GT(full, one);
+    const double budget = one + 5.5 * (full - one) / (tprf::kMaxBatch - 1);
+    EXPECT_EQ(tprf::batch_that_fits(one, full, budget), 6);
+    EXPECT_EQ(tprf::batch_that_fits(one, full, 0.5 * one), 1);
+    EXPECT_EQ(tprf::batch_that_fits(one, full, 2.0 * full), tprf::kMaxBatch);
+
+    const tprf::PatchSet patches = tprf::build_patches(scene);
+    const tprf::Visibility visibility(patches);
+    const tprf::LinkSet links =
+        tprf::make_link_set(patches, visibility, scene.links, tprf::march_time(scene).bin_width_m(), {});
+    tprf::CaptureOptions options;
+    options.memory_bytes = std::size_t(budget);
+    EXPECT_EQ(tprf::compute_capture(scene, patches, visibility, &links, options).batch, 6);
+    // The estimate applies the rule to its own model of the march (one lane: its sizes under a limit too
+    // small for two; all lanes: roomy).
+    const double beside = double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes);
+    tprf::PipelineOptions limited = roomy;
+    limited.max_memory_gb = beside / 1e9;
+    const tprf::ResourceEstimate tight = tprf::estimate_resources(scene, limited);
+    ASSERT_EQ(tight.capture_batch, 1);
+    ASSERT_EQ(e.capture_batch, tprf::kMaxBatch);
+    const double modelled = double(tight.solver_bytes) +
+                            5.5 * double(e.solver_bytes - tight.solver_bytes) / (tprf::kMaxBatch - 1);
+    limited.max_memory_gb = (beside + modelled) / 1e9;
+    EXPECT_EQ(tprf::estimate_resources(scene, limited).capture_batch, 6);
+}
+
 // The estimate against what a render measures (render.json's peak_rss_mb), in a process of its own, on
 // the sample scenes (the statue's render takes minutes: bench/estimate_constants.py checks it, and the
 // seconds, which no test asserts).

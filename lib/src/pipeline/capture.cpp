@@ -196,15 +196,14 @@ int choose_batch(const CaptureSetup& p, const LinkSet& links, const CaptureOptio
     solver.max_bounces = capture_march_bounces(p.capture);
     const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, channels));
     const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, channels));
-    const double per_lane = std::max(0.0, (all - one) / (kMaxBatch - 1));
-    const double room = double(options.memory_bytes) - one;
-    if (room < 0.0)
+    if (one > double(options.memory_bytes))
         throw Error("a capture's march needs about " + std::to_string(std::size_t(one / 1e6)) +
                     " MB for one illumination, over the memory left (" +
                     std::to_string(options.memory_bytes / 1000000) + " MB): raise --max-memory or patches.max_edge");
-    int batch = per_lane > 0.0 ? int(std::clamp(1.0 + room / per_lane, 1.0, double(kMaxBatch))) : kMaxBatch;
+    int batch = batch_that_fits(one, all, double(options.memory_bytes));
     // The lane count also picks the march's kernels (a flat set's links are packed for 1, 3, 8, 16 and 24
-    // lanes, not for 48), so the straight line is checked where it lands.
+    // lanes, not for 48), so the straight line is checked where it lands (tprf info, which builds no
+    // links, stops at the straight line).
     while (batch > 1 && double(solve_working_bytes(p.patches, links, p.march, solver, batch, channels)) >
                             double(options.memory_bytes))
         --batch;

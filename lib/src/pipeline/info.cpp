@@ -157,13 +157,13 @@ constexpr double kColourLinkBinSeconds = 1.0 / 7.5e9;  // BM_TransientSolve/wide
 // A link shorter than a block, applied bin by bin (3 channels).
 constexpr double kShortLinkBinSeconds = 1.0 / 1e9;  // BM_MeshSceneSolve/wide:0: seconds_per_short_link_bin
 // The hierarchical solve per patch and bin.
-constexpr double kHierarchicalPatchBinSeconds = 5e-7;  // BM_MeshSceneSolve/wide:0: seconds_per_patch_bin
+constexpr double kHierarchicalPatchBinSeconds = 4e-7;  // BM_MeshSceneSolve/wide:0: seconds_per_patch_bin
 // A march of B lanes costs 1 + (B - 1) x this many single marches.
 constexpr double kBatchLaneCost = 1.0 / 15.0;  // BM_TransientSolveBatch/K:16/grey:1: extra_cost_per_lane
 // The write phase's own work besides the cubes: the images, render.json, moving the files in place.
-constexpr double kWriteSeconds = 0.2;  // tprf_tiny_render: write_seconds
+constexpr double kWriteSeconds = 0.01;  // tprf_tiny_render: write_seconds
 // Writing back the memory-mapped cubes.
-constexpr double kCubeBytesPerSecond = 0.7e9;  // BM_WriteCube: bytes_per_s
+constexpr double kCubeBytesPerSecond = 1.0e9;  // BM_WriteCube: bytes_per_s
 // links.spread_pieces, per link spread.
 constexpr double kSpreadSecondsPerLink = 2e-7;  // BM_SpreadPatchLinks: seconds_per_link
 // The steady state (BiCGSTAB on the links, 3 channels), per link.
@@ -344,8 +344,11 @@ void estimate_links(const Scene& scene, const PatchCensus& census, const PairSha
         e.nodes = census.patches > 0 ? 2 * census.patches - 1 : 0;
         rows = double(e.nodes);
         tree = double(ClusterTree::bytes_for(census.patches, e.nodes));
-        seconds = std::max(near * kNearLinkSeconds, kHierarchicalLinkSecondsScale *
-                                                        std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor);
+        // Where the tolerance refines every pair to patches the builder does the flat builder's work, and
+        // no more: the fit is for the scenes where clusters take most pairs.
+        seconds = std::min(seconds, std::max(near * kNearLinkSeconds,
+                                             kHierarchicalLinkSecondsScale *
+                                                 std::pow(n, kHierarchicalLinkSecondsExponent) * tolerance_factor));
     }
     double build = build_bytes * links + (tree > 0.0 ? double(record.oracle_node) * rows : 0.0);
     // links.spread_pieces (transport/link_spread.cpp): each patch link becomes up to that many pieces.
@@ -556,11 +559,10 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
     if (scene.capture->march_grid_step > 1)
         e.solver_bytes += to_size(double(lasers) * (double(scene.time.bins) * 4.0 + double(e.patches) * 16.0));
     const std::size_t limit = memory_limit_bytes(options);
-    const double fixed = double(e.solver_bytes) - per_illumination;  // what does not grow with the batch
-    const double held =
-        double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes + e.solver_bytes);
-    const double room = limit > 0 ? double(limit) - held : INFINITY;
-    const int batch = int(std::clamp(1.0 + std::floor(room / std::max(per_illumination, 1.0)), 1.0, double(kMaxBatch)));
+    const double one = double(e.solver_bytes), fixed = one - per_illumination;  // fixed: what does not grow
+    const double beside = double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes);
+    const int batch = limit > 0 ? batch_that_fits(one, one + (kMaxBatch - 1) * per_illumination, double(limit) - beside)
+                                : kMaxBatch;
     e.capture_batch = batch;
     e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
     e.solver_bytes = to_size(fixed + batch * per_illumination);

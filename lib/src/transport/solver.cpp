@@ -760,6 +760,12 @@ std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& set, con
     return solve_sizing(patches, set, time, options, illuminations, channels).working_bytes;
 }
 
+int batch_that_fits(double one_bytes, double full_bytes, double memory_bytes) {
+    const double per_lane = std::max(0.0, (full_bytes - one_bytes) / (kMaxBatch - 1));
+    if (!(per_lane > 0.0)) return memory_bytes >= one_bytes ? kMaxBatch : 1;
+    return int(std::clamp(1.0 + std::floor((memory_bytes - one_bytes) / per_lane), 1.0, double(kMaxBatch)));
+}
+
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
     const Links& links = set.links;

@@ -141,6 +141,12 @@ bool scene_keeps_grey(const Scene& scene);
 std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& links, const TimeAxis& time,
                                 const SolverOptions& options, int illuminations, int channels);
 
+/// The most illuminations, up to kMaxBatch, whose march fits in `memory_bytes`, on the straight line
+/// through the working bytes of a march of one illumination (`one_bytes`) and of kMaxBatch
+/// (`full_bytes`); 1 when not even one fits. The capture's batch (pipeline/capture.cpp) and its
+/// estimate (tprf info) both take it from here.
+int batch_that_fits(double one_bytes, double full_bytes, double memory_bytes);
+
 // ---- Sizing a march without building it ----
 //
 // A march's working memory follows from its shape, which the plan decides from the sizes of its inputs
