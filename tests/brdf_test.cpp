@@ -3,7 +3,7 @@
 // formula written in its tangent form, and the directional albedo integrated independently over the
 // incoming hemisphere.
 
-#include "tprf/transport/brdf.h"
+#include "tprf/scene/brdf.h"
 
 #include <Eigen/Core>
 #include <gtest/gtest.h>

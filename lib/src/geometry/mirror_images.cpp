@@ -36,11 +36,6 @@ bool SpecularPlane::contains(const Vec3& p) const {
 
 namespace {
 
-std::string object_path(const Scene& scene, std::size_t i) {
-    const std::string& path = scene.objects[i].json_path;
-    return path.empty() ? "objects[" + std::to_string(i) + "]" : path;
-}
-
 // The plane of object `id` from its patches (a rectangle: the rectangle itself, as one polygon).
 SpecularPlane make_plane(const Scene& scene, const PatchSet& patches, std::uint32_t id) {
     const Object& o = scene.objects[id];
@@ -70,14 +65,14 @@ SpecularPlane make_plane(const Scene& scene, const PatchSet& patches, std::uint3
             for (std::size_t c = 0; c < count; ++c) s.corners.push_back(poly[flip ? count - 1 - c : c]);
             s.first.push_back(std::uint32_t(s.corners.size()));
         }
-        if (!have) fail_input(scene.file, object_path(scene, id), "a mirror or glass object must have some area");
+        if (!have) fail_input(scene.file, scene.object_path(id), "a mirror or glass object must have some area");
     }
     for (const Vec3& c : s.corners) s.box.extend(c);
     const double size = s.box.diagonal().norm();
     double off = 0.0;
     for (const Vec3& c : s.corners) off = std::max(off, std::abs(s.normal.dot(c - s.point)));
     if (off > 1e-6 * size)
-        fail_input(scene.file, object_path(scene, id),
+        fail_input(scene.file, scene.object_path(id),
                    "a mirror or glass object must be planar: a corner lies " + std::to_string(off) +
                        " m off its plane (at most 1e-6 of its size, " + std::to_string(1e-6 * size) + " m)");
     return s;

@@ -365,12 +365,23 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     if (scene.objects.empty()) return patches;
     st.max_edge = patch_size(scene, scene_box(loaded));
 
+    // A glossy object's patches carry its hemispherical albedo (PatchSet::glossy).
+    std::vector<Object> objects = scene.objects;
+    if (std::any_of(objects.begin(), objects.end(), [](const Object& o) { return o.material.glossy(); })) {
+        patches.glossy.resize(objects.size());
+        for (std::size_t k = 0; k < objects.size(); ++k)
+            if (objects[k].material.glossy()) {
+                patches.glossy[k] = glossy_brdf(objects[k]);
+                objects[k].albedo = patches.glossy[k]->hemispherical_albedo();
+            }
+    }
+
     // Counting before emitting lets every array be allocated once.
     std::vector<Source> sources;
     std::size_t total = 0;
     std::size_t corner_total = 0;
-    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
-        sources.push_back(cut(scene.objects[k], loaded.meshes[k], st.max_edge));
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+        sources.push_back(cut(objects[k], loaded.meshes[k], st.max_edge));
         count_cells(loaded, k, sources.back());
         loaded.meshes[k] = PolygonMesh{};
         const Source& s = sources.back();

@@ -121,6 +121,7 @@ void straight_samples(const Sampler& sampler, int r, int c, std::vector<SensingP
             if (!h.hit || !h.front) continue;
             SensingPoint& sp =
                 out.emplace_back(SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
+            sp.view = (-dir[k]).cast<float>();
             if (camera.footprint)
                 cell_on_surface(pin, {towards[k], straight, h.distance, sampler.patches.normal[h.patch]}, sampler.half_px, sp);
         }
@@ -162,6 +163,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
                     if (!t.hit.front) continue;
                     SensingPoint& sp = by_row[r].emplace_back(SensingPoint{
                         pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path), float(t.weight)});
+                    sp.view = (-(t.turn * dir)).normalized().cast<float>();
                     if (camera.footprint)
                         cell_on_surface(pin, {towards, t.turn, t.path, patches.normal[t.hit.patch]}, half_px, sp);
                     row_tints[r].push_back(t.tint);

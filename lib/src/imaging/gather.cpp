@@ -427,6 +427,12 @@ void shared_area_arrivals(const DirectScene& scene, const Samples& samples, std:
     }
 }
 
+// A glossy sensing point's BRDF for the light of a point source towards the sensor (wo: the point's view).
+Rgb reflected_towards(const GlossyBrdf& brdf, const SensingPoint& sp, const PointSource& source, const Vec3& n) {
+    const Vec3 wi = (source.position - sp.point).normalized(), wo = sp.view.cast<double>();
+    return brdf.eval(n, wi, wo);
+}
+
 // Exact direct light of every point and area source at the sensing point, seen along its leg; a point
 // source's light is spread over the paths of the point's cell.
 void direct_arrivals(const DirectScene& scene, const SensingPoint& sp, RunSample at, double weight, const char* area_done,
@@ -434,17 +440,23 @@ void direct_arrivals(const DirectScene& scene, const SensingPoint& sp, RunSample
     const PatchSet& patches = scene.patches;
     const LightSources& sources = scene.sources;
     const Rgb& albedo = patches.albedo[sp.patch];
+    const GlossyBrdf* brdf = patches.brdf(sp.patch);
     const Footprint f = footprint_of(sp);
     for (const PointSource& source : sources.points) {
         if (source.patch == sp.patch) continue;
         PointArrival a;
         if (!arrive(source, sp.point, patches.normal[sp.patch], scene.vis, a)) continue;
+        // Radiance towards the sensor, times the sample's weight: the BRDF times the irradiance (albedo /
+        // pi for a Lambertian point).
+        const Rgb radiance =
+            brdf ? Rgb(reflected_towards(*brdf, sp, source, patches.normal[sp.patch]) * a.reflected(Rgb::Ones()) * weight)
+                 : Rgb(a.reflected(albedo) * (weight / M_PI));
         const Vec3 away = (sp.point - source.position).normalized();  // |x - source| changes along it
         const double lowest = f.empty() ? a.path : source.path + f.least_at_corners([&](const Vec3& offset) {
             return (sp.point + offset - source.position).norm();
         });
         add_over_cell({sp.output, a.path + sp.leg, away.dot(f.du) + f.leg_du, away.dot(f.dv) + f.leg_dv, lowest + sp.leg,
-                       a.reflected(albedo) * (weight / M_PI), source.order},
+                       radiance, source.order},
                       scene.options.time, out);
     }
     for (std::size_t k = 0; k < sources.areas.size(); ++k)

@@ -86,6 +86,19 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
     return shares;
 }
 
+// What glossy objects do in this version of the method, said once per render that has one.
+void note_glossy(const Scene& scene, RenderReport& report) {
+    for (std::size_t k = 0; k < scene.objects.size(); ++k)
+        if (scene.objects[k].material.glossy()) {
+            report.warnings.push_back(
+                scene.object_path(k) +
+                " is glossy: point lights reach the camera through its BRDF; the light it passes on, area "
+                "lights' light on it and what the camera sees of its indirect light are a Lambertian surface's of "
+                "its hemispherical albedo (docs/materials.md, \"Glossy surfaces\")");
+            return;
+        }
+}
+
 // Patches, visibility and (when `links`) the links: what every rank of a split render builds alike.
 void build_geometry(const Scene& scene, const RenderOptions& options, bool links, Transport& t,
                     RenderReport& report) {
@@ -94,6 +107,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
     t.patches = build_patches(scene, {options.progress}, &patch_stats);
     report.patches = t.patches.size();
     report.meshes = std::move(patch_stats.meshes);
+    note_glossy(scene, report);
     report.seconds.patches = seconds_since(start);
 
     start = Clock::now();

@@ -1,4 +1,6 @@
-#include "tprf/transport/brdf.h"
+#include "tprf/scene/brdf.h"
+
+#include "tprf/scene/scene.h"
 
 #include <algorithm>
 #include <array>
@@ -162,6 +164,23 @@ Rgb GlossyBrdf::directional_albedo(double cos_o) const {
     if (model == GlossyModel::Glossy) return albedo + reflectance * lobe_part;
     const double base = (1.0 - fresnel_dielectric(cos_o, ior)) * entering_share(ior);
     return Rgb::Constant(lobe_part) + albedo * base;
+}
+
+Rgb GlossyBrdf::hemispherical_albedo() const {
+    static const Quadrature q = gauss_legendre01(32);
+    Rgb sum = Rgb::Zero();
+    for (std::size_t k = 0; k < q.x.size(); ++k) sum += directional_albedo(q.x[k]) * (2.0 * q.x[k] * q.w[k]);
+    return sum;
+}
+
+GlossyBrdf glossy_brdf(const Object& o) {
+    GlossyBrdf b;
+    b.model = o.material.type == MaterialType::Plastic ? GlossyModel::Plastic : GlossyModel::Glossy;
+    b.albedo = o.albedo;
+    b.reflectance = b.model == GlossyModel::Glossy ? o.material.reflectance : Rgb::Zero();
+    b.roughness = o.material.roughness;
+    b.ior = o.material.ior;
+    return b;
 }
 
 HemisphereCells::HemisphereCells(int rings) : m_rings(rings) {

@@ -151,8 +151,8 @@ fs::path parse_mesh_file(const Node& n) {
     return p;
 }
 
-// The `material` block. Its `albedo` (the diffuse part) may be given there or on the object, not both;
-// a specular object without one has no diffuse part.
+// The `material` block. Its `albedo` (the diffuse part; a plastic's base) may be given there or on the
+// object, not both; a mirror, glass or glossy object without one has no diffuse part.
 void parse_material(const Node& n, bool object_albedo, Object& o) {
     const Node type = n.child("type");
     const std::string name = type.string();
@@ -168,14 +168,25 @@ void parse_material(const Node& n, bool object_albedo, Object& o) {
         m.type = MaterialType::Glass;
         m.reflectance = n.child("reflectance").rgb();
         m.transmittance = n.child("transmittance").rgb();
+    } else if (name == "glossy") {
+        n.check_keys({"type", "reflectance", "roughness", "albedo"});
+        m.type = MaterialType::Glossy;
+        m.reflectance = n.child("reflectance").rgb();
+        if (const auto roughness = n.find("roughness")) m.roughness = roughness->number();
+    } else if (name == "plastic") {
+        n.check_keys({"type", "roughness", "ior", "albedo"});
+        m.type = MaterialType::Plastic;
+        if (const auto roughness = n.find("roughness")) m.roughness = roughness->number();
+        if (const auto ior = n.find("ior")) m.ior = ior->number();
     } else {
-        type.fail("unknown material type " + in_quotes(name) + R"( (expected "diffuse", "mirror" or "glass"))");
+        type.fail("unknown material type " + in_quotes(name) +
+                  R"( (expected "diffuse", "mirror", "glass", "glossy" or "plastic"))");
     }
     if (const auto albedo = n.find("albedo")) {
         if (object_albedo) albedo->fail("the object gives an albedo too; give it in one place");
         o.albedo = albedo->rgb();
-    } else if (m.specular() && !object_albedo) {
-        o.albedo = Rgb::Zero();
+    } else if ((m.specular() || m.type == MaterialType::Glossy) && !object_albedo) {
+        o.albedo = Rgb::Zero();  // a mirror's, glass's or rough metal's diffuse part is what is asked for
     }
 }
 

@@ -150,8 +150,30 @@ void check_specular_part(const Rgb& value, const At& at) {
     if ((value < 0.0).any() || (value > 1.0).any()) at.fail("must be in [0, 1]");
 }
 
+// A glossy or plastic material: its roughness, a glossy one's reflectance beside its albedo, a
+// plastic's index.
+void check_glossy(const Object& o, const At& material) {
+    const Material& m = o.material;
+    const At roughness = material.key("roughness");
+    finite(m.roughness, roughness);
+    if (!(m.roughness >= 0.01 && m.roughness <= 1.0))
+        roughness.fail("must be in [0.01, 1] (GGX alpha; below 0.01 use a mirror)");
+    if (m.type == MaterialType::Plastic) {
+        const At ior = material.key("ior");
+        finite(m.ior, ior);
+        if (!(m.ior > 1.0)) ior.fail("must be > 1 (the coat's refractive index against air)");
+        return;
+    }
+    check_specular_part(m.reflectance, material.key("reflectance"));
+    const Rgb sum = m.reflectance + o.albedo;
+    if ((sum > 1.0 + 1e-12).any())
+        material.fail("reflectance + albedo is " + std::to_string(sum.maxCoeff()) +
+                      "; it must be at most 1 (energy is not created)");
+}
+
 void check_material(const Object& o, const At& at) {
     const Material& m = o.material;
+    if (m.glossy()) check_glossy(o, at.key("material"));
     if (!m.specular()) return;
     const At material = at.key("material");
     check_specular_part(m.reflectance, material.key("reflectance"));

@@ -3,9 +3,11 @@
 
 #include "tprf/core/types.h"
 #include "tprf/core/progress.h"
+#include "tprf/scene/brdf.h"
 #include "tprf/scene/mesh_io.h"
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -24,6 +26,16 @@ struct PatchSet {
     std::vector<Rgb> albedo;           ///< N, in [0, 1]
     std::vector<Rgb> emission;         ///< N, radiance L_e, W/(m^2 sr)
     std::vector<std::uint32_t> object; ///< N, index into Scene::objects
+    /// Per object (Scene::objects' order): its reflectance when its material is glossy or plastic, else
+    /// none; empty when no object is glossy. A glossy patch's `albedo` is its hemispherical albedo, the
+    /// share it reflects of light arriving alike from every direction: what the transport between
+    /// patches takes it for (docs/materials.md); the camera's direct light uses the BRDF.
+    std::vector<std::optional<GlossyBrdf>> glossy;
+
+    /// Patch i's glossy reflectance, or null for a Lambertian (or mirror, or glass) patch.
+    const GlossyBrdf* brdf(std::size_t i) const {
+        return glossy.empty() || !glossy[object[i]] ? nullptr : &*glossy[object[i]];
+    }
 
     /// Number of patches N.
     std::size_t size() const { return centroid.size(); }

@@ -31,6 +31,9 @@ struct SensingPoint {
     /// sensor point). The gather spreads the point's direct light over the paths of its cell, so that a
     /// pixel's light is spread over the times its footprint spans rather than over spp instants.
     Eigen::Vector3f du = Eigen::Vector3f::Zero(), dv = Eigen::Vector3f::Zero();
+    /// The unit direction from the point towards the sensor along the last straight leg (after the
+    /// mirrors); where the point is glossy, what its BRDF reflects towards. Zero when not known.
+    Eigen::Vector3f view = Eigen::Vector3f::Zero();
 };
 
 /// A set of sensing points, in output order (non-decreasing `output`).

@@ -1,7 +1,8 @@
 #pragma once
-/// Glossy reflectance: a GGX microfacet lobe with Smith masking over a Lambertian part (docs/materials.md,
-/// "Glossy surfaces"). Directions point away from the surface and are unit vectors; `n` is the side's
-/// normal (the caller flips it for the back of a two-sided object). Every function is pure.
+/// Glossy reflectance: a GGX microfacet lobe with Smith masking over a Lambertian part, the reflectance
+/// of a `glossy` or `plastic` material (docs/materials.md, "Glossy surfaces"). Directions point away
+/// from the surface and are unit vectors; `n` is the side's normal (the caller flips it for the back of
+/// a two-sided object). Every function is pure.
 
 #include "tprf/core/types.h"
 
@@ -49,7 +50,15 @@ struct GlossyBrdf {
     /// from wo that the surface reflects. The lobe is integrated over its own half vectors (Gauss-Legendre
     /// in the GGX distribution's cumulative measure and in azimuth), the plastic base over cos_i.
     Rgb directional_albedo(double cos_o) const;
+    /// The share of light arriving from the whole hemisphere with a uniform radiance (as a Lambertian
+    /// surface sends it) that the surface reflects: directional_albedo averaged with weight 2 cos_o.
+    Rgb hemispherical_albedo() const;
 };
+
+struct Object;
+
+/// A glossy object's reflectance (Object::material.glossy()): its albedo, reflectance, roughness, ior.
+GlossyBrdf glossy_brdf(const Object& o);
 
 /// The hemisphere above a surface cut into M = 4 R^2 cells of equal projected solid angle (pi / M each):
 /// the unit disk below it (x = sin(theta) cos(phi), y = sin(theta) sin(phi)) cut into R rings of equal

@@ -71,6 +71,8 @@ enum class MaterialType {
     Diffuse,  ///< Lambertian only (`albedo`)
     Mirror,   ///< perfect specular reflection of `reflectance` on the front side, plus `albedo` diffuse
     Glass,    ///< a thin sheet: `reflectance` mirrored on both sides, `transmittance` straight through
+    Glossy,   ///< `albedo` Lambertian plus a GGX lobe of `roughness` with a constant Fresnel `reflectance`
+    Plastic,  ///< a dielectric GGX coat of index `ior` and `roughness` over a Lambertian base of `albedo`
 };
 
 /// An object's material: its specular parts; the diffuse part is Object::albedo.
@@ -81,8 +83,14 @@ struct Material {
     Rgb reflectance = Rgb::Zero();
     /// Glass: straight-through transmittance per channel, in [0, 1], grey; else zero.
     Rgb transmittance = Rgb::Zero();
+    /// Glossy and plastic: the GGX roughness alpha, in [0.01, 1].
+    double roughness = 0.1;
+    /// Plastic: the coat's refractive index, > 1.
+    double ior = 1.5;
     /// Whether the object is a specular plane (a mirror or glass).
-    bool specular() const { return type != MaterialType::Diffuse; }
+    bool specular() const { return type == MaterialType::Mirror || type == MaterialType::Glass; }
+    /// Whether the object is glossy (a glossy or plastic material, scene/brdf.h).
+    bool glossy() const { return type == MaterialType::Glossy || type == MaterialType::Plastic; }
 };
 
 /// One entry of `objects`.
@@ -199,6 +207,12 @@ struct Scene {
     LinkSettings links;
     std::optional<SensorSettings> sensor;  ///< the optional `sensor` block (named "sensor" when its json_path is "")
     std::optional<Capture> capture;        ///< the optional `capture` block; a scene without one needs a camera
+
+    /// Object i's name in messages: its json_path, or "objects[i]".
+    std::string object_path(std::size_t i) const {
+        const std::string& path = objects[i].json_path;
+        return path.empty() ? "objects[" + std::to_string(i) + "]" : path;
+    }
 };
 
 }  // namespace tprf

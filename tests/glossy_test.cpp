@@ -1,0 +1,176 @@
+// Glossy and plastic materials in a render: the scene keys, and the camera's direct light against the
+// microfacet model written out here on its own (not through scene/brdf.h), so that a slip in the
+// library's BRDF cannot hide in the test.
+
+#include "tprf/imaging/camera.h"
+#include "tprf/io/npy.h"
+#include "tprf/pipeline/render.h"
+#include "tprf/scene/parse_json.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace tprf {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path fresh_dir(const std::string& name) {
+    const fs::path dir = fs::temp_directory_path() / ("tprf_glossy_" + name + "_" + std::to_string(std::random_device{}()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    return dir;
+}
+
+// The microfacet model, as docs/materials.md states it. a: GGX alpha; c: cosines against the normal.
+double ggx(double a, double c) {
+    if (c <= 0.0) return 0.0;
+    const double t2 = (1.0 - c * c) / (c * c);
+    return a * a / (M_PI * std::pow(c, 4) * std::pow(a * a + t2, 2));
+}
+double masking(double a, double c) {
+    if (c <= 0.0) return 0.0;
+    return 2.0 / (1.0 + std::sqrt(1.0 + a * a * (1.0 - c * c) / (c * c)));
+}
+// Unpolarised Fresnel reflectance from air into index `eta` at incidence cosine c.
+double fresnel(double c, double eta) {
+    const double s2 = (1.0 - c * c) / (eta * eta);
+    const double ct = std::sqrt(1.0 - s2);
+    const double rs = (c - eta * ct) / (c + eta * ct), rp = (eta * c - ct) / (eta * c + ct);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+struct Material {
+    std::string type;  // "glossy" or "plastic"
+    double albedo, reflectance, roughness, ior;
+};
+
+// f(wi, wo) for the floor's normal +z.
+double brdf(const Material& m, const Vec3& wi, const Vec3& wo) {
+    const double ci = wi.z(), co = wo.z();
+    if (ci <= 0.0 || co <= 0.0) return 0.0;
+    const Vec3 h = (wi + wo).normalized();
+    const double lobe = ggx(m.roughness, h.z()) * masking(m.roughness, ci) * masking(m.roughness, co) / (4.0 * ci * co);
+    if (m.type == "glossy") return m.albedo / M_PI + m.reflectance * lobe;
+    return fresnel(wi.dot(h), m.ior) * lobe + (1.0 - fresnel(ci, m.ior)) * (1.0 - fresnel(co, m.ior)) * m.albedo / M_PI;
+}
+
+nlohmann::json material_json(const Material& m) {
+    if (m.type == "glossy")
+        return {{"type", "glossy"}, {"albedo", m.albedo}, {"reflectance", m.reflectance}, {"roughness", m.roughness}};
+    return {{"type", "plastic"}, {"albedo", m.albedo}, {"roughness", m.roughness}, {"ior", m.ior}};
+}
+
+// A 4 x 4 m glossy floor at z = 0 under a point light, seen obliquely so that the highlight is in the
+// image; one sample at each pixel's centre, no footprint: every pixel is one exact surface point.
+constexpr int kSide = 32, kBins = 500;
+constexpr double kBin = 0.01;
+const Vec3 kLight(0.4, 0.1, 0.7);
+constexpr double kIntensity = 2.0;
+
+nlohmann::json floor_scene(const Material& m) {
+    return {{"time", {{"bins", kBins}, {"bin_width", kBin}}},
+            {"camera", {{"position", {-0.6, 0.0, 0.9}}, {"look_at", {0.3, 0.0, 0.0}}, {"up", {0, 0, 1}}, {"fov", 60},
+                        {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}}},
+            {"lights", {{{"type", "point"}, {"position", {kLight.x(), kLight.y(), kLight.z()}}, {"intensity", kIntensity}}}},
+            {"objects", {{{"type", "rectangle"}, {"origin", {-2, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
+                          {"material", material_json(m)}}}},
+            {"patches", {{"max_edge", 0.25}}}};
+}
+
+// Every pixel's steady value is f(wi, wo) I cos_i / r^2 (p99 of the relative error within 0.5%), and its
+// first light is in the bin of its path, light -> point -> camera.
+void expect_exact_direct_light(const Material& m) {
+    const fs::path dir = fresh_dir(m.type);
+    const fs::path file = dir / "scene.json";
+    std::ofstream(file) << floor_scene(m).dump(2);
+    RenderOptions options;
+    options.output = dir / "out";
+    render_file(file, options);
+    const NpyArray steady = read_npy(dir / "out" / "steady.npy");
+    const NpyArray cube = read_npy(dir / "out" / "transient.npy");
+    ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, kBins, 3}));
+    const Camera camera = *load_scene(file).camera;
+    std::vector<double> errors;
+    double brightest = 0.0, dimmest = 1e300;
+    for (int r = 0; r < kSide; ++r)
+        for (int c = 0; c < kSide; ++c) {
+            const Vec3 d = camera_ray(camera, c + 0.5, r + 0.5);
+            ASSERT_LT(d.z(), 0.0);
+            const Vec3 x = camera.position + d * (-camera.position.z() / d.z());
+            const std::size_t px = std::size_t(r) * kSide + std::size_t(c);
+            if (std::abs(x.x()) > 2.0 || std::abs(x.y()) > 2.0) {  // past the floor's far edge: nothing
+                EXPECT_EQ(steady.data[px * 3], 0.0f) << "pixel " << r << "," << c;
+                continue;
+            }
+            const Vec3 to_light = kLight - x;
+            const Vec3 wi = to_light.normalized(), wo = -d;
+            const double expected = brdf(m, wi, wo) * kIntensity * wi.z() / to_light.squaredNorm();
+            const double got = steady.data[px * 3];
+            errors.push_back(std::abs(got - expected) / expected);
+            brightest = std::max(brightest, expected);
+            dimmest = std::min(dimmest, expected);
+            const double path = to_light.norm() + (x - camera.position).norm();
+            const double edge = path / kBin - std::floor(path / kBin);
+            if (edge < 1e-3 || edge > 1.0 - 1e-3) continue;  // a path on a bin's edge: either bin is right
+            int first = -1;
+            for (int t = 0; t < kBins && first < 0; ++t)
+                if (cube.data[(px * kBins + std::size_t(t)) * 3] != 0.0f) first = t;
+            EXPECT_EQ(first, int(std::floor(path / kBin))) << m.type << " roughness " << m.roughness << " pixel " << r
+                                                            << "," << c;
+        }
+    ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 2));
+    std::sort(errors.begin(), errors.end());
+    const double p99 = errors[errors.size() * 99 / 100];
+    EXPECT_LT(p99, 0.005) << m.type << " roughness " << m.roughness << ": median " << errors[errors.size() / 2];
+    // The highlight is in the image: the lobe, not the Lambertian part, sets the brightest pixels.
+    EXPECT_GT(brightest, 3.0 * dimmest) << m.type << " roughness " << m.roughness;
+    fs::remove_all(dir);
+}
+
+TEST(Glossy, PointLightOverAGlossyFloorIsTheClosedFormAtEveryPixel) {
+    for (const double roughness : {0.05, 0.2, 0.5}) expect_exact_direct_light({"glossy", 0.2, 0.7, roughness, 1.5});
+}
+
+TEST(Glossy, PointLightOverAPlasticFloorIsTheClosedFormAtEveryPixel) {
+    for (const double roughness : {0.05, 0.2, 0.5}) expect_exact_direct_light({"plastic", 0.6, 0.0, roughness, 1.5});
+}
+
+// Bad values exit 2 naming the JSON path (load_scene throws InputError with it).
+void expect_refused(const nlohmann::json& material, const std::string& path, const std::string& what = "") {
+    nlohmann::json j = floor_scene({"glossy", 0.2, 0.7, 0.2, 1.5});
+    j["objects"][0]["material"] = material;
+    const fs::path dir = fresh_dir("bad");
+    const fs::path file = dir / "scene.json";
+    std::ofstream(file) << j.dump(2);
+    try {
+        load_scene(file);
+        ADD_FAILURE() << material.dump() << " was accepted";
+    } catch (const std::exception& e) {
+        EXPECT_NE(std::string(e.what()).find(path + ":"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+    fs::remove_all(dir);
+}
+
+TEST(Glossy, BadValuesNameTheirJsonPath) {
+    expect_refused({{"type", "glossy"}, {"reflectance", 0.7}, {"roughness", 0.001}}, "objects[0].material.roughness");
+    expect_refused({{"type", "glossy"}, {"reflectance", 0.7}, {"roughness", 1.5}}, "objects[0].material.roughness");
+    expect_refused({{"type", "glossy"}, {"reflectance", 0.7}, {"albedo", 0.5}}, "objects[0].material", "at most 1");
+    expect_refused({{"type", "glossy"}, {"reflectance", {0.5, 1.2, 0.5}}}, "objects[0].material.reflectance");
+    expect_refused({{"type", "glossy"}}, "objects[0].material", "reflectance");
+    expect_refused({{"type", "plastic"}, {"ior", 1.0}}, "objects[0].material.ior");
+    expect_refused({{"type", "plastic"}, {"reflectance", 0.5}}, "objects[0].material.reflectance", "unknown key");
+    expect_refused({{"type", "satin"}}, "objects[0].material.type");
+}
+
+}  // namespace
+}  // namespace tprf
