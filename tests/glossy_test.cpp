@@ -144,6 +144,69 @@ TEST(Glossy, PointLightOverAPlasticFloorIsTheClosedFormAtEveryPixel) {
     for (const double roughness : {0.05, 0.2, 0.5}) expect_exact_direct_light({"plastic", 0.6, 0.0, roughness, 1.5});
 }
 
+// A laser spot on a diffuse wall, seen in a glossy floor: the spot is a Lambertian point source of
+// radiant intensity a P cos(theta) / pi, so the floor's second bounce (transient_bounce_2.npy) at each
+// pixel is f(wi, wo) times that intensity, cos_i / r^2, to 1%, with its first light in the bin of the
+// path laser -> spot -> floor point -> camera.
+TEST(Glossy, ALaserSpotSeenInAGlossyFloorIsTheClosedForm) {
+    const Vec3 origin(2.0, 0.0, 1.0), spot(0.0, 0.3, 0.6);
+    const double power = 3.0, wall_albedo = 0.8;
+    for (const Material& m : {Material{"glossy", 0.1, 0.8, 0.1, 1.5}, Material{"plastic", 0.5, 0.0, 0.3, 1.5}}) {
+        nlohmann::json j = floor_scene(m);
+        j["objects"] = {{{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
+                         {"material", material_json(m)}},
+                        {{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {0, 4, 0}}, {"v", {0, 0, 2}},
+                         {"albedo", wall_albedo}}};
+        j["lights"] = {{{"type", "laser"}, {"origin", {origin.x(), origin.y(), origin.z()}},
+                        {"target", {spot.x(), spot.y(), spot.z()}}, {"power", power}}};
+        j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {0.6, 0.15, 0.0}}, {"up", {0, 0, 1}}, {"fov", 50},
+                       {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
+        j["solver"] = {{"bounces", true}, {"max_bounces", 3}};
+        const int bins = 800;  // paths up to 8 m
+        j["time"]["bins"] = bins;
+        const fs::path dir = fresh_dir("laser_" + m.type);
+        const fs::path file = dir / "scene.json";
+        std::ofstream(file) << j.dump(2);
+        RenderOptions options;
+        options.output = dir / "out";
+        render_file(file, options);
+        const NpyArray cube = read_npy(dir / "out" / "transient_bounce_2.npy");
+        ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, bins, 3}));
+        const Camera camera = *load_scene(file).camera;
+        std::vector<double> errors;
+        for (int r = 0; r < kSide; ++r)
+            for (int c = 0; c < kSide; ++c) {
+                const Vec3 d = camera_ray(camera, c + 0.5, r + 0.5);
+                if (d.z() >= 0.0) continue;
+                const Vec3 x = camera.position + d * (-camera.position.z() / d.z());
+                if (x.x() < 0.02 || x.x() > 4.0 || std::abs(x.y()) > 2.0) continue;  // the floor, clear of the wall
+                const Vec3 to_spot = spot - x;
+                const Vec3 wi = to_spot.normalized();
+                const double cos_spot = -wi.x();  // the wall's normal is +x
+                const double intensity = wall_albedo * power * cos_spot / M_PI;
+                const double expected = brdf(m, wi, -d) * intensity * wi.z() / to_spot.squaredNorm();
+                const std::size_t px = std::size_t(r) * kSide + std::size_t(c);
+                double got = 0.0;
+                int first = -1;
+                for (int t = 0; t < bins; ++t) {
+                    const float v = cube.data[(px * bins + std::size_t(t)) * 3];
+                    got += v;
+                    if (first < 0 && v != 0.0f) first = t;
+                }
+                errors.push_back(std::abs(got - expected) / expected);
+                const double path = (spot - origin).norm() + to_spot.norm() + (x - camera.position).norm();
+                const double edge = path / kBin - std::floor(path / kBin);
+                if (edge > 1e-3 && edge < 1.0 - 1e-3) {
+                    EXPECT_EQ(first, int(std::floor(path / kBin))) << m.type << " pixel " << r << "," << c;
+                }
+            }
+        ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
+        std::sort(errors.begin(), errors.end());
+        EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
+        fs::remove_all(dir);
+    }
+}
+
 // Bad values exit 2 naming the JSON path (load_scene throws InputError with it).
 void expect_refused(const nlohmann::json& material, const std::string& path, const std::string& what = "") {
     nlohmann::json j = floor_scene({"glossy", 0.2, 0.7, 0.2, 1.5});

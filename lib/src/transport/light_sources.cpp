@@ -212,7 +212,7 @@ bool arrive(const PointSource& source, const Vec3& x, const Vec3& n, const Visib
     if (!(intensity > 0.0).any()) return false;
     const double passed = visibility.passes(source.chain, x + visibility.epsilon() * n, source.position);
     if (!(passed > 0.0)) return false;
-    out.path = source.path + r;
+    out.path = source.path + (source.origin - x).norm();  // from the true point, not the shadow ray's lifted end
     out.intensity = intensity * passed;
     out.cos_over_r2 = cos_x / (r * r);
     return true;
