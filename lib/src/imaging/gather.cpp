@@ -121,6 +121,50 @@ struct Samples {
     double weight;
 };
 
+// A glossy sensing point under an area source: the point, its BRDF, the source, and the exact form
+// factor F(x) of the source times the point's weight.
+struct GlossyArea {
+    const SensingPoint& sp;
+    const Vec3& n;
+    const GlossyBrdf& brdf;
+    const AreaSource& a;
+    double ff_weight;
+};
+
+// Timing cells per side that resolve a glossy lobe of roughness alpha over source a seen from x: about a
+// third of the lobe's width (2 alpha) per cell, up to 64.
+int lobe_cells(const AreaSource& a, const Vec3& x, double alpha) {
+    double extent = 0.0;
+    for (int k = 0; k < a.count; ++k) extent = std::max(extent, (a.polygon()[k] - a.polygon()[(k + 1) % a.count]).norm());
+    const double r = std::max((a.centroid - x).norm(), 1e-9);
+    return int(std::clamp(std::ceil(3.0 * extent / (r * 2.0 * alpha)), 1.0, 64.0));
+}
+
+// Direct light of area source a at a glossy sensing point: the BRDF as its two terms, each a scalar of
+// the direction towards the source times a colour (GlossyBrdf::base and lobe), the scalar weighing
+// each timing cell. Pair weights are pi times the scalar times the Lambertian kernel, so that
+// L_e F(x) / total turns them into radiance as for a Lambertian point (whose term is 1 / pi). The lobe's
+// cells are fine enough to resolve it (lobe_cells).
+void glossy_area_arrivals(const GlossyArea& g, AreaSampling sampling, const Visibility& vis,
+                          std::vector<DirectArrival>& out) {
+    const SensingPoint& sp = g.sp;
+    const GlossyBrdf& brdf = g.brdf;
+    const Vec3& n = g.n;
+    const Vec3 wo = sp.view.cast<double>();
+    thread_local std::vector<AreaPair> pairs;
+    for (const bool lobe : {false, true}) {
+        const Rgb colour = lobe ? brdf.lobe_colour() : brdf.albedo;
+        if (!(colour > 0.0).any()) continue;
+        if (lobe) sampling.timing = std::max(sampling.timing, lobe_cells(g.a, sp.point, brdf.roughness));
+        sampling.towards = [&](const Vec3& wi) { return M_PI * (lobe ? brdf.lobe(n, wi, wo) : brdf.base(n, wi, wo)); };
+        pairs.clear();
+        const double total = arrive_area(g.a, sp.point, n, vis, sampling, pairs);
+        if (!(total > 0.0)) continue;
+        const Rgb radiance = colour * g.a.radiance * (g.ff_weight / total);
+        for (const AreaPair& q : pairs) out.push_back({sp.output, q.path + sp.leg, radiance * q.weight, 1});
+    }
+}
+
 // Direct light of area source a at the sensing point, seen along its leg: radiance albedo L_e F(x)
 // with F the exact point-to-polygon form factor, times the unblocked share of its sampled pairs,
 // spread over their paths and over the point's cell (per bin of the time axis, when there is one).
@@ -141,6 +185,10 @@ void area_arrivals(const DirectScene& scene, const SensingPoint& sp, RunSample a
     AreaSampling sampling = area_sampling(a, sp.point, bin_m, origin, options.emitter_rays, penumbra);
     if (at.count > 1) r2_point(double(at.index), sampling.jitter_u, sampling.jitter_v);
     sampling.footprint = footprint_of(sp);
+    if (const GlossyBrdf* brdf = patches.brdf(sp.patch)) {
+        glossy_area_arrivals({sp, n, *brdf, a, ff * weight}, sampling, vis, out);
+        return;
+    }
     double total = arrive_area(a, sp.point, n, vis, sampling, pairs);
     if (!(total > 0.0) && (total = arrive_area_centroid(a, sp.point, n, vis, pairs)) == 0.0) return;
     const Rgb radiance = patches.albedo[sp.patch] * a.radiance * (ff * weight / total);
@@ -182,7 +230,7 @@ int flat_groups(const SensingPoint* pts, std::size_t count, const PatchSet& patc
     first.clear();
     for (std::size_t h = 0; h < count; ++h) {
         const SensingPoint& sp = pts[h];
-        if (sp.throughput != 1.0f || sp.tint != 0 || (sp.du.isZero() && sp.dv.isZero())) continue;
+        if (sp.throughput != 1.0f || sp.tint != 0 || (sp.du.isZero() && sp.dv.isZero()) || patches.brdf(sp.patch)) continue;
         const Vec3& n = patches.normal[sp.patch];
         const double reach = 1e-6 * (1.0 + sp.point.norm());
         for (std::size_t g = 0; g < first.size() && group[h] < 0; ++g) {

@@ -150,6 +150,13 @@ double GlossyBrdf::lobe(const Vec3& n, const Vec3& wi, const Vec3& wo) const {
     return model == GlossyModel::Plastic ? value * fresnel_dielectric(wi.dot(h), ior) : value;
 }
 
+double GlossyBrdf::base(const Vec3& n, const Vec3& wi, const Vec3& wo) const {
+    const double cos_i = n.dot(wi), cos_o = n.dot(wo);
+    if (cos_i <= 0.0 || cos_o <= 0.0) return 0.0;
+    if (model == GlossyModel::Glossy) return 1.0 / kPi;
+    return (1.0 - fresnel_dielectric(cos_i, ior)) * (1.0 - fresnel_dielectric(cos_o, ior)) / kPi;
+}
+
 Rgb GlossyBrdf::eval(const Vec3& n, const Vec3& wi, const Vec3& wo) const {
     const double cos_i = n.dot(wi), cos_o = n.dot(wo);
     if (cos_i <= 0.0 || cos_o <= 0.0) return Rgb::Zero();

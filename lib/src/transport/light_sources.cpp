@@ -306,7 +306,7 @@ double timing_cells(const AreaSource& a, const AreaSampling& s, const TimingGrid
         const double w = std::max(0.0, n.dot(d)) * std::max(0.0, -a.normal.dot(d)) / (r2 * r2) / (double(m) * m);
         if (!(w > 0.0)) continue;
         total += w;
-        const double o = open(u, v, m);
+        const double o = open(u, v, m) * (s.towards ? s.towards(d / path) : 1.0);
         if (!(o > 0.0)) continue;
         if (s.bin_m > 0.0) {
             cell_spread(a, s, {x, u, v, m, path, nearest, w * o}, out);

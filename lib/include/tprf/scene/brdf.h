@@ -45,6 +45,11 @@ struct GlossyBrdf {
     /// The lobe's part of f alone (no Lambertian term), per steradian, per unit of reflectance for
     /// Glossy (the Fresnel factor included for Plastic).
     double lobe(const Vec3& n, const Vec3& wi, const Vec3& wo) const;
+    /// The colour the lobe is scaled by: `reflectance` (Glossy), white (Plastic).
+    Rgb lobe_colour() const { return model == GlossyModel::Glossy ? reflectance : Rgb::Ones(); }
+    /// The Lambertian part of f per unit of albedo, per steradian: 1 / pi (Glossy), or (Plastic)
+    /// (1 - F(cos_i)) (1 - F(cos_o)) / pi. So f = albedo base + lobe_colour lobe.
+    double base(const Vec3& n, const Vec3& wi, const Vec3& wo) const;
     /// The directional albedo: the integral of f(wi, wo) cos_i over the hemisphere of wi, for a wo whose
     /// cosine with the normal is `cos_o` in (0, 1]. By reciprocity, also the share of light arriving
     /// from wo that the surface reflects. The lobe is integrated over its own half vectors (Gauss-Legendre

@@ -15,6 +15,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <span>
 #include <vector>
@@ -182,6 +183,9 @@ struct AreaSampling {
     /// centre). The samples of one pixel take different offsets, so that together they see more points
     /// of the source than one grid has.
     double jitter_u = 0.5, jitter_v = 0.5;
+    /// When set, each pair's weight is scaled by this function of the unit direction from the surface
+    /// point towards the pair's cell (a glossy point's BRDF term); the total returned is not.
+    std::function<double(const Vec3&)> towards;
 };
 
 /// Bins of the time axis that one timing cell of an area source spans, about: each cell's light is
