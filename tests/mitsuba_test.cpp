@@ -4,6 +4,7 @@
 #include "tprf/core/error.h"
 #include "tprf/imaging/camera.h"
 #include "tprf/io/npy.h"
+#include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/parse_mitsuba.h"
 
@@ -669,4 +670,59 @@ TEST(Mitsuba, GlossyRefusalsNameFileLineAndElement) {
     expect_error(R"(<bsdf type="plastic"><string name="int_ior" value="unobtainium"/></bsdf>)",
                  "<string name=\"int_ior\">: unknown index of refraction \"unobtainium\"");
     expect_error(R"(<bsdf type="plastic"><float name="alpha" value="0.1"/></bsdf>)", "<float name=\"alpha\">: unknown property");
+}
+
+// A Cornell box whose floor is a rough conductor and whose tall block is a rough plastic, lit by its
+// area light and a point light, renders as the same box written as a JSON scene (32 x 32 pixels, one
+// sample, 100 bins, patches of 0.2 m): the XML becomes the same Scene, so the images agree to the bit.
+TEST(Mitsuba, GlossyCornellBoxXmlRendersAsTheJson) {
+    TempDir dir;
+    fs::copy_file(kSource / "meshes" / "block.obj", dir.path / "block.obj");
+    std::string xml = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.xml");
+    xml = replaced(xml, "<ref id=\"white\"/>", R"(<bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.2"/><rgb name="eta" value="1, 3, 0"/><rgb name="k" value="2, 0, 1"/>
+            <float name="specular_reflectance" value="0.8"/></bsdf>)");
+    xml.replace(xml.rfind("<ref id=\"white\"/>"), 17, R"(<bsdf type="roughplastic"><string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.3"/><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/>
+            <float name="diffuse_reflectance" value="0.6"/></bsdf>)");
+    xml = replaced(xml, "name=\"bin_width_opl\" value=\"0.005\"", "name=\"bin_width_opl\" value=\"0.05\"");
+    xml = replaced(xml, "</scene>", R"(<emitter type="point"><point name="position" x="0.5" y="0.3" z="0.8"/>
+        <float name="intensity" value="0.5"/></emitter></scene>)");
+    std::ofstream(dir.path / "box.xml") << xml;
+    // Fresnel at normal incidence of (eta, k) = (1, 2), (3, 0), (0, 1): 0.5, 0.25, 1; times 0.8.
+    std::string json = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.json");
+    json = replaced(json, "\"albedo\": 0.73}",
+                    R"("material": {"type": "glossy", "reflectance": [0.4, 0.2, 0.8], "roughness": 0.2}})");
+    json.replace(json.rfind("\"albedo\": 0.73,"), 15,
+                 R"("material": {"type": "plastic", "albedo": 0.6, "roughness": 0.3, "ior": 1.5},)");
+    json = replaced(json, "\"width\": 128, \"height\": 128, \"spp\": 4", "\"width\": 32, \"height\": 32, \"spp\": 1");
+    json = replaced(json, "\"bins\": 1024, \"bin_width\": 0.005", "\"bins\": 100, \"bin_width\": 0.05");
+    json = replaced(json, "\"lights\":  []", R"("lights": [{"type": "point", "position": [0.5, 0.3, 0.8], "intensity": 0.5}])");
+    std::ofstream(dir.path / "box.json") << json;
+
+    const tprf::Scene x = tprf::load_scene(dir.path / "box.xml", tprf::XmlDefines{{"res", "32"}, {"bins", "100"}, {"spp", "1"}});
+    const tprf::Scene j = tprf::load_scene(dir.path / "box.json");
+    ASSERT_EQ(x.objects.size(), j.objects.size());
+    for (std::size_t i = 0; i < x.objects.size(); ++i) {
+        const tprf::Material &a = x.objects[i].material, &b = j.objects[i].material;
+        EXPECT_EQ(a.type, b.type) << i;
+        EXPECT_EQ(a.reflectance.matrix(), b.reflectance.matrix()) << i;
+        EXPECT_EQ(x.objects[i].albedo.matrix(), j.objects[i].albedo.matrix()) << i;
+        if (a.glossy()) {
+            EXPECT_EQ(a.roughness, b.roughness) << i;
+            EXPECT_EQ(a.ior, b.ior) << i;
+        }
+    }
+    EXPECT_EQ(x.objects.front().material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(x.objects.back().material.type, tprf::MaterialType::Plastic);
+    tprf::RenderOptions options;
+    options.max_edge = 0.2;
+    options.threads = 1;  // the same numbers for any count; one thread waits for no other on a busy machine
+    const tprf::RenderResult rx = tprf::render_scene(x, options), rj = tprf::render_scene(j, options);
+    for (const char* name : {"steady", "transient"}) {
+        const tprf::FloatArray &a = rx.arrays.at(name), &b = rj.arrays.at(name);
+        EXPECT_EQ(a.shape, b.shape) << name;
+        EXPECT_TRUE(a.data == b.data) << name;
+        EXPECT_GT(*std::max_element(b.data.begin(), b.data.end()), 0.0f) << name;  // not two black images
+    }
 }
