@@ -4,6 +4,7 @@
 #include "tprf/core/error.h"
 #include "tprf/imaging/camera.h"
 #include "tprf/io/npy.h"
+#include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/parse_mitsuba.h"
 
@@ -321,7 +322,7 @@ TEST(Mitsuba, UnsupportedInputNamesFileLineAndElement) {
         EXPECT_NE(e.find(expected), std::string::npos) << "got: " << e;
         EXPECT_NE(e.find("scene.xml:12: "), std::string::npos) << "got: " << e;
     };
-    expect_error(R"(<bsdf type="roughplastic" id="a"/>)", "<bsdf type=\"roughplastic\" id=\"a\">: unsupported BSDF type");
+    expect_error(R"(<bsdf type="roughdielectric" id="a"/>)", "<bsdf type=\"roughdielectric\" id=\"a\">: unsupported BSDF type");
     expect_error(R"(<medium type="homogeneous"/>)", "<medium type=\"homogeneous\">: unsupported element");
     expect_error(R"(<shape type="rectangle" flavour="x"/>)", "unknown attribute \"flavour\"");
     expect_error(R"(<shape type="rectangle"><bsdf type="diffuse"><float name="roughness" value="1"/></bsdf></shape>)",
@@ -508,11 +509,220 @@ TEST(MitsubaCli, DefinesReachTheScene) {
 
 TEST(MitsubaCli, BadElementExitsTwoWithFileLineAndWritesNothing) {
     TempDir dir;
-    std::ofstream(dir.path / "bad.xml") << scene_xml(R"(<shape type="rectangle"><bsdf type="roughplastic"/></shape>)");
+    std::ofstream(dir.path / "bad.xml") << scene_xml(R"(<shape type="rectangle"><bsdf type="roughdielectric"/></shape>)");
     const tprf::test::Outcome r =
         tprf::test::run_tprf("render " + (dir.path / "bad.xml").string() + " -o " + (dir.path / "out").string());
     EXPECT_EQ(r.status, 2);
-    EXPECT_NE(r.err.find("bad.xml:12: <bsdf type=\"roughplastic\">: unsupported BSDF type"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("bad.xml:12: <bsdf type=\"roughdielectric\">: unsupported BSDF type"), std::string::npos) << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     EXPECT_FALSE(fs::exists(dir.path / "out"));
+}
+
+namespace {
+
+// The normal-incidence Fresnel reflectance of a conductor of complex index eta + ik.
+double fresnel0(double eta, double k) { return ((eta - 1) * (eta - 1) + k * k) / ((eta + 1) * (eta + 1) + k * k); }
+
+// `scene_xml` around `body`, with meshes/block.obj (a box: curved as a whole) beside it as block.obj.
+std::string with_block(const std::string& body, const TempDir& dir) {
+    fs::copy_file(kSource / "meshes" / "block.obj", dir.path / "block.obj", fs::copy_options::overwrite_existing);
+    return scene_xml(body);
+}
+
+}  // namespace
+
+// A rough conductor is glossy: its alpha, the normal-incidence Fresnel reflectance of eta + ik times
+// specular_reflectance (Mitsuba's "none", eta 0 and k 1, reflects 1), no diffuse part, on any shape.
+TEST(Mitsuba, RoughConductorIsGlossy) {
+    TempDir dir;
+    const tprf::Scene s = parse(with_block(R"(
+      <shape type="rectangle"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.3"/><rgb name="eta" value="0.2, 0.9, 1.1"/><rgb name="k" value="3.9, 2.45, 2.1"/>
+        <float name="specular_reflectance" value="0.9"/></bsdf></shape>
+      <shape type="obj"><string name="filename" value="block.obj"/><bsdf type="roughconductor">
+        <string name="distribution" value="GGX"/><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/>
+        <boolean name="sample_visible" value="false"/><rgb name="specular_reflectance" value="0.8, 0.6, 0.4"/></bsdf></shape>
+      <shape type="rectangle"><bsdf type="twosided"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+        <float name="eta" value="1.5"/></bsdf></bsdf></shape>)",
+                                           dir),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 3u);
+    const tprf::Object& a = s.objects[0];
+    EXPECT_EQ(a.material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(a.material.roughness, 0.3);
+    EXPECT_EQ(a.albedo.matrix(), Vec3::Zero());
+    EXPECT_FALSE(a.two_sided);
+    const Vec3 eta(0.2, 0.9, 1.1), k(3.9, 2.45, 2.1);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(a.material.reflectance[c], 0.9 * fresnel0(eta[c], k[c]), 1e-15) << c;
+    const tprf::Object& b = s.objects[1];
+    EXPECT_EQ(b.material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(b.material.roughness, 0.2);
+    EXPECT_EQ(b.material.reflectance.matrix(), Vec3(0.8, 0.6, 0.4));
+    // Mitsuba's k defaults to 1 when eta is given.
+    const tprf::Object& c = s.objects[2];
+    EXPECT_EQ(c.material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(c.material.roughness, 0.1);  // Mitsuba's default alpha
+    EXPECT_TRUE(c.two_sided);
+    EXPECT_NEAR(c.material.reflectance[0], fresnel0(1.5, 1.0), 1e-15);
+}
+
+// A smooth conductor stays a mirror on a planar shape (a rectangle, a mesh in one plane) and becomes
+// glossy of roughness 0.01 on a curved mesh, with its Fresnel reflectance either way; twosided, it is
+// glass that passes nothing on a plane and a two-sided glossy surface on a curved mesh.
+TEST(Mitsuba, SmoothConductorIsAMirrorOnAPlaneAndGlossyOnACurvedMesh) {
+    TempDir dir;
+    const std::string gold = R"(<bsdf type="conductor"><rgb name="eta" value="0.2, 0.4, 1.4"/>)"
+                             R"(<rgb name="k" value="3.6, 2.3, 1.8"/></bsdf>)";
+    const tprf::Scene s = parse(with_block(R"(
+      <shape type="rectangle">)" + gold + R"(</shape>
+      <shape type="obj"><string name="filename" value="meshes/tri.obj"/>)" + gold + R"(</shape>
+      <shape type="obj"><string name="filename" value="block.obj"/>)" + gold + R"(</shape>
+      <shape type="obj"><string name="filename" value="meshes/tri.obj"/><bsdf type="twosided"><bsdf type="conductor"/></bsdf></shape>
+      <shape type="obj"><string name="filename" value="block.obj"/><bsdf type="twosided"><bsdf type="conductor"/></bsdf></shape>)",
+                                           dir),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 5u);
+    const Vec3 eta(0.2, 0.4, 1.4), k(3.6, 2.3, 1.8);
+    for (std::size_t i = 0; i < 3; ++i) {
+        EXPECT_EQ(s.objects[i].albedo.matrix(), Vec3::Zero()) << i;
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(s.objects[i].material.reflectance[c], fresnel0(eta[c], k[c]), 1e-15) << i;
+    }
+    EXPECT_EQ(s.objects[0].material.type, tprf::MaterialType::Mirror);
+    EXPECT_EQ(s.objects[1].material.type, tprf::MaterialType::Mirror);
+    EXPECT_EQ(s.objects[2].material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(s.objects[2].material.roughness, 0.01);
+    EXPECT_FALSE(s.objects[2].two_sided);
+    EXPECT_EQ(s.objects[3].material.type, tprf::MaterialType::Glass);
+    EXPECT_EQ(s.objects[3].material.transmittance.matrix(), Vec3::Zero());
+    EXPECT_FALSE(s.objects[3].two_sided);
+    EXPECT_EQ(s.objects[4].material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(s.objects[4].material.reflectance.matrix(), Vec3::Ones());
+    EXPECT_TRUE(s.objects[4].two_sided);
+}
+
+// Plastics: alpha (smooth: 0.01), ior = int_ior / ext_ior (numbers or Mitsuba's names, in any case;
+// defaults polypropylene in air), diffuse_reflectance as the base's albedo (default 0.5); nonlinear and
+// a specular_reflectance of 1 are accepted; twosided is two-sided.
+TEST(Mitsuba, PlasticsArePlastic) {
+    TempDir dir;
+    const tprf::Scene s = parse(scene_xml(R"(
+      <shape type="rectangle"><bsdf type="roughplastic"><string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.25"/><float name="int_ior" value="1.6"/><float name="ext_ior" value="1"/>
+        <rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/><float name="specular_reflectance" value="1"/></bsdf></shape>
+      <shape type="rectangle"><bsdf type="plastic"/></shape>
+      <shape type="rectangle"><bsdf type="twosided"><bsdf type="plastic"><string name="int_ior" value="BK7"/>
+        <string name="ext_ior" value="water"/><boolean name="nonlinear" value="true"/></bsdf></bsdf></shape>
+      <shape type="rectangle"><bsdf type="thindielectric"><string name="int_ior" value="diamond"/></bsdf></shape>)"),
+                                dir);
+    ASSERT_EQ(s.objects.size(), 4u);
+    const tprf::Object& a = s.objects[0];
+    EXPECT_EQ(a.material.type, tprf::MaterialType::Plastic);
+    EXPECT_EQ(a.material.roughness, 0.25);
+    EXPECT_EQ(a.material.ior, 1.6);
+    EXPECT_EQ(a.albedo.matrix(), Vec3(0.1, 0.2, 0.3));
+    EXPECT_FALSE(a.two_sided);
+    const tprf::Object& b = s.objects[1];
+    EXPECT_EQ(b.material.type, tprf::MaterialType::Plastic);
+    EXPECT_EQ(b.material.roughness, 0.01);
+    EXPECT_EQ(b.material.ior, 1.49 / 1.000277);
+    EXPECT_EQ(b.albedo.matrix(), Vec3::Constant(0.5));
+    const tprf::Object& c = s.objects[2];
+    EXPECT_EQ(c.material.type, tprf::MaterialType::Plastic);
+    EXPECT_EQ(c.material.ior, 1.5046 / 1.333);
+    EXPECT_TRUE(c.two_sided);
+    const double r = std::pow((2.419 / 1.000277 - 1) / (2.419 / 1.000277 + 1), 2);
+    EXPECT_NEAR(s.objects[3].material.reflectance[0], 2 * r / (1 + r), 1e-12);
+}
+
+// Values tprf cannot render exit with file:line, the element and the reason.
+TEST(Mitsuba, GlossyRefusalsNameFileLineAndElement) {
+    TempDir dir;
+    const auto expect_error = [&](const std::string& bsdf, const std::string& expected, int line = 12) {
+        const std::string e = error_of(scene_xml("<shape type=\"rectangle\">" + bsdf + "</shape>"), dir);
+        EXPECT_NE(e.find(expected), std::string::npos) << "got: " << e;
+        EXPECT_NE(e.find("scene.xml:" + std::to_string(line) + ": "), std::string::npos) << "got: " << e;
+    };
+    const std::string ggx = R"(<string name="distribution" value="ggx"/>)";
+    expect_error(R"(<bsdf type="roughconductor"/>)",
+                 "<bsdf type=\"roughconductor\">: no distribution: Mitsuba's default is \"beckmann\"");
+    expect_error("<bsdf type=\"roughplastic\">\n<string name=\"distribution\" value=\"beckmann\"/></bsdf>",
+                 "<string name=\"distribution\">: \"beckmann\": tprf's lobes are GGX", 13);
+    expect_error("<bsdf type=\"roughconductor\">" + ggx + "\n<float name=\"alpha\" value=\"0.005\"/></bsdf>",
+                 "<float name=\"alpha\">: must lie in [0.01, 1]", 13);
+    expect_error("<bsdf type=\"roughplastic\">" + ggx + R"(<float name="alpha" value="1.5"/></bsdf>)", "must lie in [0.01, 1]");
+    expect_error("<bsdf type=\"roughconductor\">" + ggx +
+                     R"(<float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>)",
+                 "<float name=\"alpha_v\">: differs from alpha_u: tprf's lobes are isotropic");
+    expect_error("<bsdf type=\"roughconductor\">" + ggx + R"(<float name="alpha_u" value="0.1"/></bsdf>)",
+                 "alpha_u and alpha_v go together");
+    expect_error("<bsdf type=\"roughconductor\">" + ggx +
+                     R"(<float name="alpha" value="0.1"/><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.1"/></bsdf>)",
+                 "give either alpha or alpha_u and alpha_v");
+    expect_error("<bsdf type=\"roughconductor\">" + ggx + R"(<string name="material" value="Cu"/></bsdf>)",
+                 "conductor material \"Cu\": tprf holds no spectral tables");
+    expect_error(R"(<bsdf type="conductor"><float name="k" value="-1"/></bsdf>)", "<float name=\"k\">: must be >= 0");
+    expect_error("<bsdf type=\"roughconductor\">" + ggx + R"(<texture type="bitmap" name="alpha"/></bsdf>)",
+                 "<texture type=\"bitmap\" name=\"alpha\">: unsupported inside <bsdf type=\"roughconductor\">");
+    expect_error(R"(<bsdf type="plastic"><float name="specular_reflectance" value="0.5"/></bsdf>)",
+                 "<float name=\"specular_reflectance\">: must be 1");
+    expect_error(R"(<bsdf type="plastic"><float name="int_ior" value="1.2"/><float name="ext_ior" value="1.33"/></bsdf>)",
+                 "<bsdf type=\"plastic\">: int_ior / ext_ior must be > 1");
+    expect_error(R"(<bsdf type="plastic"><string name="int_ior" value="unobtainium"/></bsdf>)",
+                 "<string name=\"int_ior\">: unknown index of refraction \"unobtainium\"");
+    expect_error(R"(<bsdf type="plastic"><float name="alpha" value="0.1"/></bsdf>)", "<float name=\"alpha\">: unknown property");
+}
+
+// A Cornell box whose floor is a rough conductor and whose tall block is a rough plastic, lit by its
+// area light and a point light, renders as the same box written as a JSON scene (32 x 32 pixels, one
+// sample, 100 bins, patches of 0.2 m): the XML becomes the same Scene, so the images agree to the bit.
+TEST(Mitsuba, GlossyCornellBoxXmlRendersAsTheJson) {
+    TempDir dir;
+    fs::copy_file(kSource / "meshes" / "block.obj", dir.path / "block.obj");
+    std::string xml = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.xml");
+    xml = replaced(xml, "<ref id=\"white\"/>", R"(<bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.2"/><rgb name="eta" value="1, 3, 0"/><rgb name="k" value="2, 0, 1"/>
+            <float name="specular_reflectance" value="0.8"/></bsdf>)");
+    xml.replace(xml.rfind("<ref id=\"white\"/>"), 17, R"(<bsdf type="roughplastic"><string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.3"/><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/>
+            <float name="diffuse_reflectance" value="0.6"/></bsdf>)");
+    xml = replaced(xml, "name=\"bin_width_opl\" value=\"0.005\"", "name=\"bin_width_opl\" value=\"0.05\"");
+    xml = replaced(xml, "</scene>", R"(<emitter type="point"><point name="position" x="0.5" y="0.3" z="0.8"/>
+        <float name="intensity" value="0.5"/></emitter></scene>)");
+    std::ofstream(dir.path / "box.xml") << xml;
+    // Fresnel at normal incidence of (eta, k) = (1, 2), (3, 0), (0, 1): 0.5, 0.25, 1; times 0.8.
+    std::string json = tprf::test::read_bytes(kSource / "meshes" / "cornell-box.json");
+    json = replaced(json, "\"albedo\": 0.73}",
+                    R"("material": {"type": "glossy", "reflectance": [0.4, 0.2, 0.8], "roughness": 0.2}})");
+    json.replace(json.rfind("\"albedo\": 0.73,"), 15,
+                 R"("material": {"type": "plastic", "albedo": 0.6, "roughness": 0.3, "ior": 1.5},)");
+    json = replaced(json, "\"width\": 128, \"height\": 128, \"spp\": 4", "\"width\": 32, \"height\": 32, \"spp\": 1");
+    json = replaced(json, "\"bins\": 1024, \"bin_width\": 0.005", "\"bins\": 100, \"bin_width\": 0.05");
+    json = replaced(json, "\"lights\":  []", R"("lights": [{"type": "point", "position": [0.5, 0.3, 0.8], "intensity": 0.5}])");
+    std::ofstream(dir.path / "box.json") << json;
+
+    const tprf::Scene x = tprf::load_scene(dir.path / "box.xml", tprf::XmlDefines{{"res", "32"}, {"bins", "100"}, {"spp", "1"}});
+    const tprf::Scene j = tprf::load_scene(dir.path / "box.json");
+    ASSERT_EQ(x.objects.size(), j.objects.size());
+    for (std::size_t i = 0; i < x.objects.size(); ++i) {
+        const tprf::Material &a = x.objects[i].material, &b = j.objects[i].material;
+        EXPECT_EQ(a.type, b.type) << i;
+        EXPECT_EQ(a.reflectance.matrix(), b.reflectance.matrix()) << i;
+        EXPECT_EQ(x.objects[i].albedo.matrix(), j.objects[i].albedo.matrix()) << i;
+        if (a.glossy()) {
+            EXPECT_EQ(a.roughness, b.roughness) << i;
+            EXPECT_EQ(a.ior, b.ior) << i;
+        }
+    }
+    EXPECT_EQ(x.objects.front().material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(x.objects.back().material.type, tprf::MaterialType::Plastic);
+    tprf::RenderOptions options;
+    options.max_edge = 0.2;
+    options.threads = 1;  // the same numbers for any count; one thread waits for no other on a busy machine
+    const tprf::RenderResult rx = tprf::render_scene(x, options), rj = tprf::render_scene(j, options);
+    for (const char* name : {"steady", "transient"}) {
+        const tprf::FloatArray &a = rx.arrays.at(name), &b = rj.arrays.at(name);
+        EXPECT_EQ(a.shape, b.shape) << name;
+        EXPECT_TRUE(a.data == b.data) << name;
+        EXPECT_GT(*std::max_element(b.data.begin(), b.data.end()), 0.0f) << name;  // not two black images
+    }
 }

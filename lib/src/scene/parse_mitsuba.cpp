@@ -1,15 +1,19 @@
 #include "tprf/scene/parse_mitsuba.h"
 
 #include "tprf/core/error.h"
+#include "tprf/scene/mesh_io.h"
 #include "tprf/scene/validate.h"
 #include "mitsuba_xml.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <iterator>
 #include <map>
 #include <numbers>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -28,7 +32,8 @@ using mitsuba::describe;
 struct Surface {
     Rgb albedo = Rgb::Constant(0.5);  // Mitsuba's default diffuse reflectance
     bool two_sided = false;
-    Material material;                // a conductor or a thin dielectric: mirror or glass
+    Material material;                // a conductor, a thin dielectric or a plastic
+    bool smooth_conductor = false;    // a mirror or glossy, by its shape (place_conductor)
 };
 
 // What is read while walking the document: elements with an id (for <ref>), and whether the one-of
@@ -51,10 +56,94 @@ void check_color(const Props& p, std::string_view name, const Rgb& c, bool at_mo
     if (at_most_one && (c > 1.0).any()) p.source().fail(p.find(name), "must lie in [0, 1] (a diffuse reflectance)");
 }
 
-Surface diffuse_bsdf(const Context& ctx, const pugi::xml_node& node);
-Surface specular_bsdf(const Context& ctx, const pugi::xml_node& node, std::string_view type);
+// The GGX alpha that Mitsuba's smooth BSDFs get where tprf needs a lobe (a plastic, a conductor on a
+// curved mesh): the least roughness tprf renders.
+constexpr double kSmoothRoughness = 0.01;
 
-// <bsdf type="diffuse"> or <bsdf type="twosided"> around one, or a <ref> to either.
+// Mitsuba's named refractive indices (its table, measured near 589 nm), for int_ior and ext_ior.
+struct NamedIor {
+    std::string_view name;
+    double value;
+};
+constexpr NamedIor kNamedIors[] = {
+    {"vacuum", 1.0},       {"helium", 1.000036},        {"hydrogen", 1.000132},    {"air", 1.000277},
+    {"carbon dioxide", 1.00045}, {"water", 1.333},      {"acetone", 1.36},         {"ethanol", 1.361},
+    {"carbon tetrachloride", 1.461}, {"glycerol", 1.4729}, {"benzene", 1.501},     {"silicone oil", 1.52045},
+    {"bromine", 1.661},    {"water ice", 1.31},         {"fused quartz", 1.458},   {"pyrex", 1.47},
+    {"acrylic glass", 1.49}, {"polypropylene", 1.49},   {"bk7", 1.5046},           {"sodium chloride", 1.544},
+    {"amber", 1.55},       {"pet", 1.575},              {"diamond", 2.419},
+};
+constexpr double kAirIor = 1.000277;
+
+std::string lower(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+
+// An index of refraction: a <float>, or a <string> naming one of kNamedIors (in any case, as Mitsuba
+// reads it); `fallback` when absent.
+double read_ior(Props& p, std::string_view name, double fallback) {
+    const pugi::xml_node node = p.find(name);
+    if (!node) return fallback;
+    if (std::string_view(node.name()) != "string") return *p.number(name);
+    const std::string value = lower(*p.string(name));
+    std::string names;
+    for (const NamedIor& n : kNamedIors) {
+        if (n.name == value) return n.value;
+        names += (names.empty() ? "" : ", ") + std::string(n.name);
+    }
+    p.source().fail(node, "unknown index of refraction \"" + value + "\" (a number, or one of Mitsuba's names: " +
+                              names + ")");
+}
+
+// The GGX alpha of a rough BSDF: `alpha` (Mitsuba's default 0.1), or alpha_u and alpha_v when they are
+// equal, in [0.01, 1]. `distribution` must be "ggx": tprf's lobes are GGX, and Mitsuba's default,
+// "beckmann", is another lobe, refused rather than silently replaced. `sample_visible` only steers
+// Mitsuba's sampling.
+double rough_alpha(Props& p) {
+    const auto distribution = p.string("distribution");
+    const std::string fix = "write <string name=\"distribution\" value=\"ggx\"/> to render it with a GGX lobe "
+                            "of the same alpha (docs/mitsuba.md)";
+    if (!distribution) p.fail("no distribution: Mitsuba's default is \"beckmann\", and tprf's lobes are GGX; " + fix);
+    if (lower(*distribution) != "ggx")
+        p.source().fail(p.find("distribution"), "\"" + *distribution + "\": tprf's lobes are GGX; " + fix);
+    p.boolean("sample_visible");
+    const auto alpha = p.number("alpha"), alpha_u = p.number("alpha_u"), alpha_v = p.number("alpha_v");
+    if ((alpha_u || alpha_v) && alpha) p.fail("give either alpha or alpha_u and alpha_v, not both");
+    if (alpha_u.has_value() != alpha_v.has_value()) p.fail("alpha_u and alpha_v go together");
+    if (alpha_u && *alpha_u != *alpha_v)
+        p.source().fail(p.find("alpha_v"), "differs from alpha_u: tprf's lobes are isotropic (give one alpha)");
+    const double a = alpha_u ? *alpha_u : alpha.value_or(0.1);
+    if (!(a >= kSmoothRoughness && a <= 1.0))
+        p.source().fail(p.find(alpha_u ? "alpha_u" : "alpha"),
+                        "must lie in [0.01, 1] (tprf's GGX roughness; a smoother surface is Mitsuba's smooth "
+                        "\"conductor\" or \"plastic\")");
+    return a;
+}
+
+// A conductor's reflectance: the Fresnel reflectance of its complex index eta + ik at normal incidence,
+// ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2) per channel, times specular_reflectance. Mitsuba's default,
+// material "none" (eta 0, k 1), reflects exactly 1. Named materials are spectral tables tprf does not hold.
+Rgb conductor_reflectance(Props& p) {
+    const auto material = p.string("material");
+    if (material && *material != "none")
+        p.fail("conductor material \"" + *material + "\": tprf holds no spectral tables; give the material's RGB "
+               "index as <rgb name=\"eta\"> and <rgb name=\"k\">, or material \"none\" and a specular_reflectance");
+    Rgb eta = Rgb::Zero(), k = Rgb::Ones(), scale = Rgb::Ones();
+    for (auto [name, value] : {std::pair{"eta", &eta}, std::pair{"k", &k}, std::pair{"specular_reflectance", &scale}})
+        if (const auto c = p.color(name)) {
+            *value = *c;
+            check_color(p, name, *c, value == &scale);
+        }
+    return (((eta - 1.0).square() + k.square()) / ((eta + 1.0).square() + k.square())) * scale;
+}
+
+Surface diffuse_bsdf(const Context& ctx, const pugi::xml_node& node);
+Surface conductor_bsdf(const Context& ctx, const pugi::xml_node& node, bool rough);
+Surface plastic_bsdf(const Context& ctx, const pugi::xml_node& node, bool rough);
+Surface thin_dielectric_bsdf(const Context& ctx, const pugi::xml_node& node);
+
+// A <bsdf> (any type read) or a <ref> to one; `inside_twosided` for the one a twosided BSDF wraps.
 Surface parse_bsdf(const Context& ctx, pugi::xml_node node, bool inside_twosided) {
     if (std::string_view(node.name()) == "ref") {
         mitsuba::check_attributes(ctx.src, node, {"id", "name"});
@@ -67,63 +156,95 @@ Surface parse_bsdf(const Context& ctx, pugi::xml_node node, bool inside_twosided
     }
     const std::string type = node.attribute("type").value();
     if (type == "diffuse") return diffuse_bsdf(ctx, node);
-    if (type == "conductor" || type == "thindielectric") return specular_bsdf(ctx, node, type);
+    if (type == "conductor" || type == "roughconductor") return conductor_bsdf(ctx, node, type == "roughconductor");
+    if (type == "plastic" || type == "roughplastic") return plastic_bsdf(ctx, node, type == "roughplastic");
+    if (type == "thindielectric") return thin_dielectric_bsdf(ctx, node);
     if (type == "dielectric")
         ctx.src.fail(node, "a solid dielectric refracts, which tprf does not; a thin sheet of glass is "
                            "<bsdf type=\"thindielectric\"> (docs/materials.md)");
     if (type != "twosided")
-        ctx.src.fail(node, "unsupported BSDF type " + std::string("\"") + type +
-                               "\" (tprf reads \"diffuse\", \"conductor\", \"thindielectric\" and \"twosided\" "
-                               "around a diffuse or conductor one)");
+        ctx.src.fail(node, "unsupported BSDF type \"" + type +
+                               "\" (tprf reads \"diffuse\", \"conductor\", \"roughconductor\", \"plastic\", "
+                               "\"roughplastic\", \"thindielectric\" and \"twosided\" around one of the first five)");
     if (inside_twosided) ctx.src.fail(node, "a twosided BSDF inside a twosided BSDF");
     Props p(ctx.src, node);
     const std::vector<pugi::xml_node> inner = p.objects({"bsdf", "ref"});
     p.finish();
-    if (inner.size() != 1) p.fail("needs exactly one nested diffuse <bsdf> (tprf has no separate back side)");
+    if (inner.size() != 1) p.fail("needs exactly one nested <bsdf> (tprf has no separate back side)");
     Surface s = parse_bsdf(ctx, inner.front(), true);
     if (s.material.type == MaterialType::Glass) ctx.src.fail(node, "a thin dielectric is two-sided already");
-    if (s.material.type == MaterialType::Mirror) {
-        // A mirror on both sides is glass that lets nothing through.
-        s.material.type = MaterialType::Glass;
-        return s;
-    }
-    s.two_sided = true;
+    s.two_sided = true;  // a smooth conductor's two sides are settled by its shape (place_conductor)
     return s;
 }
 
-// <bsdf type="conductor"> as a mirror (material "none": Mitsuba's perfect mirror, times its
-// specular_reflectance), <bsdf type="thindielectric"> as glass with the normal-incidence reflectance
-// and transmittance of a thin sheet of relative index n: r = ((n - 1) / (n + 1))^2, R = 2r / (1 + r),
-// T = (1 - r) / (1 + r). tprf's specular parts do not vary with the angle (docs/mitsuba.md).
-Surface specular_bsdf(const Context& ctx, const pugi::xml_node& node, std::string_view type) {
+// <bsdf type="roughconductor"> as glossy: a GGX lobe of its alpha with the constant reflectance
+// conductor_reflectance gives, and no diffuse part. <bsdf type="conductor"> as a smooth conductor of
+// that reflectance: a mirror on a planar shape, else glossy of the least roughness (place_conductor).
+// Real conductors' Fresnel curves vary with the angle; tprf's reflectance does not (docs/mitsuba.md).
+Surface conductor_bsdf(const Context& ctx, const pugi::xml_node& node, bool rough) {
     Props p(ctx.src, node);
     Surface s;
     s.albedo = Rgb::Zero();
-    Rgb scale = Rgb::Ones();
+    s.material.reflectance = conductor_reflectance(p);
+    if (rough) {
+        s.material.type = MaterialType::Glossy;
+        s.material.roughness = rough_alpha(p);
+    } else {
+        s.material.type = MaterialType::Mirror;
+        s.smooth_conductor = true;
+    }
+    p.finish();
+    return s;
+}
+
+// <bsdf type="roughplastic"> and <bsdf type="plastic"> as plastic: a GGX coat of index int_ior / ext_ior
+// and the BSDF's alpha (smooth: 0.01) over a Lambertian base of diffuse_reflectance. tprf's base has no
+// light bouncing between it and the coat, so `nonlinear`, which changes how Mitsuba sums those bounces,
+// changes nothing here (docs/mitsuba.md).
+Surface plastic_bsdf(const Context& ctx, const pugi::xml_node& node, bool rough) {
+    Props p(ctx.src, node);
+    Surface s;
+    s.material.type = MaterialType::Plastic;
+    s.material.roughness = rough ? rough_alpha(p) : kSmoothRoughness;
+    const double int_ior = read_ior(p, "int_ior", 1.49), ext_ior = read_ior(p, "ext_ior", kAirIor);
+    s.material.ior = int_ior / ext_ior;
+    if (!(int_ior > 0.0) || !(ext_ior > 0.0) || !(s.material.ior > 1.0))
+        p.fail("int_ior / ext_ior must be > 1: tprf's plastic coat is denser than what surrounds it (got " +
+               std::to_string(int_ior) + " / " + std::to_string(ext_ior) + ")");
+    if (const auto r = p.color("diffuse_reflectance")) {
+        s.albedo = *r;
+        check_color(p, "diffuse_reflectance", s.albedo, true);
+    }
+    if (const auto r = p.color("specular_reflectance"); r && !(*r == 1.0).all())
+        p.source().fail(p.find("specular_reflectance"),
+                        "must be 1: tprf's plastic coat reflects its Fresnel term unscaled");
+    p.boolean("nonlinear");
+    p.finish();
+    return s;
+}
+
+// <bsdf type="thindielectric"> as glass with the normal-incidence reflectance and transmittance of a thin
+// sheet of relative index n: r = ((n - 1) / (n + 1))^2, R = 2r / (1 + r), T = (1 - r) / (1 + r), times
+// the specular_ factors. tprf's glass does not vary with the angle (docs/mitsuba.md).
+Surface thin_dielectric_bsdf(const Context& ctx, const pugi::xml_node& node) {
+    Props p(ctx.src, node);
+    Surface s;
+    s.albedo = Rgb::Zero();
+    Rgb scale = Rgb::Ones(), transmit = Rgb::Ones();
     if (const auto r = p.color("specular_reflectance")) {
         scale = *r;
         check_color(p, "specular_reflectance", scale, true);
     }
-    if (type == "conductor") {
-        const auto material = p.string("material");
-        if (material && *material != "none")
-            p.fail("conductor material \"" + *material + "\": tprf's mirrors reflect alike at every angle; give "
-                   "material \"none\" and a specular_reflectance");
-        s.material.type = MaterialType::Mirror;
-        s.material.reflectance = scale;
-    } else {
-        const double int_ior = p.number("int_ior").value_or(1.5046), ext_ior = p.number("ext_ior").value_or(1.000277);
-        if (!(int_ior > 0.0) || !(ext_ior > 0.0)) p.fail("int_ior and ext_ior must be > 0 (numbers)");
-        Rgb transmit = Rgb::Ones();
-        if (const auto t = p.color("specular_transmittance")) {
-            transmit = *t;
-            check_color(p, "specular_transmittance", transmit, true);
-        }
-        const double n = int_ior / ext_ior, r = ((n - 1.0) / (n + 1.0)) * ((n - 1.0) / (n + 1.0));
-        s.material.type = MaterialType::Glass;
-        s.material.reflectance = scale * (2.0 * r / (1.0 + r));
-        s.material.transmittance = transmit * ((1.0 - r) / (1.0 + r));
+    const double int_ior = read_ior(p, "int_ior", 1.5046), ext_ior = read_ior(p, "ext_ior", kAirIor);
+    if (!(int_ior > 0.0) || !(ext_ior > 0.0)) p.fail("int_ior and ext_ior must be > 0");
+    if (const auto t = p.color("specular_transmittance")) {
+        transmit = *t;
+        check_color(p, "specular_transmittance", transmit, true);
     }
+    const double n = int_ior / ext_ior, r = ((n - 1.0) / (n + 1.0)) * ((n - 1.0) / (n + 1.0));
+    s.material.type = MaterialType::Glass;
+    s.material.reflectance = scale * (2.0 * r / (1.0 + r));
+    s.material.transmittance = transmit * ((1.0 - r) / (1.0 + r));
     p.finish();
     return s;
 }
@@ -137,6 +258,35 @@ Surface diffuse_bsdf(const Context& ctx, const pugi::xml_node& node) {
     }
     p.finish();
     return s;
+}
+
+// Whether every vertex of a mesh lies in the plane of its first face, within 1e-6 of its size (the
+// tolerance tprf's mirrors are held to, docs/materials.md).
+bool planar_mesh(const MeshShape& shape, const XmlSource& src, const std::string& json_path) {
+    const PolygonMesh mesh = load_mesh(shape.file, shape.transform, src.file(), json_path + ".file");
+    const std::span<const int> face = mesh.face(0);
+    Vec3 normal = Vec3::Zero();  // Newell's normal of the first face
+    for (std::size_t i = 0; i < face.size(); ++i)
+        normal += mesh.vertices[std::size_t(face[i])].cross(mesh.vertices[std::size_t(face[(i + 1) % face.size()])]);
+    normal.normalize();
+    const Vec3& point = mesh.vertices[std::size_t(face[0])];
+    const double tolerance = 1e-6 * mesh.bounds.diagonal().norm();
+    return std::all_of(mesh.vertices.begin(), mesh.vertices.end(),
+                       [&](const Vec3& v) { return std::abs(normal.dot(v - point)) <= tolerance; });
+}
+
+// A smooth conductor on a planar shape (a rectangle, a cube's face, a mesh in one plane) is a mirror, and
+// twosided, glass that passes nothing; on a curved mesh, where no mirror can be, it is glossy of the least
+// roughness with the same reflectance.
+void place_conductor(Surface& s, bool planar) {
+    if (!s.smooth_conductor) return;
+    if (!planar) {
+        s.material.type = MaterialType::Glossy;
+        s.material.roughness = kSmoothRoughness;
+    } else if (s.two_sided) {
+        s.material.type = MaterialType::Glass;
+        s.two_sided = false;
+    }
 }
 
 // The <bsdf> (or <ref>) and <emitter type="area"> of a shape.
@@ -205,14 +355,6 @@ void parse_shape(const Context& ctx, const pugi::xml_node& node, std::vector<Obj
     if (std::abs(m.block<3, 3>(0, 0).determinant()) == 0.0) ctx.src.fail(p.find("to_world"), "is singular");
     Surface surface;
     parse_material(ctx, p, surface, o.emission);
-    // Mitsuba's area emitter lights the front alone, whatever the BSDF; a two-sided tprf object would
-    // emit from both sides.
-    if (surface.two_sided && (o.emission.array() > 0.0).any())
-        ctx.src.fail(node, "an area emitter on a shape with a twosided BSDF: Mitsuba lights its front alone, a "
-                           "two-sided tprf surface would emit from both sides (use a one-sided diffuse BSDF)");
-    o.albedo = surface.albedo;
-    o.two_sided = surface.two_sided;
-    o.material = surface.material;
     if (type == "obj" || type == "ply") {
         MeshShape mesh;
         mesh.file = mesh_file(ctx.src, p);
@@ -221,6 +363,16 @@ void parse_shape(const Context& ctx, const pugi::xml_node& node, std::vector<Obj
         o.shape = std::move(mesh);
     }
     p.finish();
+    const auto* mesh = std::get_if<MeshShape>(&o.shape);
+    place_conductor(surface, !mesh || !surface.smooth_conductor || planar_mesh(*mesh, ctx.src, o.json_path));
+    // Mitsuba's area emitter lights the front alone, whatever the BSDF; a two-sided tprf object would
+    // emit from both sides.
+    if (surface.two_sided && (o.emission.array() > 0.0).any())
+        ctx.src.fail(node, "an area emitter on a shape with a twosided BSDF: Mitsuba lights its front alone, a "
+                           "two-sided tprf surface would emit from both sides (use a one-sided BSDF)");
+    o.albedo = surface.albedo;
+    o.two_sided = surface.two_sided;
+    o.material = surface.material;
     if (type == "rectangle") {
         o.shape = map_rectangle(m, Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY());
         objects.push_back(std::move(o));

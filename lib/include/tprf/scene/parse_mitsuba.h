@@ -1,10 +1,11 @@
 #pragma once
-/// Mitsuba 3 XML scenes (docs/mitsuba.md) read into the same Scene as a
-/// JSON scene file. Only the subset that describes what tprf renders is read: diffuse (and twosided)
-/// BSDFs, obj/ply/rectangle/cube shapes with area emitters, point emitters, a perspective sensor with
-/// mitransient's transient_hdr_film, and the transient_path or path integrator. Anything else (another
-/// BSDF, a texture, a medium, an unknown attribute or child) is a tprf::Error "FILE:LINE: <element>:
-/// what is wrong"; nothing is silently ignored. The XML library stays inside this stage's sources.
+/// Mitsuba 3 XML scenes (docs/mitsuba.md) read into the same Scene as a JSON scene file. Only the
+/// subset that describes what tprf renders is read: diffuse, conductor, roughconductor, plastic,
+/// roughplastic and thindielectric BSDFs (and twosided around them), obj/ply/rectangle/cube shapes with
+/// area emitters, point emitters, a perspective sensor with mitransient's transient_hdr_film, and the
+/// transient_path or path integrator. Anything else (another BSDF, a texture, a medium, an unknown
+/// attribute or child) is a tprf::Error "FILE:LINE: <element>: what is wrong"; nothing is silently
+/// ignored. The XML library stays inside this stage's sources.
 
 #include "tprf/scene/scene.h"
 
