@@ -532,7 +532,8 @@ std::string with_block(const std::string& body, const TempDir& dir) {
 }  // namespace
 
 // A rough conductor is glossy: its alpha, the normal-incidence Fresnel reflectance of eta + ik times
-// specular_reflectance (Mitsuba's "none", eta 0 and k 1, reflects 1), no diffuse part, on any shape.
+// specular_reflectance (Mitsuba's "none", eta 0 and k 1, reflects 1), no diffuse part, on any shape,
+// with a GGX or a Beckmann distribution.
 TEST(Mitsuba, RoughConductorIsGlossy) {
     TempDir dir;
     const tprf::Scene s = parse(with_block(R"(
@@ -542,11 +543,13 @@ TEST(Mitsuba, RoughConductorIsGlossy) {
       <shape type="obj"><string name="filename" value="block.obj"/><bsdf type="roughconductor">
         <string name="distribution" value="GGX"/><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/>
         <boolean name="sample_visible" value="false"/><rgb name="specular_reflectance" value="0.8, 0.6, 0.4"/></bsdf></shape>
-      <shape type="rectangle"><bsdf type="twosided"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
-        <float name="eta" value="1.5"/></bsdf></bsdf></shape>)",
+      <shape type="rectangle"><bsdf type="twosided"><bsdf type="roughconductor">
+        <float name="eta" value="1.5"/></bsdf></bsdf></shape>
+      <shape type="rectangle"><bsdf type="roughconductor"><string name="distribution" value="beckmann"/>
+        <float name="alpha" value="0.25"/></bsdf></shape>)",
                                            dir),
                                 dir);
-    ASSERT_EQ(s.objects.size(), 3u);
+    ASSERT_EQ(s.objects.size(), 4u);
     const tprf::Object& a = s.objects[0];
     EXPECT_EQ(a.material.type, tprf::MaterialType::Glossy);
     EXPECT_EQ(a.material.roughness, 0.3);
@@ -564,6 +567,10 @@ TEST(Mitsuba, RoughConductorIsGlossy) {
     EXPECT_EQ(c.material.roughness, 0.1);  // Mitsuba's default alpha
     EXPECT_TRUE(c.two_sided);
     EXPECT_NEAR(c.material.reflectance[0], fresnel0(1.5, 1.0), 1e-15);
+    // Beckmann (Mitsuba's default distribution, as for c, or named) becomes GGX of the same alpha.
+    const tprf::Object& d = s.objects[3];
+    EXPECT_EQ(d.material.type, tprf::MaterialType::Glossy);
+    EXPECT_EQ(d.material.roughness, 0.25);
 }
 
 // A smooth conductor stays a mirror on a planar shape (a rectangle, a mesh in one plane) and becomes
@@ -643,10 +650,8 @@ TEST(Mitsuba, GlossyRefusalsNameFileLineAndElement) {
         EXPECT_NE(e.find("scene.xml:" + std::to_string(line) + ": "), std::string::npos) << "got: " << e;
     };
     const std::string ggx = R"(<string name="distribution" value="ggx"/>)";
-    expect_error(R"(<bsdf type="roughconductor"/>)",
-                 "<bsdf type=\"roughconductor\">: no distribution: Mitsuba's default is \"beckmann\"");
-    expect_error("<bsdf type=\"roughplastic\">\n<string name=\"distribution\" value=\"beckmann\"/></bsdf>",
-                 "<string name=\"distribution\">: \"beckmann\": tprf's lobes are GGX", 13);
+    expect_error("<bsdf type=\"roughplastic\">\n<string name=\"distribution\" value=\"phong\"/></bsdf>",
+                 "<string name=\"distribution\">: \"phong\": expected \"ggx\" or \"beckmann\"", 13);
     expect_error("<bsdf type=\"roughconductor\">" + ggx + "\n<float name=\"alpha\" value=\"0.005\"/></bsdf>",
                  "<float name=\"alpha\">: must lie in [0.01, 1]", 13);
     expect_error("<bsdf type=\"roughplastic\">" + ggx + R"(<float name="alpha" value="1.5"/></bsdf>)", "must lie in [0.01, 1]");

@@ -97,16 +97,15 @@ double read_ior(Props& p, std::string_view name, double fallback) {
 }
 
 // The GGX alpha of a rough BSDF: `alpha` (Mitsuba's default 0.1), or alpha_u and alpha_v when they are
-// equal, in [0.01, 1]. `distribution` must be "ggx": tprf's lobes are GGX, and Mitsuba's default,
-// "beckmann", is another lobe, refused rather than silently replaced. `sample_visible` only steers
+// equal, in [0.01, 1]. `distribution` "ggx" is read as it is; "beckmann" (Mitsuba's default) becomes a
+// GGX lobe of the same alpha (docs/mitsuba.md says what that changes). `sample_visible` only steers
 // Mitsuba's sampling.
 double rough_alpha(Props& p) {
-    const auto distribution = p.string("distribution");
-    const std::string fix = "write <string name=\"distribution\" value=\"ggx\"/> to render it with a GGX lobe "
-                            "of the same alpha (docs/mitsuba.md)";
-    if (!distribution) p.fail("no distribution: Mitsuba's default is \"beckmann\", and tprf's lobes are GGX; " + fix);
-    if (lower(*distribution) != "ggx")
-        p.source().fail(p.find("distribution"), "\"" + *distribution + "\": tprf's lobes are GGX; " + fix);
+    if (const auto distribution = p.string("distribution"); distribution) {
+        const std::string name = lower(*distribution);
+        if (name != "ggx" && name != "beckmann")
+            p.source().fail(p.find("distribution"), "\"" + *distribution + "\": expected \"ggx\" or \"beckmann\"");
+    }
     p.boolean("sample_visible");
     const auto alpha = p.number("alpha"), alpha_u = p.number("alpha_u"), alpha_v = p.number("alpha_v");
     if ((alpha_u || alpha_v) && alpha) p.fail("give either alpha or alpha_u and alpha_v, not both");
