@@ -92,9 +92,9 @@ void note_glossy(const Scene& scene, RenderReport& report) {
         if (scene.objects[k].material.glossy()) {
             report.warnings.push_back(
                 scene.object_path(k) +
-                " is glossy: point lights reach the camera through its BRDF; the light it passes on, area "
-                "lights' light on it and what the camera sees of its indirect light are a Lambertian surface's of "
-                "its hemispherical albedo (docs/materials.md, \"Glossy surfaces\")");
+                " is glossy: point lights, laser spots and emitters reach the camera through its BRDF; the light "
+                "it passes on to other surfaces, what the camera sees of its indirect light, and captures take it "
+                "for a Lambertian surface of its hemispherical albedo (docs/materials.md, \"Glossy surfaces\")");
             return;
         }
 }
