@@ -204,6 +204,52 @@ TEST(Capture, ThirdBounceOfASmallPatchMatchesTheClosedForm) {
     }
 }
 
+// A small glossy (then plastic) hidden patch between a laser point and a sensor point placed about its
+// specular direction: its third bounce is the Lambertian one's with albedo / pi replaced by the BRDF
+// between the directions to the two points, albedo_l P albedo_s A f(wi, wo) / pi^2 (cos cos / r^2) at
+// each end. f written out here: GGX D, Smith G1, and for plastic the dielectric Fresnel F.
+TEST(Capture, ThirdBounceOfASmallGlossyPatchMatchesTheClosedForm) {
+    const std::string capture = R"({"type": "exhaustive", "laser": {"position": [0, -1.5, 0.3]},
+        "sensor": {"position": [0.5, -1.5, 0.3]},
+        "grid": {"origin": [-0.305, -0.005, 0], "u": [0.01, 0, 0], "v": [0, 0.01, 0], "nu": 1, "nv": 1},
+        "sensor_grid": {"origin": [0.245, -0.005, 0], "u": [0.01, 0, 0], "v": [0, 0.01, 0], "nu": 1, "nv": 1},
+        "max_bounces": 3})";
+    const double D = 0.5, a = 0.2, ior = 1.5;
+    const Vec3 l(-0.3, 0, 0), s(0.25, 0, 0), x(0, 0, D), n(0, 0, -1);
+    const Vec3 wi = (l - x).normalized(), wo = (s - x).normalized(), h = (wi + wo).normalized();
+    const double ci = n.dot(wi), co = n.dot(wo), ch = n.dot(h);
+    const auto g1 = [&](double c) { return 2.0 / (1.0 + std::sqrt(1.0 + a * a * (1.0 - c * c) / (c * c))); };
+    const double t2 = (1.0 - ch * ch) / (ch * ch);
+    const double lobe = a * a / (M_PI * std::pow(ch, 4) * std::pow(a * a + t2, 2)) * g1(ci) * g1(co) / (4.0 * ci * co);
+    const auto fresnel = [&](double c) {
+        const double ct = std::sqrt(1.0 - (1.0 - c * c) / (ior * ior));
+        const double rs = (c - ior * ct) / (c + ior * ct), rp = (ior * c - ct) / (ior * c + ct);
+        return 0.5 * (rs * rs + rp * rp);
+    };
+    const double glossy_f = 0.1 / M_PI + 0.7 * lobe;
+    const double plastic_f = fresnel(wi.dot(h)) * lobe + (1.0 - fresnel(ci)) * (1.0 - fresnel(co)) * 0.5 / M_PI;
+    const std::pair<const char*, double> materials[] = {
+        {R"({"type": "glossy", "albedo": 0.1, "reflectance": 0.7, "roughness": 0.2})", glossy_f},
+        {R"({"type": "plastic", "albedo": 0.5, "roughness": 0.2, "ior": 1.5})", plastic_f}};
+    for (const auto& [material, f] : materials) {
+        const std::string patch = R"({"type": "rectangle", "origin": [-0.01, -0.01, 0.5], "u": [0, 0.02, 0],
+            "v": [0.02, 0, 0], "material": )" + std::string(material) + "}";
+        const Built b(scene_text(std::string(kWall) + "," + patch, capture, R"({"bins": 300, "bin_width": 0.01})"));
+        const CaptureResult r = b.capture();
+        ASSERT_EQ(r.pairs, 1u);
+        double total = 0.0;
+        for (float v : r.H) total += v;
+        const double rl2 = (l - x).squaredNorm(), rs2 = (s - x).squaredNorm();
+        const double expected =
+            0.8 * 1.0 * 0.8 * 0.02 * 0.02 * f / (M_PI * M_PI) * (D * D / (rl2 * rl2)) * (D * D / (rs2 * rs2));
+        MEASURED("glossy third bounce %.9g expected %.9g (%.2e)\n", total, expected, total / expected - 1);
+        EXPECT_NEAR(total, expected, 0.01 * expected) << material;
+        // The lobe shows: the BRDF here is far from what the Lambertian part alone (albedo / pi) gives.
+        const double lambertian = b.scene.objects[1].albedo[0] / M_PI;
+        EXPECT_GT(std::abs(f - lambertian), 0.3 * f) << material;
+    }
+}
+
 // The relay wall and a hidden corner in front of it (a tilted plane and a wall standing on it).
 std::string corner_objects() {
     const char* plane =

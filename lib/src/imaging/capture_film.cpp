@@ -58,7 +58,7 @@ void exact_light(const CaptureScene& scene, const WallPair& pair, std::vector<Pa
     if (!keeps(3)) return;
     const Rgb ends = patches.albedo[pair.laser.patch] * capture.laser_power * patches.albedo[pair.sensor.patch] /
                      (M_PI * M_PI * M_PI * kViewSamples);
-    third_bounce(patches, {pair.laser_views, pair.sensor_views, ends, pair.laser_leg + pair.sensor_leg}, out);
+    third_bounce(patches, {pair.laser_views, pair.sensor_views, ends, pair.laser_leg + pair.sensor_leg, &scene.cells}, out);
 }
 
 std::vector<SensorTap> sensor_taps(const PatchSet& patches, const WallPoint& sensor, double leg,

@@ -54,7 +54,7 @@ struct CaptureSetup {
     std::size_t first_pair(std::size_t l) const { return confocal ? l : l * sensors; }
     std::size_t pair_count() const { return confocal ? 1 : sensors; }
     std::size_t sensor_of(std::size_t l, std::size_t k) const { return confocal ? l : k; }
-    CaptureScene exact_scene() const { return {capture, patches, visibility}; }
+    CaptureScene exact_scene() const { return {capture, patches, visibility, viewer.cells()}; }
 };
 
 CaptureSetup make_capture_setup(const Scene& scene, const PatchSet& patches, const Visibility& visibility) {

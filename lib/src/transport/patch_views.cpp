@@ -59,8 +59,9 @@ bool PatchViewer::view_patch(const PointSource& probe, const Vec3& wall_normal, 
         double g = 0.0, path = 0.0;
         if (one_ray) {
             const Vec3 d = probe.position - y;
-            path = d.norm();
-            g = std::max(0.0, n.dot(d)) * std::max(0.0, -wall_normal.dot(d)) / (path * path * path * path);
+            const double r = d.norm();
+            path = probe.path + (probe.origin - y).norm();  // as arrive() times it: from the point itself
+            g = std::max(0.0, n.dot(d)) * std::max(0.0, -wall_normal.dot(d)) / (r * r * r * r);
         } else if (PointArrival a; arrive(probe, y, n, visibility, a)) {
             path = a.path;
             g = a.intensity[0] * a.cos_over_r2;
@@ -68,7 +69,7 @@ bool PatchViewer::view_patch(const PointSource& probe, const Vec3& wall_normal, 
         if (!(g > 0.0)) continue;
         v.path[std::size_t(s)] = float(path);
         v.g[std::size_t(s)] = float(g);
-        const Vec3 dir = (y - probe.position) / path;
+        const Vec3 dir = (y - probe.origin).normalized();
         v.du[std::size_t(s)] = float(dir.dot(cells.hu[at]));
         v.dv[std::size_t(s)] = float(dir.dot(cells.hv[at]));
         seen = true;

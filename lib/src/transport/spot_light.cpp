@@ -19,6 +19,20 @@ double shortest_by_plane(const PatchSet& patches, std::uint32_t j, const Vec3& l
     return std::sqrt((l - s).squaredNorm() + 4.0 * dl * ds);
 }
 
+// Sample k of patch j, with the patch's front normal.
+struct ViewSample {
+    const ViewCells& cells;
+    std::uint32_t patch;
+    std::size_t k;
+    const Vec3& n;
+};
+
+// A glossy patch's BRDF at one of its samples, from the laser's end towards the sensor's.
+Rgb reflected(const GlossyBrdf& brdf, const ViewSample& s, const PatchView& laser, const PatchView& sensor) {
+    const Vec3& y = s.cells.point[std::size_t(s.patch) * std::size_t(kViewSamples) + s.k];
+    return brdf.eval(s.n, (laser.from - y).normalized(), (sensor.from - y).normalized());
+}
+
 }  // namespace
 
 std::vector<PointSource> spot_sources(const LaserSpot& spot, const PatchSet& patches, const Visibility& visibility) {
@@ -61,19 +75,25 @@ void third_bounce(const PatchSet& patches, const ThirdBounce& ends, std::vector<
         }
         const std::uint32_t j = a->patch;
         const Rgb own = ends.ends * patches.albedo[j] * patches.area[j];
+        const GlossyBrdf* brdf = ends.cells ? patches.brdf(j) : nullptr;
         const auto a_end = run_end(a, from_laser.end()), b_end = run_end(b, from_sensor.end());
         for (auto va = a; va != a_end; ++va)
             for (auto vb = b; vb != b_end; ++vb) {
                 const double scale = channel_mean(own * va->tint * vb->tint);
+                const Rgb glossy = brdf ? Rgb(ends.ends * patches.area[j] * va->tint * vb->tint * M_PI) : Rgb::Zero();
                 // The points as patch j sees them (their images through the views' chains).
                 const double first = legs + shortest_by_plane(patches, j, va->from, vb->from);
                 for (std::size_t k = 0; k < std::size_t(kViewSamples); ++k) {
                     const double g = double(va->g[k]) * double(vb->g[k]);
                     if (!(g > 0.0)) continue;
+                    // A glossy patch: pi f(wi, wo) at the sample in place of its albedo.
+                    const double weight =
+                        brdf ? channel_mean(glossy * reflected(*brdf, {*ends.cells, j, k, patches.normal[j]}, *va, *vb))
+                             : scale;
                     const double path = legs + double(va->path[k]) + double(vb->path[k]);
                     const double spread = std::abs(double(va->du[k]) + double(vb->du[k])) +
                                           std::abs(double(va->dv[k]) + double(vb->dv[k]));
-                    out.push_back({std::min(path, std::max(first, path - spread)), path + spread, scale * g});
+                    out.push_back({std::min(path, std::max(first, path - spread)), path + spread, weight * g});
                 }
             }
         a = a_end;

@@ -49,6 +49,7 @@ struct CaptureScene {
     const Capture& capture;
     const PatchSet& patches;
     const Visibility& visibility;
+    const ViewCells& cells;  ///< the patches' view samples (PatchViewer::cells), where glossy patches reflect
 };
 
 /// A laser point and a sensor point of a capture, as their exact light needs them.

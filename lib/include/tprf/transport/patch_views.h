@@ -63,6 +63,8 @@ public:
     /// (some sample with g > 0), straight or through a chain of mirrors and glass, in increasing patch
     /// order (then chain order, the straight view first).
     std::vector<PatchView> view(const Vec3& x, const Vec3& n, std::uint32_t own) const;
+    /// The patches' samples and cells that every view takes.
+    const ViewCells& cells() const { return m_cells; }
 
 private:
     bool view_patch(const PointSource& probe, const Vec3& wall_normal, std::size_t j, PatchView& v) const;

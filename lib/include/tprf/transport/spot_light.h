@@ -57,6 +57,9 @@ struct ThirdBounce {
     const std::vector<PatchView>& from_sensor;
     Rgb ends = Rgb::Zero();
     double legs = 0.0;
+    /// The views' samples (PatchViewer::cells): at a glossy patch, the BRDF between the directions to
+    /// the two ends replaces albedo / pi at each sample.
+    const ViewCells* cells = nullptr;
 };
 
 /// The third reflection, over the samples of every patch that both ends see (each view of one end with
