@@ -92,9 +92,10 @@ void note_glossy(const Scene& scene, RenderReport& report) {
         if (scene.objects[k].material.glossy()) {
             report.warnings.push_back(
                 scene.object_path(k) +
-                " is glossy: point lights, laser spots and emitters reach the camera through its BRDF; the light "
-                "it passes on to other surfaces, what the camera sees of its indirect light, and captures take it "
-                "for a Lambertian surface of its hemispherical albedo (docs/materials.md, \"Glossy surfaces\")");
+                " is glossy: point lights, laser spots and emitters reach the camera, and a capture's laser spot "
+                "its sensor points, through its BRDF; the light it passes on to other surfaces and what the camera "
+                "sees of its indirect light take it for a Lambertian surface of its hemispherical albedo "
+                "(docs/materials.md, \"Glossy surfaces\")");
             return;
         }
 }
