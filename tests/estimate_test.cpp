@@ -307,9 +307,8 @@ TEST(EstimateRules, AgreeWithTheRenderAndThePlan) {
     }
 }
 
-// A capture without a camera marches its laser points in batches: the estimate's march of its batch is
-// the plan's, on the capture's orders and lanes (a coloured laser makes three).
-TEST(EstimateRules, AgreeWithTheCaptureMarch) {
+// The NLOS example's capture, small: 4 x 4 points, 64 bins, every bounce to the sixth.
+tprf::Scene small_letter_capture() {
     tprf::Scene scene = tprf::load_scene(std::string(TPRF_SOURCE_DIR) + "/examples/nlos/letter.json");
     scene.max_edge = 0.1;
     scene.links.tolerance = 0.01;
@@ -318,6 +317,13 @@ TEST(EstimateRules, AgreeWithTheCaptureMarch) {
     scene.capture->laser_grid.nu = scene.capture->laser_grid.nv = 4;
     scene.capture->sensor_grid = scene.capture->laser_grid;
     scene.capture->max_bounces = 6;
+    return scene;
+}
+
+// A capture without a camera marches its laser points in batches: the estimate's march of its batch is
+// the plan's, on the capture's orders and lanes (a coloured laser makes three).
+TEST(EstimateRules, AgreeWithTheCaptureMarch) {
+    tprf::Scene scene = small_letter_capture();
     for (const bool coloured : {false, true}) {
         if (coloured) scene.capture->laser_power = tprf::Rgb(1.0, 0.5, 0.25);
         tprf::PipelineOptions roomy;
@@ -339,14 +345,7 @@ TEST(EstimateRules, AgreeWithTheCaptureMarch) {
 // Under a memory budget the capture chooses its batch by the rule the estimate applies (batch_that_fits),
 // each to its own sizes of the march: a budget of one illumination's march and 5.5 more lanes is 6 for both.
 TEST(EstimateRules, CaptureBatchUnderABudget) {
-    tprf::Scene scene = tprf::load_scene(std::string(TPRF_SOURCE_DIR) + "/examples/nlos/letter.json");
-    scene.max_edge = 0.1;
-    scene.links.tolerance = 0.01;
-    scene.time.bins = 64;
-    scene.time.bin_width = 0.05;
-    scene.capture->laser_grid.nu = scene.capture->laser_grid.nv = 4;
-    scene.capture->sensor_grid = scene.capture->laser_grid;
-    scene.capture->max_bounces = 6;
+    tprf::Scene scene = small_letter_capture();
     tprf::PipelineOptions roomy;
     roomy.threads = 2;
     roomy.max_memory_gb = 1000.0;

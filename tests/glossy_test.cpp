@@ -69,6 +69,23 @@ nlohmann::json material_json(const Material& m) {
     return {{"type", "plastic"}, {"albedo", m.albedo}, {"roughness", m.roughness}, {"ior", m.ior}};
 }
 
+// A scene rendered into a fresh folder: the folder (removed by the caller) and the scene's camera.
+struct Rendered {
+    fs::path dir;
+    Camera camera;
+    NpyArray read(const std::string& name) const { return read_npy(dir / "out" / name); }
+};
+
+Rendered render_json(const nlohmann::json& j, const std::string& name) {
+    const fs::path dir = fresh_dir(name);
+    const fs::path file = dir / "scene.json";
+    std::ofstream(file) << j.dump(2);
+    RenderOptions options;
+    options.output = dir / "out";
+    render_file(file, options);
+    return {dir, *load_scene(file).camera};
+}
+
 // A 4 x 4 m glossy floor at z = 0 under a point light, seen obliquely so that the highlight is in the
 // image; one sample at each pixel's centre, no footprint: every pixel is one exact surface point.
 constexpr int kSide = 32, kBins = 500;
@@ -89,16 +106,11 @@ nlohmann::json floor_scene(const Material& m) {
 // Every pixel's steady value is f(wi, wo) I cos_i / r^2 (p99 of the relative error within 0.5%), and its
 // first light is in the bin of its path, light -> point -> camera.
 void expect_exact_direct_light(const Material& m) {
-    const fs::path dir = fresh_dir(m.type);
-    const fs::path file = dir / "scene.json";
-    std::ofstream(file) << floor_scene(m).dump(2);
-    RenderOptions options;
-    options.output = dir / "out";
-    render_file(file, options);
-    const NpyArray steady = read_npy(dir / "out" / "steady.npy");
-    const NpyArray cube = read_npy(dir / "out" / "transient.npy");
+    const Rendered out = render_json(floor_scene(m), m.type);
+    const NpyArray steady = out.read("steady.npy");
+    const NpyArray cube = out.read("transient.npy");
     ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, kBins, 3}));
-    const Camera camera = *load_scene(file).camera;
+    const Camera& camera = out.camera;
     std::vector<double> errors;
     double brightest = 0.0, dimmest = 1e300;
     for (int r = 0; r < kSide; ++r)
@@ -133,7 +145,7 @@ void expect_exact_direct_light(const Material& m) {
     EXPECT_LT(p99, 0.005) << m.type << " roughness " << m.roughness << ": median " << errors[errors.size() / 2];
     // The highlight is in the image: the lobe, not the Lambertian part, sets the brightest pixels.
     EXPECT_GT(brightest, 3.0 * dimmest) << m.type << " roughness " << m.roughness;
-    fs::remove_all(dir);
+    fs::remove_all(out.dir);
 }
 
 TEST(Glossy, PointLightOverAGlossyFloorIsTheClosedFormAtEveryPixel) {
@@ -161,18 +173,13 @@ TEST(Glossy, ALaserSpotSeenInAGlossyFloorIsTheClosedForm) {
                         {"target", {spot.x(), spot.y(), spot.z()}}, {"power", power}}};
         j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {0.6, 0.15, 0.0}}, {"up", {0, 0, 1}}, {"fov", 50},
                        {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
-        j["solver"] = {{"bounces", true}, {"max_bounces", 3}};
+        j["solver"] = {{"bounces", true}, {"max_bounces", 2}};
         const int bins = 800;  // paths up to 8 m
         j["time"]["bins"] = bins;
-        const fs::path dir = fresh_dir("laser_" + m.type);
-        const fs::path file = dir / "scene.json";
-        std::ofstream(file) << j.dump(2);
-        RenderOptions options;
-        options.output = dir / "out";
-        render_file(file, options);
-        const NpyArray cube = read_npy(dir / "out" / "transient_bounce_2.npy");
+        const Rendered out = render_json(j, "laser_" + m.type);
+        const NpyArray cube = out.read("transient_bounce_2.npy");
         ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, bins, 3}));
-        const Camera camera = *load_scene(file).camera;
+        const Camera& camera = out.camera;
         std::vector<double> errors;
         for (int r = 0; r < kSide; ++r)
             for (int c = 0; c < kSide; ++c) {
@@ -203,7 +210,7 @@ TEST(Glossy, ALaserSpotSeenInAGlossyFloorIsTheClosedForm) {
         ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
         std::sort(errors.begin(), errors.end());
         EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
-        fs::remove_all(dir);
+        fs::remove_all(out.dir);
     }
 }
 
@@ -224,15 +231,10 @@ void expect_emitter_reflection(const Material& m) {
                    {"width", side}, {"height", side}, {"spp", 1}, {"footprint", false}};
     j["time"]["bins"] = bins;
     j["solver"] = {{"bounces", true}, {"max_bounces", 1}};
-    const fs::path dir = fresh_dir("emitter_" + m.type);
-    const fs::path file = dir / "scene.json";
-    std::ofstream(file) << j.dump(2);
-    RenderOptions options;
-    options.output = dir / "out";
-    render_file(file, options);
-    const NpyArray cube = read_npy(dir / "out" / "transient_bounce_1.npy");
+    const Rendered out = render_json(j, "emitter_" + m.type);
+    const NpyArray cube = out.read("transient_bounce_1.npy");
     ASSERT_EQ(cube.shape, (std::vector<std::size_t>{side, side, bins, 3}));
-    const Camera camera = *load_scene(file).camera;
+    const Camera& camera = out.camera;
     const Vec3 down = u.cross(v).normalized();
     constexpr int grid = 300;
     const double cell_area = u.cross(v).norm() / (grid * grid);
@@ -281,7 +283,7 @@ void expect_emitter_reflection(const Material& m) {
     EXPECT_LT(steady_errors[mid], 0.01) << m.type << " roughness " << m.roughness << ": p90 " << steady_errors[mid * 9 / 5];
     EXPECT_LT(profile_errors[mid], 0.03) << m.type << " roughness " << m.roughness << ": p90 " << profile_errors[mid * 9 / 5];
     EXPECT_GT(brightest, 3.0 * dimmest) << m.type << " roughness " << m.roughness << ": the reflection is in view";
-    fs::remove_all(dir);
+    fs::remove_all(out.dir);
 }
 
 TEST(Glossy, AGlossyFloorReflectsAnEmitterAsItsIntegralSays) {
