@@ -42,7 +42,7 @@ printf "point samples: "
     | grep -E "^normal"
 
 if [ "${NLOS:-1}" != 0 ]; then
-    echo "== examples/nlos (README: depth 0.8005 m, error +0.05 cm)"
+    echo "== examples/nlos (README: depth 0.8006 m, error +0.06 cm)"
     TPRF="$tprf" PYTHON="$py" "$root/examples/nlos/run.sh" "$out/nlos" > "$out/nlos.log" 2>&1
     echo "render: $(render_summary "$out/nlos/render")"
     grep -E "^(target|depth|error|seconds)" "$out/nlos.log"
