@@ -337,6 +337,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     CLI::App app{"tprf: transient radiosity, light in flight"};
     app.require_subcommand(1);
     app.fallthrough();  // --threads and --quiet may also follow the subcommand
+    app.set_version_flag("--version", "tprf " TPRF_VERSION, "print the version (tprf X.Y.Z) and exit");
     std::string scene_file;
     int threads = 0;
     bool quiet = false;
