@@ -4,9 +4,11 @@
 #include "tprf/scene/mesh_io.h"
 #include "tprf/scene/validate.h"
 #include "mitsuba_xml.h"
+#include "open_reason.h"
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iterator>
@@ -475,8 +477,9 @@ Scene parse_mitsuba_scene(const std::string& text, const std::filesystem::path& 
 Scene load_mitsuba_scene(const std::filesystem::path& file, const XmlDefines& defines) {
     std::error_code ec;
     if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read scene file (it is a directory)");
+    errno = 0;
     std::ifstream in(file, std::ios::binary);
-    if (!in) fail_input(file, "", "cannot read scene file");
+    if (!in) fail_input(file, "", "cannot read scene file" + open_reason(errno));
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (in.bad()) fail_input(file, "", "cannot read scene file");
     return parse_mitsuba_scene(text, file, defines);

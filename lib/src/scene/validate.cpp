@@ -2,10 +2,12 @@
 
 #include "tprf/core/error.h"
 #include "tprf/core/time_kernel.h"
+#include "open_reason.h"
 
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -130,7 +132,9 @@ void check_mesh_file(const fs::path& p, const At& at) {
     const fs::file_status st = fs::status(p, ec);
     if (!fs::exists(st)) at.fail("mesh file " + p.string() + " does not exist");
     if (!fs::is_regular_file(st)) at.fail("mesh file " + p.string() + " is not a regular file");
-    if (!std::ifstream(p, std::ios::binary)) at.fail("cannot read mesh file " + p.string());
+    errno = 0;
+    const std::ifstream probe(p, std::ios::binary);
+    if (!probe) at.fail("cannot read mesh file " + p.string() + open_reason(errno));
 }
 
 // `at` names the matrix as the scene file's `transform.matrix` (16 numbers, row-major).
