@@ -6,6 +6,7 @@
 #include "tprf/pipeline/ranks.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/pipeline/sensor_run.h"
+#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/parse_json.h"
 
 #include <CLI/CLI.hpp>
@@ -154,9 +155,28 @@ void print_meshes(const std::vector<tprf::MeshReport>& meshes) {
     for (const tprf::MeshReport& m : meshes) std::printf("mesh     %s\n", tprf::describe(m).c_str());
 }
 
+// Warnings are printed even with --quiet: they say that something asked for was not made.
+void print_warnings(const std::vector<std::string>& warnings) {
+    for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
+}
+
+// A -D that no $name of the XML scene uses changes nothing (a misspelt name, most likely): said, not
+// refused. Called once the scene has loaded; a file gone since then only loses the warning.
+void warn_unused_defines(const std::string& scene_file, const tprf::XmlDefines& defines) {
+    std::vector<std::string> lines;
+    try {
+        for (const std::string& name : tprf::unused_defines(scene_file, defines))
+            lines.push_back("-D " + name + "=" + defines.find(name)->second + ": the scene has no parameter $" + name);
+    } catch (const tprf::Error&) {
+        return;
+    }
+    print_warnings(lines);
+}
+
 int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool quiet,
              bool progress_lines) {
     tprf::Scene scene = tprf::load_scene(scene_file, options.defines);
+    warn_unused_defines(scene_file, options.defines);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     std::printf("scene    %s\n", scene_file.c_str());
     if (meshes_only) {
@@ -197,11 +217,6 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     return 0;
 }
 
-// Warnings are printed even with --quiet: they say that something asked for was not made.
-void print_warnings(const std::vector<std::string>& warnings) {
-    for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
-}
-
 int run_render(const std::string& scene_file, tprf::RenderOptions options, bool quiet, bool progress_lines) {
     quiet = quiet || options.ranks->rank() != 0;  // rank 0 alone prints
     ProgressBar bar(quiet, progress_lines);
@@ -210,6 +225,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     bar.finish();
     print_mesh_repairs(r.meshes);
     print_warnings(r.warnings);
+    if (options.ranks->rank() == 0) warn_unused_defines(scene_file, options.defines);
     if (!quiet && r.capture_pairs > 0)
         std::fprintf(stderr, "tprf: capture of %zu laser-sensor pairs x %d bins -> %s\n", r.capture_pairs, r.bins,
                      (options.output / "capture.hdf5").string().c_str());
@@ -337,6 +353,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     CLI::App app{"tprf: transient radiosity, light in flight"};
     app.require_subcommand(1);
     app.fallthrough();  // --threads and --quiet may also follow the subcommand
+    app.set_version_flag("--version", "tprf " TPRF_VERSION, "print the version (tprf X.Y.Z) and exit");
     std::string scene_file;
     int threads = 0;
     bool quiet = false;

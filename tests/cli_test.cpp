@@ -73,10 +73,17 @@ TEST_F(Cli, BadSceneExitsTwoWithThePathAndWritesNothing) {
     EXPECT_FALSE(fs::exists(m_dir / "out"));
 }
 
+TEST_F(Cli, VersionPrintsTheProjectVersionAndExitsZero) {
+    int status = -1;
+    EXPECT_EQ(run_stdout("--version", status), "tprf " TPRF_VERSION "\n");
+    EXPECT_EQ(status, 0);
+}
+
 TEST_F(Cli, MissingSceneFileExitsTwo) {
     const Outcome r = run("info " + (m_dir / "nope.json").string());
     EXPECT_EQ(r.status, 2);
-    EXPECT_NE(r.err.find("nope.json"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err, "tprf: error: " + (m_dir / "nope.json").string() +
+                         ": cannot read scene file: No such file or directory\n");
 }
 
 TEST_F(Cli, UnknownFlagExitsTwo) {

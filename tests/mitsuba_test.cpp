@@ -6,6 +6,7 @@
 #include "tprf/io/npy.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
+#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/parse_mitsuba.h"
 
 #include "test_process.h"
@@ -443,6 +444,20 @@ TEST(Mitsuba, JsonSceneRefusesDefines) {
     }
 }
 
+// A -D that no $name uses is found (a <default> of that name does not count as a use); the others are not.
+TEST(Mitsuba, UnusedDefinesAreTheNamesNoParameterUses) {
+    TempDir dir;
+    std::ofstream(dir.path / "scene.xml") << R"(<scene version="3.0.0">
+    <default name="spp" value="4"/>
+    <default name="unused_default" value="1"/>
+    <integer name="x" value="$spp"/>
+</scene>)";
+    const tprf::XmlDefines defines{{"spp", "8"}, {"sppp", "4"}, {"unused_default", "2"}};
+    EXPECT_EQ(tprf::unused_defines(dir.path / "scene.xml", defines),
+              (std::vector<std::string>{"sppp", "unused_default"}));
+    EXPECT_TRUE(tprf::unused_defines(dir.path / "scene.xml", {}).empty());
+}
+
 namespace {
 
 // The largest difference of two float arrays relative to the largest magnitude of the first.
@@ -501,10 +516,19 @@ TEST(MitsubaCli, DefinesReachTheScene) {
     const tprf::test::Outcome ok = tprf::test::run_tprf("render " + scene + " -D res=6 -Dbins=32 --max-edge 0.25 -o " +
                                                         (dir.path / "out").string());
     ASSERT_EQ(ok.status, 0) << ok.err;
+    EXPECT_EQ(ok.err.find("-D"), std::string::npos) << ok.err;  // both used: no warning
     EXPECT_EQ(tprf::read_npy(dir.path / "out" / "transient.npy").shape, (std::vector<std::size_t>{6, 6, 32, 3}));
     const tprf::test::Outcome json = tprf::test::run_tprf("info " + (kSource / "meshes" / "corner.json").string() + " -D a=1");
     EXPECT_EQ(json.status, 2);
     EXPECT_NE(json.err.find("-D applies to Mitsuba XML scenes only"), std::string::npos) << json.err;
+}
+
+// A -D that the scene never uses is a warning on stderr, not a failure.
+TEST(MitsubaCli, UnusedDefineIsAWarning) {
+    const std::string scene = (kSource / "meshes" / "cornell-box.xml").string();
+    const tprf::test::Outcome r = tprf::test::run_tprf("info --meshes " + scene + " -D sppp=4 -D res=8");
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_EQ(r.err, "tprf: warning: -D sppp=4: the scene has no parameter $sppp\n");
 }
 
 TEST(MitsubaCli, BadElementExitsTwoWithFileLineAndWritesNothing) {

@@ -1,8 +1,10 @@
 #include "json_node.h"
+#include "open_reason.h"
 
 #include "tprf/core/error.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iterator>
@@ -152,8 +154,9 @@ json read_json_file(const fs::path& file, std::string_view what) {
     std::error_code ec;
     // An ifstream opens a directory without complaint on POSIX and then reads nothing.
     if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read " + std::string(what) + " (it is a directory)");
+    errno = 0;
     std::ifstream in(file, std::ios::binary);
-    if (!in) fail_input(file, "", "cannot read " + std::string(what));
+    if (!in) fail_input(file, "", "cannot read " + std::string(what) + open_reason(errno));
     std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (in.bad()) fail_input(file, "", "cannot read " + std::string(what));
     return parse_json_text(text, file);

@@ -9,6 +9,7 @@
 #include "tprf/scene/mesh_io.h"
 
 #include "mesh_readers.h"
+#include "open_reason.h"
 #include "tprf/core/error.h"
 
 #include <Eigen/Geometry>
@@ -21,6 +22,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cerrno>
 #include <cstdio>
 #include <cstdint>
 #include <fstream>
@@ -322,7 +324,9 @@ PolygonMesh load_mesh(const std::filesystem::path& file, const Eigen::Matrix4d& 
     if (!std::filesystem::exists(file, ec)) fail_input(scene_file, json_path, name + " does not exist");
     if (!std::filesystem::is_regular_file(file, ec))
         fail_input(scene_file, json_path, name + " is not a regular file");
-    if (!std::ifstream(file).good()) fail_input(scene_file, json_path, name + " cannot be opened");
+    errno = 0;
+    const std::ifstream probe(file);
+    if (!probe) fail_input(scene_file, json_path, name + " cannot be opened" + open_reason(errno));
 
     mesh_read::RawMesh raw;
     try {

@@ -8,6 +8,7 @@
 #include <charconv>
 #include <cmath>
 #include <numbers>
+#include <set>
 #include <system_error>
 #include <utility>
 
@@ -44,11 +45,15 @@ pugi::xml_node next_in_document(pugi::xml_node node, const pugi::xml_node& root)
 }
 
 // `value` with every "$name" of `params` replaced, longer names first (so that $ab is not read as $a).
-std::string substitute(std::string value, const std::vector<std::pair<std::string, std::string>>& params) {
+// The names replaced are added to `used`.
+std::string substitute(std::string value, const std::vector<std::pair<std::string, std::string>>& params,
+                       std::set<std::string>& used) {
     for (const auto& [name, replacement] : params) {
         const std::string key = "$" + name;
-        for (std::size_t at = value.find(key); at != std::string::npos; at = value.find(key, at + replacement.size()))
+        for (std::size_t at = value.find(key); at != std::string::npos; at = value.find(key, at + replacement.size())) {
             value.replace(at, key.size(), replacement);
+            used.insert(name);
+        }
     }
     return value;
 }
@@ -184,8 +189,9 @@ std::string describe(const pugi::xml_node& node) {
     return s + ">";
 }
 
-void substitute_parameters(const XmlSource& src, const XmlDefines& defines) {
+std::vector<std::string> substitute_parameters(const XmlSource& src, const XmlDefines& defines) {
     std::vector<std::pair<std::string, std::string>> params;
+    std::set<std::string> used;
     for (const auto& [name, value] : defines) add_parameter(params, name, value);
     const pugi::xml_node root = src.root();
     for (pugi::xml_node n = root; n; n = next_in_document(n, root)) {
@@ -193,7 +199,7 @@ void substitute_parameters(const XmlSource& src, const XmlDefines& defines) {
         for (pugi::xml_attribute a : n.attributes()) {
             const std::string_view value = a.value();
             if (value.find('$') == std::string_view::npos) continue;
-            const std::string replaced = substitute(std::string(value), params);
+            const std::string replaced = substitute(std::string(value), params, used);
             if (replaced.find('$') != std::string::npos)
                 src.fail(n, "undefined parameter in " + quote(value) + " (give it a <default> or -D name=value)");
             a.set_value(replaced.c_str());
@@ -205,6 +211,10 @@ void substitute_parameters(const XmlSource& src, const XmlDefines& defines) {
         if (name.empty() || !n.attribute("value")) src.fail(n, "needs a non-empty \"name\" and a \"value\"");
         add_parameter(params, name, n.attribute("value").value());
     }
+    std::vector<std::string> unused;
+    for (const auto& define : defines)
+        if (!used.contains(define.first)) unused.push_back(define.first);
+    return unused;
 }
 
 std::vector<std::string> tokens(std::string_view text) {

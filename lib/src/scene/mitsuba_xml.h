@@ -50,8 +50,9 @@ std::string describe(const pugi::xml_node& node);
 
 /// Replaces `$name` in every attribute value, in document order, by the command line's `defines` or
 /// else by the `<default name value>` seen before (Mitsuba's rule: longer names first; an undefined
-/// `$` is an error). `<default>` must be a child of the root.
-void substitute_parameters(const XmlSource& src, const XmlDefines& defines);
+/// `$` is an error). `<default>` must be a child of the root. Returns the names of `defines` that no
+/// `$name` refers to (they change nothing), in name order.
+std::vector<std::string> substitute_parameters(const XmlSource& src, const XmlDefines& defines);
 
 /// The words of an attribute value, split at commas and white space.
 std::vector<std::string> tokens(std::string_view text);

@@ -2,11 +2,14 @@
 
 #include "tprf/core/error.h"
 #include "tprf/scene/mesh_io.h"
+#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/validate.h"
 #include "mitsuba_xml.h"
+#include "open_reason.h"
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iterator>
@@ -443,6 +446,18 @@ void parse_child(Context& ctx, const pugi::xml_node& n, Scene& scene) {
                     "docs/mitsuba.md)");
 }
 
+// The text of the XML scene file.
+std::string read_scene_text(const std::filesystem::path& file) {
+    std::error_code ec;
+    if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read scene file (it is a directory)");
+    errno = 0;
+    std::ifstream in(file, std::ios::binary);
+    if (!in) fail_input(file, "", "cannot read scene file" + open_reason(errno));
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) fail_input(file, "", "cannot read scene file");
+    return text;
+}
+
 Scene build_scene(const XmlSource& src, const XmlDefines& defines) {
     const pugi::xml_node root = src.root();
     if (std::string_view(root.name()) != "scene") src.fail(root, "the root element must be <scene version=...>");
@@ -473,13 +488,13 @@ Scene parse_mitsuba_scene(const std::string& text, const std::filesystem::path& 
 }
 
 Scene load_mitsuba_scene(const std::filesystem::path& file, const XmlDefines& defines) {
-    std::error_code ec;
-    if (fs::is_directory(file, ec)) fail_input(file, "", "cannot read scene file (it is a directory)");
-    std::ifstream in(file, std::ios::binary);
-    if (!in) fail_input(file, "", "cannot read scene file");
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) fail_input(file, "", "cannot read scene file");
-    return parse_mitsuba_scene(text, file, defines);
+    return parse_mitsuba_scene(read_scene_text(file), file, defines);
+}
+
+std::vector<std::string> unused_defines(const std::filesystem::path& file, const XmlDefines& defines) {
+    if (defines.empty()) return {};
+    const XmlSource src(read_scene_text(file), file);
+    return mitsuba::substitute_parameters(src, defines);
 }
 
 }  // namespace tprf

@@ -3,8 +3,10 @@
 #include "tprf/core/error.h"
 #include "tprf/scene/validate.h"
 #include "json_node.h"
+#include "open_reason.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -35,8 +37,9 @@ void read_pulse_table(const JsonNode& node, SensorPulse& pulse) {
     if (path.is_relative()) path = node.file.parent_path() / path;
     std::error_code ec;
     if (fs::is_directory(path, ec)) node.fail("pulse table " + path.string() + " is a directory");
+    errno = 0;
     std::ifstream in(path);
-    if (!in) node.fail("cannot read pulse table " + path.string());
+    if (!in) node.fail("cannot read pulse table " + path.string() + open_reason(errno));
     std::string line;
     int line_no = 0;
     bool first_row = true;

@@ -2,10 +2,12 @@
 
 #include "tprf/core/error.h"
 #include "tprf/core/time_kernel.h"
+#include "open_reason.h"
 
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -123,14 +125,34 @@ void check_rectangle(const RectangleShape& r, const At& at) {
     if (parallel(r.u, r.v)) v.fail("is parallel to u, so the rectangle has no area");
 }
 
+// A missing mesh file as the scene file names it: a name relative to the scene file's folder (the
+// parsers join the two) is given as written, with that folder in full, so that a user who ran tprf
+// from elsewhere sees where it was looked for. "mesh file meshes/x.obj does not exist (relative to /a/b)".
+std::string missing_mesh_message(const fs::path& p, const fs::path& scene_file) {
+    const fs::path folder = scene_file.parent_path();
+    auto b = p.begin();
+    for (auto a = folder.begin(); a != folder.end(); ++a, ++b)
+        if (b == p.end() || *a != *b) return "mesh file " + p.string() + " does not exist";
+    if (folder.empty() && p.is_absolute()) return "mesh file " + p.string() + " does not exist";
+    fs::path written;
+    for (; b != p.end(); ++b) written /= *b;
+    std::error_code ec;
+    fs::path full = folder.empty() ? fs::current_path(ec) : fs::absolute(folder, ec);
+    full = full.lexically_normal();
+    if (!full.has_filename() && full.has_relative_path()) full = full.parent_path();
+    return "mesh file " + written.string() + " does not exist (relative to " + full.string() + ")";
+}
+
 // The mesh is read by a later stage; checking here reports a bad path with the scene's other errors.
 void check_mesh_file(const fs::path& p, const At& at) {
     if (p.empty()) at.fail("is empty");
     std::error_code ec;
     const fs::file_status st = fs::status(p, ec);
-    if (!fs::exists(st)) at.fail("mesh file " + p.string() + " does not exist");
+    if (!fs::exists(st)) at.fail(missing_mesh_message(p, at.file));
     if (!fs::is_regular_file(st)) at.fail("mesh file " + p.string() + " is not a regular file");
-    if (!std::ifstream(p, std::ios::binary)) at.fail("cannot read mesh file " + p.string());
+    errno = 0;
+    const std::ifstream probe(p, std::ios::binary);
+    if (!probe) at.fail("cannot read mesh file " + p.string() + open_reason(errno));
 }
 
 // `at` names the matrix as the scene file's `transform.matrix` (16 numbers, row-major).
