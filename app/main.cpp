@@ -6,7 +6,6 @@
 #include "tprf/pipeline/ranks.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/pipeline/sensor_run.h"
-#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/parse_json.h"
 
 #include <CLI/CLI.hpp>
@@ -160,23 +159,10 @@ void print_warnings(const std::vector<std::string>& warnings) {
     for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
 }
 
-// A -D that no $name of the XML scene uses changes nothing (a misspelt name, most likely): said, not
-// refused. Called once the scene has loaded; a file gone since then only loses the warning.
-void warn_unused_defines(const std::string& scene_file, const tprf::XmlDefines& defines) {
-    std::vector<std::string> lines;
-    try {
-        for (const std::string& name : tprf::unused_defines(scene_file, defines))
-            lines.push_back("-D " + name + "=" + defines.find(name)->second + ": the scene has no parameter $" + name);
-    } catch (const tprf::Error&) {
-        return;
-    }
-    print_warnings(lines);
-}
-
 int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool quiet,
              bool progress_lines) {
     tprf::Scene scene = tprf::load_scene(scene_file, options.defines);
-    warn_unused_defines(scene_file, options.defines);
+    print_warnings(scene.warnings);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
     std::printf("scene    %s\n", scene_file.c_str());
     if (meshes_only) {
@@ -224,8 +210,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     const tprf::RenderReport r = tprf::render_file(scene_file, options);
     bar.finish();
     print_mesh_repairs(r.meshes);
-    print_warnings(r.warnings);
-    if (options.ranks->rank() == 0) warn_unused_defines(scene_file, options.defines);
+    if (options.ranks->rank() == 0) print_warnings(r.warnings);  // every rank reads the same scene
     if (!quiet && r.capture_pairs > 0)
         std::fprintf(stderr, "tprf: capture of %zu laser-sensor pairs x %d bins -> %s\n", r.capture_pairs, r.bins,
                      (options.output / "capture.hdf5").string().c_str());

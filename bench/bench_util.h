@@ -2,13 +2,19 @@
 /// What the link and solver benchmarks share: the Cornell box at a chosen patch count, and the
 /// process's resident memory.
 
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
 #include "tprf/scene/parse_json.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/light_sources.h"
+#include "tprf/transport/link_set.h"
 
 #include <malloc.h>
 #include <sys/resource.h>
 
 #include <cstddef>
 #include <fstream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -35,6 +41,36 @@ inline Scene cornell_box(int target_patches) {
 }
 
 /// A field of /proc/self/status in bytes ("VmRSS", "VmHWM"); 0 when it cannot be read.
+/// The Cornell box built as a render builds it before the solve: patches, visibility, flat links, its
+/// light sources and their pulses.
+struct BuiltCornell {
+    Scene scene;
+    PatchSet patches;
+    std::unique_ptr<Visibility> visibility;
+    LinkSet links;
+    LightSources sources;
+    Illumination emission;
+};
+
+/// cornell_box(target_patches) on `bins` bins (0: the scene's), built on `threads` threads; the pulses
+/// merged on the scene's bins when `merge_bins`, as a render merges them.
+inline std::unique_ptr<BuiltCornell> built_cornell(int target_patches, int bins, int threads, bool merge_bins) {
+    auto out = std::make_unique<BuiltCornell>();
+    out->scene = cornell_box(target_patches);
+    if (bins > 0) out->scene.time.bins = bins;
+    out->patches = build_patches(out->scene);
+    out->visibility = std::make_unique<Visibility>(out->patches);
+    LinkOptions link_options;
+    link_options.threads = threads;
+    out->links = flat_link_set(out->patches, *out->visibility, link_options);
+    IlluminationOptions light_options;
+    light_options.threads = threads;
+    if (merge_bins) light_options.merge_bins = &out->scene.time;
+    out->sources = light_sources(out->scene, out->patches, *out->visibility);
+    out->emission = illuminate(out->sources, out->patches, *out->visibility, light_options);
+    return out;
+}
+
 inline double proc_status_bytes(const std::string& field) {
     std::ifstream in("/proc/self/status");
     std::string line;

@@ -23,31 +23,9 @@ constexpr int kThreads = 2;
 constexpr int kBins = 2048;
 constexpr int kBlockBins = 32;
 
-struct Stage {
-    tprf::Scene scene;
-    tprf::PatchSet patches;
-    std::unique_ptr<tprf::Visibility> visibility;
-    tprf::LinkSet links;
-    tprf::LightSources sources;
-    tprf::Illumination emission;
-};
-
-const Stage& stage() {
-    static const std::unique_ptr<Stage> s = [] {
-        auto out = std::make_unique<Stage>();
-        out->scene = tprf::bench::cornell_box(4000);
-        out->scene.time.bins = kBins;
-        out->patches = tprf::build_patches(out->scene);
-        out->visibility = std::make_unique<tprf::Visibility>(out->patches);
-        tprf::LinkOptions link_options;
-        link_options.threads = kThreads;
-        out->links = tprf::flat_link_set(out->patches, *out->visibility, link_options);
-        tprf::IlluminationOptions emitter_options;
-        emitter_options.threads = kThreads;
-        out->sources = tprf::light_sources(out->scene, out->patches, *out->visibility);
-        out->emission = tprf::illuminate(out->sources, out->patches, *out->visibility, emitter_options);
-        return out;
-    }();
+// The Cornell box at about 4k patches on kBins bins, built once.
+const tprf::bench::BuiltCornell& stage() {
+    static const std::unique_ptr<tprf::bench::BuiltCornell> s = tprf::bench::built_cornell(4000, kBins, kThreads, false);
     return *s;
 }
 
@@ -61,7 +39,7 @@ tprf::Camera camera_of_size(int pixels, int spp) {
 
 // Primary rays, FLANN neighbours and interpolation weights for every sample.
 void BM_PrepareCamera(benchmark::State& state) {
-    const Stage& s = stage();
+    const tprf::bench::BuiltCornell& s = stage();
     const tprf::Camera camera = camera_of_size(int(state.range(0)), int(state.range(1)));
     tprf::GatherOptions options;
     options.threads = kThreads;
@@ -98,7 +76,7 @@ BENCHMARK(BM_PrepareCamera)
 
 // One block of patch profiles (made-up values: the cost does not depend on them) filmed into the cube.
 void BM_FilmBlock(benchmark::State& state) {
-    const Stage& s = stage();
+    const tprf::bench::BuiltCornell& s = stage();
     const tprf::Camera camera = camera_of_size(int(state.range(0)), int(state.range(1)));
     tprf::GatherOptions options;
     options.threads = kThreads;

@@ -40,30 +40,8 @@ tprf::Scene sample_scene(const std::string& name) {
 }
 
 // The Cornell box at about 4k patches with flat links and its light, built once for the cases below.
-struct Cornell {
-    tprf::Scene scene;
-    tprf::PatchSet patches;
-    std::unique_ptr<tprf::Visibility> visibility;
-    tprf::LinkSet links;
-    tprf::Illumination emission;
-};
-
-const Cornell& cornell() {
-    static const std::unique_ptr<Cornell> c = [] {
-        auto out = std::make_unique<Cornell>();
-        out->scene = tprf::bench::cornell_box(4000);
-        out->patches = tprf::build_patches(out->scene);
-        out->visibility = std::make_unique<tprf::Visibility>(out->patches);
-        tprf::LinkOptions link_options;
-        link_options.threads = kThreads;
-        out->links = tprf::flat_link_set(out->patches, *out->visibility, link_options);
-        tprf::IlluminationOptions light_options;
-        light_options.threads = kThreads;
-        light_options.merge_bins = &out->scene.time;
-        out->emission = tprf::illuminate(tprf::light_sources(out->scene, out->patches, *out->visibility), out->patches,
-                                         *out->visibility, light_options);
-        return out;
-    }();
+const tprf::bench::BuiltCornell& cornell() {
+    static const std::unique_ptr<tprf::bench::BuiltCornell> c = tprf::bench::built_cornell(4000, 0, kThreads, true);
     return *c;
 }
 
@@ -201,7 +179,7 @@ BENCHMARK(BM_Illuminate)->ArgName("area_light")->Arg(0)->Arg(1)->Unit(benchmark:
 // The second bounce read at the samples' own times (camera.shift_second_bounce) on the Cornell box:
 // made once per render, per link.
 void BM_SecondBounceLight(benchmark::State& state) {
-    const Cornell& c = cornell();
+    const tprf::bench::BuiltCornell& c = cornell();
     double seconds = 0.0;
     for (auto _ : state) {
         const auto t0 = std::chrono::steady_clock::now();
@@ -217,7 +195,7 @@ BENCHMARK(BM_SecondBounceLight)->Unit(benchmark::kMillisecond)->Iterations(3)->U
 
 // links.spread_pieces = 4 on the Cornell box's flat links under 5 mm bins, per link spread.
 void BM_SpreadPatchLinks(benchmark::State& state) {
-    const Cornell& c = cornell();
+    const tprf::bench::BuiltCornell& c = cornell();
     double seconds = 0.0;
     for (auto _ : state) {
         state.PauseTiming();
@@ -235,7 +213,7 @@ BENCHMARK(BM_SpreadPatchLinks)->Unit(benchmark::kMillisecond)->Iterations(3)->Us
 
 // The steady state of the Cornell box (BiCGSTAB on its flat links, 3 channels), per link.
 void BM_SteadyState(benchmark::State& state) {
-    const Cornell& c = cornell();
+    const tprf::bench::BuiltCornell& c = cornell();
     double seconds = 0.0;
     for (auto _ : state) {
         const auto t0 = std::chrono::steady_clock::now();

@@ -6,7 +6,6 @@
 #include "tprf/io/npy.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
-#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/parse_mitsuba.h"
 
 #include "test_process.h"
@@ -444,18 +443,19 @@ TEST(Mitsuba, JsonSceneRefusesDefines) {
     }
 }
 
-// A -D that no $name uses is found (a <default> of that name does not count as a use); the others are not.
+// A -D that no $name uses is a warning of the scene (a <default> of that name does not count as a use);
+// the others are not.
 TEST(Mitsuba, UnusedDefinesAreTheNamesNoParameterUses) {
     TempDir dir;
-    std::ofstream(dir.path / "scene.xml") << R"(<scene version="3.0.0">
-    <default name="spp" value="4"/>
+    const std::string text = scene_xml(R"(<default name="level" value="4"/>
     <default name="unused_default" value="1"/>
-    <integer name="x" value="$spp"/>
-</scene>)";
-    const tprf::XmlDefines defines{{"spp", "8"}, {"sppp", "4"}, {"unused_default", "2"}};
-    EXPECT_EQ(tprf::unused_defines(dir.path / "scene.xml", defines),
-              (std::vector<std::string>{"sppp", "unused_default"}));
-    EXPECT_TRUE(tprf::unused_defines(dir.path / "scene.xml", {}).empty());
+    <shape type="rectangle"><bsdf type="diffuse"><float name="reflectance" value="0.$level"/></bsdf></shape>)");
+    const tprf::XmlDefines defines{{"level", "8"}, {"levl", "4"}, {"unused_default", "2"}};
+    const tprf::Scene scene = parse(text, dir, defines);
+    EXPECT_EQ(scene.objects.at(0).albedo[0], 0.8);
+    EXPECT_EQ(scene.warnings, (std::vector<std::string>{"-D levl=4: the scene has no parameter $levl",
+                                                        "-D unused_default=2: the scene has no parameter $unused_default"}));
+    EXPECT_TRUE(parse(text, dir).warnings.empty());
 }
 
 namespace {

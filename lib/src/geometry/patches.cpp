@@ -353,6 +353,26 @@ std::size_t dropped_faces(const std::vector<MeshReport>& meshes) {
     return n;
 }
 
+namespace {
+
+// The glossy objects' reflectances (PatchSet::glossy), and their patches' albedo: each object's
+// hemispherical albedo, what the transport between patches takes a glossy patch for.
+void add_glossy(const Scene& scene, PatchSet& patches) {
+    const auto& objects = scene.objects;
+    if (std::none_of(objects.begin(), objects.end(), [](const Object& o) { return o.material.glossy(); })) return;
+    patches.glossy.resize(objects.size());
+    std::vector<Rgb> albedo(objects.size());
+    for (std::size_t k = 0; k < objects.size(); ++k)
+        if (objects[k].material.glossy()) {
+            patches.glossy[k] = glossy_brdf(objects[k]);
+            albedo[k] = patches.glossy[k]->hemispherical_albedo();
+        }
+    for (std::size_t i = 0; i < patches.size(); ++i)
+        if (patches.brdf(i)) patches.albedo[i] = albedo[patches.object[i]];
+}
+
+}  // namespace
+
 PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchStats* stats) {
     PatchStats local;
     PatchStats& st = stats ? *stats : local;
@@ -365,23 +385,12 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     if (scene.objects.empty()) return patches;
     st.max_edge = patch_size(scene, scene_box(loaded));
 
-    // A glossy object's patches carry its hemispherical albedo (PatchSet::glossy).
-    std::vector<Object> objects = scene.objects;
-    if (std::any_of(objects.begin(), objects.end(), [](const Object& o) { return o.material.glossy(); })) {
-        patches.glossy.resize(objects.size());
-        for (std::size_t k = 0; k < objects.size(); ++k)
-            if (objects[k].material.glossy()) {
-                patches.glossy[k] = glossy_brdf(objects[k]);
-                objects[k].albedo = patches.glossy[k]->hemispherical_albedo();
-            }
-    }
-
     // Counting before emitting lets every array be allocated once.
     std::vector<Source> sources;
     std::size_t total = 0;
     std::size_t corner_total = 0;
-    for (std::size_t k = 0; k < objects.size(); ++k) {
-        sources.push_back(cut(objects[k], loaded.meshes[k], st.max_edge));
+    for (std::size_t k = 0; k < scene.objects.size(); ++k) {
+        sources.push_back(cut(scene.objects[k], loaded.meshes[k], st.max_edge));
         count_cells(loaded, k, sources.back());
         loaded.meshes[k] = PolygonMesh{};
         const Source& s = sources.back();
@@ -416,6 +425,7 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
             options.progress("patches", static_cast<double>(k + 1) / static_cast<double>(sources.size()));
     }
     TPRF_CHECK_EQ(patches.size(), total);
+    add_glossy(scene, patches);
     return patches;
 }
 

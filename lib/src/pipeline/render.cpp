@@ -86,8 +86,10 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
     return shares;
 }
 
-// What glossy objects do in this version of the method, said once per render that has one.
-void note_glossy(const Scene& scene, RenderReport& report) {
+// What the scene's reading found to say (Scene::warnings), and what glossy objects do in this version of
+// the method, said once per render that has one.
+void note_scene(const Scene& scene, RenderReport& report) {
+    report.warnings.insert(report.warnings.end(), scene.warnings.begin(), scene.warnings.end());
     for (std::size_t k = 0; k < scene.objects.size(); ++k)
         if (scene.objects[k].material.glossy()) {
             report.warnings.push_back(
@@ -108,7 +110,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
     t.patches = build_patches(scene, {options.progress}, &patch_stats);
     report.patches = t.patches.size();
     report.meshes = std::move(patch_stats.meshes);
-    note_glossy(scene, report);
+    note_scene(scene, report);
     report.seconds.patches = seconds_since(start);
 
     start = Clock::now();

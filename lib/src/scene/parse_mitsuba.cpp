@@ -2,7 +2,6 @@
 
 #include "tprf/core/error.h"
 #include "tprf/scene/mesh_io.h"
-#include "tprf/scene/mitsuba_defines.h"
 #include "tprf/scene/validate.h"
 #include "mitsuba_xml.h"
 #include "open_reason.h"
@@ -462,11 +461,14 @@ Scene build_scene(const XmlSource& src, const XmlDefines& defines) {
     const pugi::xml_node root = src.root();
     if (std::string_view(root.name()) != "scene") src.fail(root, "the root element must be <scene version=...>");
     mitsuba::check_attributes(src, root, {"version"});
-    mitsuba::substitute_parameters(src, defines);
+    const std::vector<std::string> unused = mitsuba::substitute_parameters(src, defines);
     Context ctx{src, {}, {}, {}, false};
     collect_ids(ctx);
     Scene scene;
     scene.file = src.file();
+    // A -D that no $name uses changes nothing (a misspelt name, most likely): said, not refused.
+    for (const std::string& name : unused)
+        scene.warnings.push_back("-D " + name + "=" + defines.find(name)->second + ": the scene has no parameter $" + name);
     for (const pugi::xml_node& n : root.children()) {
         if (n.type() != pugi::node_element) src.fail(root, "unexpected text inside <scene>");
         parse_child(ctx, n, scene);
@@ -489,12 +491,6 @@ Scene parse_mitsuba_scene(const std::string& text, const std::filesystem::path& 
 
 Scene load_mitsuba_scene(const std::filesystem::path& file, const XmlDefines& defines) {
     return parse_mitsuba_scene(read_scene_text(file), file, defines);
-}
-
-std::vector<std::string> unused_defines(const std::filesystem::path& file, const XmlDefines& defines) {
-    if (defines.empty()) return {};
-    const XmlSource src(read_scene_text(file), file);
-    return mitsuba::substitute_parameters(src, defines);
 }
 
 }  // namespace tprf

@@ -207,6 +207,9 @@ struct Scene {
     LinkSettings links;
     std::optional<SensorSettings> sensor;  ///< the optional `sensor` block (named "sensor" when its json_path is "")
     std::optional<Capture> capture;        ///< the optional `capture` block; a scene without one needs a camera
+    /// What reading the scene found to tell the user without refusing it (a -D name=value that no $name
+    /// of a Mitsuba scene uses): a render and `tprf info` print each line as a warning.
+    std::vector<std::string> warnings;
 
     /// Object i's name in messages: its json_path, or "objects[i]".
     std::string object_path(std::size_t i) const {
