@@ -1,6 +1,7 @@
 // The tprf command line: parse arguments, call one library entry point, print. No physics here.
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
 #include "tprf/pipeline/capture.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/pipeline/ranks.h"
@@ -412,6 +413,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
 // MPI is joined around everything else (under mpirun or srun; a plain run never initialises it) and
 // finalised when the group goes.
 int main(int argc, char** argv) {
+    tprf::start_threads();
     std::unique_ptr<tprf::RankGroup> ranks;
     try {
         ranks = tprf::join_ranks();

@@ -6,6 +6,13 @@ namespace tprf {
 
 int thread_count(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
+void start_threads() {
+    // An empty region: the runtime keeps its threads in a pool for the regions that follow.
+#pragma omp parallel
+    {
+    }
+}
+
 void ExceptionSlot::capture() noexcept {
     std::lock_guard<std::mutex> lock(m_mutex);
     if (!m_error) m_error = std::current_exception();

@@ -21,6 +21,12 @@ namespace tprf {
 /// The number of worker threads for a stage: `requested` when positive, else all cores.
 int thread_count(int requested);
 
+/// Starts the worker threads of every later parallel region now, while the process's address space
+/// is still free: the OpenMP runtime keeps them, and one that cannot create a thread later (its stack
+/// refused under `ulimit -v` once the buffers are allocated) ends the process with its own message
+/// instead of an error the program could report and clean up after. Call once, first thing.
+void start_threads();
+
 /// Holds the first exception thrown by any worker of a parallel region.
 class ExceptionSlot {
 public:
