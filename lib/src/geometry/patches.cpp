@@ -355,8 +355,9 @@ std::size_t dropped_faces(const std::vector<MeshReport>& meshes) {
 
 namespace {
 
-// The glossy objects' reflectances (PatchSet::glossy), and their patches' albedo: each object's
-// hemispherical albedo, what the transport between patches takes a glossy patch for.
+// The glossy objects' reflectances (PatchSet::glossy), and their patches' albedo: with directional cells
+// (links.glossy_resolution) the Lambertian part's, which their patch rows carry; without, each object's
+// hemispherical albedo, what the transport between patches then takes a glossy patch for.
 void add_glossy(const Scene& scene, PatchSet& patches) {
     const auto& objects = scene.objects;
     if (std::none_of(objects.begin(), objects.end(), [](const Object& o) { return o.material.glossy(); })) return;
@@ -365,7 +366,9 @@ void add_glossy(const Scene& scene, PatchSet& patches) {
     for (std::size_t k = 0; k < objects.size(); ++k)
         if (objects[k].material.glossy()) {
             patches.glossy[k] = glossy_brdf(objects[k]);
-            albedo[k] = patches.glossy[k]->hemispherical_albedo();
+            const int rings = scene.links.glossy_resolution;
+            albedo[k] = rings > 0 ? lambertian_part_albedo(*patches.glossy[k], rings)
+                                  : patches.glossy[k]->hemispherical_albedo();
         }
     for (std::size_t i = 0; i < patches.size(); ++i)
         if (patches.brdf(i)) patches.albedo[i] = albedo[patches.object[i]];

@@ -1,4 +1,5 @@
 #include "tprf/imaging/gather.h"
+#include "tprf/transport/glossy_rows.h"
 
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
@@ -616,6 +617,7 @@ Gather gather_points(const SensingPoints& points, int width, int height, const G
     std::vector<std::vector<PixelTap>> run_taps(runs);
     std::vector<std::vector<DirectArrival>> run_direct(runs);
     const double weight = points.weight;
+    const GlossyRows* glossy = options.glossy && !options.glossy->empty() ? options.glossy : nullptr;
     parallel_for(runs, {options.threads, 64, true}, [&](std::size_t k) {
         std::vector<DirectArrival>& direct = run_direct[k];
         const std::size_t count = run_start[k + 1] - run_start[k], areas = sources.areas.size();
@@ -632,6 +634,10 @@ Gather gather_points(const SensingPoints& points, int width, int height, const G
             for (const auto& [q, w] : weights) {
                 const float shift = options.second_bounce ? float(options.second_bounce->shift(q, sp.point)) : 0.0f;
                 run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
+                if (glossy && glossy->slot[q] >= 0 && !sp.view.isZero())
+                    run_taps[k].push_back({glossy->out_row(std::size_t(glossy->slot[q]),
+                                                           glossy->cell_towards(patches, q, sp.view.cast<double>())),
+                                           float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
             }
             const std::size_t first = direct.size();
             direct_arrivals(direct_scene, sp, {h - run_start[k], count}, share, done.data() + (h - run_start[k]) * areas,

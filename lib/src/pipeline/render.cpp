@@ -90,6 +90,7 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
 // the method, said once per render that has one.
 void note_scene(const Scene& scene, RenderReport& report) {
     report.warnings.insert(report.warnings.end(), scene.warnings.begin(), scene.warnings.end());
+    if (scene.links.glossy_resolution > 0) return;  // glossy patches pass their light on through their cells
     for (std::size_t k = 0; k < scene.objects.size(); ++k)
         if (scene.objects[k].material.glossy()) {
             report.warnings.push_back(
@@ -97,7 +98,7 @@ void note_scene(const Scene& scene, RenderReport& report) {
                 " is glossy: point lights, laser spots and emitters reach the camera, and a capture's laser spot "
                 "its sensor points, through its BRDF; the light it passes on to other surfaces and what the camera "
                 "sees of its indirect light take it for a Lambertian surface of its hemispherical albedo "
-                "(docs/materials.md, \"Glossy surfaces\")");
+                "(links.glossy_resolution 0; docs/materials.md, \"Glossy surfaces\")");
             return;
         }
 }
@@ -128,6 +129,16 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
     report.seconds.links = seconds_since(start);
 }
 
+// The sources' pulses into every row the march solves: with glossy rows (glossy_illumination), lit
+// with every glossy patch's albedo taken as 1, so that its pulses carry the irradiance its rows share.
+Illumination direct_light(const LightSources& sources, const PatchSet& patches, const GlossyRows& glossy,
+                          const Visibility& visibility, const IlluminationOptions& options) {
+    if (glossy.empty()) return illuminate(sources, patches, visibility, options);
+    PatchSet unit = patches;
+    for (std::uint32_t i : glossy.glossy) unit.albedo[i] = Rgb::Ones();
+    return glossy_illumination(glossy, patches, sources, illuminate(sources, unit, visibility, options));
+}
+
 void build_transport(const Scene& scene, const RenderOptions& options, Transport& t, RenderReport& report) {
     build_geometry(scene, options, render_needs_links(scene), t, report);
     if (!scene.camera) return;  // a capture lights the patches from its own laser points
@@ -136,13 +147,14 @@ void build_transport(const Scene& scene, const RenderOptions& options, Transport
     IlluminationOptions light_options;
     light_options.threads = options.threads;
     light_options.merge_bins = &scene.time;
-    t.illumination = illuminate(t.sources, t.patches, *t.visibility, light_options);
+    t.illumination = direct_light(t.sources, t.patches, t.links.glossy, *t.visibility, light_options);
     report.seconds.illumination = seconds_since(start);
     GatherOptions gather_options;
     gather_options.threads = options.threads;
     gather_options.progress = options.progress;
     gather_options.time = &scene.time;
-    if (scene.camera->shift_second_bounce) {
+    gather_options.glossy = &t.links.glossy;
+    if (scene.camera->shift_second_bounce && t.links.glossy.empty()) {
         t.second_bounce = make_second_bounce_light(t.patches, t.links, t.illumination, scene.time,
                                                    {.delay = scene.solver.delay,
                                                     .max_bounces = scene.solver.max_bounces,

@@ -249,4 +249,12 @@ CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& 
     return out;
 }
 
+Rgb lambertian_part_albedo(const GlossyBrdf& brdf, int rings) {
+    if (brdf.model == GlossyModel::Glossy) return brdf.albedo;
+    const CellReflectance r = cell_reflectance(brdf, HemisphereCells(rings), 1);
+    double mean = 0.0;
+    for (double v : r.base) mean += v / double(r.cells);
+    return brdf.albedo * (mean * mean);
+}
+
 }  // namespace tprf

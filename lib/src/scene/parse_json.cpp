@@ -252,7 +252,7 @@ double parse_max_edge(const Node& n) {
 }
 
 LinkSettings parse_links(const Node& n) {
-    n.check_keys({"method", "tolerance", "time_bins", "spread_pieces"});
+    n.check_keys({"method", "tolerance", "time_bins", "spread_pieces", "glossy_resolution"});
     LinkSettings links;
     if (const auto method = n.find("method"))
         links.method = parse_choice<LinkMethod>(*method, "link method",
@@ -260,6 +260,7 @@ LinkSettings parse_links(const Node& n) {
     if (const auto tolerance = n.find("tolerance")) links.tolerance = tolerance->number();
     if (const auto time_bins = n.find("time_bins")) links.time_bins = time_bins->number();
     if (const auto pieces = n.find("spread_pieces")) links.spread_pieces = pieces->integer();
+    if (const auto rings = n.find("glossy_resolution")) links.glossy_resolution = rings->integer();
     return links;
 }
 

@@ -455,6 +455,10 @@ void check_settings(const Scene& scene, const At& root) {
     if (scene.links.spread_pieces < 0 || scene.links.spread_pieces > kMaxSpreadPieces)
         root.key("links").key("spread_pieces").fail("must be an integer in [0, " + std::to_string(kMaxSpreadPieces) +
                                                     "] (0: each patch link at its centroid delay)");
+    if (scene.links.glossy_resolution < 0 || scene.links.glossy_resolution > kMaxGlossyResolution)
+        root.key("links").key("glossy_resolution").fail(
+            "must be an integer in [0, " + std::to_string(kMaxGlossyResolution) +
+            "] (rings of a glossy patch's directional cells, 4 R^2 cells; 0: glossy patches pass light on as Lambertian)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
     if (scene.solver.max_specular < 0 || scene.solver.max_specular > 16)
         root.key("solver").key("max_specular").fail("must be in [0, 16]");
@@ -480,6 +484,10 @@ void validate(const Scene& scene) {
     if (scene.capture) {
         const At capture{scene.file, scene.capture->json_path};
         check_capture(*scene.capture, capture);
+        if (scene.links.glossy_resolution > 0)
+            At{scene.file, "links"}.key("glossy_resolution").fail(
+                "must be 0 in a scene with a capture: a capture's bounces pass glossy light on as Lambertian (its "
+                "third bounce through the BRDF) until captures march the glossy cells");
         if (scene.capture->march_bin_factor > 1 && scene.camera)
             capture.key("march_bin_factor").fail("must be 1 in a scene with a camera (the camera's links are marched on "
                                                  "the scene's bins): render the capture from a scene without one");

@@ -17,6 +17,7 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
                       double bin_width_m, const LinkOptions& options, LinkSetStats counts) {
     HierarchyStats* stats = counts.hierarchy;
     LinkStats* flat_stats = counts.flat;
+    const bool glossy = settings.glossy_resolution > 0 && !patches.glossy.empty() && bin_width_m > 0.0;
     LinkSet set;
     if (settings.method == LinkMethod::Flat) {
         set = flat_link_set(patches, visibility, options, flat_stats);
@@ -25,10 +26,12 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
         hierarchy.tolerance = settings.tolerance;
         hierarchy.bin_width_m = bin_width_m;
         hierarchy.time_bins = settings.time_bins;
+        if (glossy) hierarchy.least_lag_bins = 2;
         set = hierarchical_link_set(patches, visibility, options, hierarchy, stats);
     }
     if (settings.spread_pieces > 0 && bin_width_m > 0.0)
         spread_patch_links(set, patches, bin_width_m, settings.spread_pieces, options.threads);
+    if (glossy) add_glossy_links(set, patches, visibility, options, bin_width_m, settings.glossy_resolution);
     return set;
 }
 

@@ -22,13 +22,7 @@
 namespace tprf {
 namespace {
 
-struct Extra {
-    std::uint32_t receiver;
-    std::uint32_t source;
-    float ff;
-    float distance;
-    std::uint16_t tint;  // Links::tint
-};
+using Extra = ExtraLink;
 
 bool on_side(const SpecularPlane& s, int side, const Vec3* poly, std::size_t count) {
     for (std::size_t k = 0; k < count; ++k)
@@ -193,8 +187,35 @@ bool same(const MirrorChain& a, const MirrorChain& b) {
     return true;
 }
 
-// Adds `extra` to the rows of `set`, each row sorted as the solver expects.
-void merge_links(LinkSet& set, std::vector<Extra>& extra, double bin_width_m) {
+}  // namespace
+
+std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visibility& vis,
+                               const LinkOptions& options, double bin_width_m) {
+    const std::vector<MirrorChain>& chains = vis.chains();
+    if (chains.empty()) return 0;
+    const std::vector<double> radius = circumradii(patches);
+    std::vector<Extra> extra;
+    std::vector<std::array<float, 3>>& tints = set.links.tints;
+    for (const MirrorChain& chain : chains) {
+        const MirrorChain back = reversed(chain, vis.planes());
+        if (!lexicographically_first(chain, back)) continue;  // its reverse carries both directions
+        std::uint16_t tint = 0;  // a tinted chain's links carry its tint (the reverse's is the same product)
+        if (!(chain.tint == 1.0).all()) {
+            if (tints.empty()) tints.push_back({1.0f, 1.0f, 1.0f});
+            if (tints.size() > 0xffff) throw Error("more than 65535 tinted chains of mirrors; lower solver.max_specular");
+            tints.push_back({float(chain.tint[0]), float(chain.tint[1]), float(chain.tint[2])});
+            tint = std::uint16_t(tints.size() - 1);
+        }
+        std::vector<std::vector<Extra>> rows(patches.size());
+        chain_links({patches, vis, options, radius}, chain, same(chain, back), tint, rows);
+        for (auto& r : rows) extra.insert(extra.end(), r.begin(), r.end());
+    }
+    const std::uint64_t added = extra.size();
+    merge_extra_links(set, extra, bin_width_m);
+    return added;
+}
+
+void merge_extra_links(LinkSet& set, std::vector<Extra>& extra, double bin_width_m) {
     Links& l = set.links;
     const std::size_t nodes = l.receivers();
     const bool by_octave = set.tree.nodes() > set.tree.leaves && bin_width_m > 0.0;
@@ -227,34 +248,6 @@ void merge_links(LinkSet& set, std::vector<Extra>& extra, double bin_width_m) {
         out.row[r + 1] = out.source.size();
     }
     l = std::move(out);
-}
-
-}  // namespace
-
-std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visibility& vis,
-                               const LinkOptions& options, double bin_width_m) {
-    const std::vector<MirrorChain>& chains = vis.chains();
-    if (chains.empty()) return 0;
-    const std::vector<double> radius = circumradii(patches);
-    std::vector<Extra> extra;
-    std::vector<std::array<float, 3>>& tints = set.links.tints;
-    for (const MirrorChain& chain : chains) {
-        const MirrorChain back = reversed(chain, vis.planes());
-        if (!lexicographically_first(chain, back)) continue;  // its reverse carries both directions
-        std::uint16_t tint = 0;  // a tinted chain's links carry its tint (the reverse's is the same product)
-        if (!(chain.tint == 1.0).all()) {
-            if (tints.empty()) tints.push_back({1.0f, 1.0f, 1.0f});
-            if (tints.size() > 0xffff) throw Error("more than 65535 tinted chains of mirrors; lower solver.max_specular");
-            tints.push_back({float(chain.tint[0]), float(chain.tint[1]), float(chain.tint[2])});
-            tint = std::uint16_t(tints.size() - 1);
-        }
-        std::vector<std::vector<Extra>> rows(patches.size());
-        chain_links({patches, vis, options, radius}, chain, same(chain, back), tint, rows);
-        for (auto& r : rows) extra.insert(extra.end(), r.begin(), r.end());
-    }
-    const std::uint64_t added = extra.size();
-    merge_links(set, extra, bin_width_m);
-    return added;
 }
 
 std::size_t mirror_link_bytes() { return sizeof(Extra) + Links::kLinkBytes; }

@@ -13,6 +13,7 @@
 namespace tprf {
 
 struct HierarchyOptions;
+struct LinkSet;
 
 struct PairFormFactors {
     double ij = 0.0;  ///< F_ij, visibility included
@@ -128,6 +129,19 @@ struct RowLink {
     float ff, distance;
     std::uint16_t tint;
 };
+
+/// A link to add to a built set (links through mirrors, glossy rows' links).
+struct ExtraLink {
+    std::uint32_t receiver;
+    std::uint32_t source;
+    float ff;
+    float distance;
+    std::uint16_t tint;  // Links::tint
+};
+
+/// Adds `extra` to the rows of `set`, each row sorted as the solver expects (by delay octave of bins of
+/// `bin_width_m` first when the set has clusters). (mirror_links.cpp)
+void merge_extra_links(LinkSet& set, std::vector<ExtraLink>& extra, double bin_width_m);
 
 /// Circumradius of every patch.
 std::vector<double> circumradii(const PatchSet& patches);

@@ -369,7 +369,8 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
             g[c] = acc[c];
             acc[c] = 0.0f;
         }
-        if (src >= 0) add_short_links<CT>(src, q, bin, g);
+        // A glossy out-cell passes on its in-cells' light of the same order (SolvePlan::out_begin).
+        if (src >= 0) add_short_links<CT>(m_plan.order[q] >= p.out_begin ? l : src, q, bin, g);
         float b[CT > 0 ? CT : kMaxLanes];
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
@@ -769,18 +770,17 @@ int batch_that_fits(double one_bytes, double full_bytes, double memory_bytes) {
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
     const Links& links = set.links;
-    TPRF_CHECK_EQ(set.patches(), patches.size());
     TPRF_CHECK_EQ(links.receivers(), set.nodes());
     TPRF_CHECK_LE(std::size_t(1), batch.size());
     TPRF_CHECK_LE(batch.size(), std::size_t(kMaxBatch));
     for (const Illumination* illumination : batch) {
         TPRF_CHECK(illumination != nullptr);
-        TPRF_CHECK_EQ(illumination->row.size(), patches.size() + 1);
+        TPRF_CHECK_EQ(illumination->row.size(), set.patches() + 1);  // the patches and the glossy rows
     }
     check_tints(links);
     SolvePlan plan =
         make_plan(patches, set, time, options,
-                  {int(batch.size()), march_channels(keeps_grey(patches, links) && pulses_grey(batch))});
+                  {int(batch.size()), march_channels(keeps_grey(patches, links) && keeps_grey(set.glossy) && pulses_grey(batch))});
     TPRF_CHECK_LE(options.first_bin, 0);
     plan.first_emitted = options.first_bin;
     plan_blocks(plan, batch);

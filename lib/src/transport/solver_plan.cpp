@@ -194,7 +194,7 @@ void split_links(const PatchSet& patches, const Links& links, SolvePlan& plan) {
         plan.short_row[q + 1] = plan.short_links.size();
         plan.same_row[q + 1] = plan.same_links.size();
         for (int c = 0; c < plan.lanes; ++c)
-            plan.albedo[q * std::size_t(plan.lanes) + std::size_t(c)] = float(patches.albedo[i][c % plan.channels]);
+            plan.albedo[q * std::size_t(plan.lanes) + std::size_t(c)] = float(plan.set->albedo(patches, i)[c % plan.channels]);
     }
     if (tinted) flatten_tinted(bins, plan);
 }
@@ -348,7 +348,7 @@ double same_bin_radius(const PatchSet& patches, const SolvePlan& plan) {
                     const TintedSameLink& l = plan.tinted_same[k];
                     sum += double(std::max({l.w[0], l.w[1], l.w[2]})) * v[l.source];
                 }
-            y[q] = patches.albedo[plan.order[q]].maxCoeff() * sum;
+            y[q] = plan.set->albedo(patches, plan.order[q]).maxCoeff() * sum;
             bound = std::max(bound, y[q] / v[q]);
             top = std::max(top, y[q]);
         }
@@ -505,7 +505,8 @@ namespace {
 MarchInputs plan_inputs(const PatchSet& patches, const LinkSet& set, const TimeAxis& time, const SolverOptions& options,
                         int illuminations, int channels) {
     MarchInputs in;
-    in.patches = patches.size();
+    TPRF_CHECK_EQ(set.surface_patches(), patches.size());
+    in.patches = set.patches();
     in.nodes = set.nodes();
     in.links = set.links.size();
     in.clusters = set.tree.clusters() > 0;
@@ -534,6 +535,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.patches = shape.patches;
     plan.nodes = shape.nodes;
     plan.tree = &set.tree;
+    plan.set = &set;
+    plan.out_begin = set.glossy.empty() ? plan.patches : set.glossy.out_begin();
     plan.clusters = set.tree.clusters() > 0;
     plan.threads = shape.threads;
     if (plan.clusters) cut_subtrees(set.tree, plan);
@@ -555,6 +558,8 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.recent_bins = shape.recent_bins;
     const bool wide = options.wide_vectors && cpu_has_wide_kernels();
     plan_windows(links, plan, wide, !sizing_only);
+    // Out-cells read their in-cells (one bin away) in the bin-by-bin pass, from their own layer.
+    if (!set.glossy.empty() && plan.layer_count > 1) TPRF_CHECK_LE(2, plan.block_bins);
     split_links(patches, links, plan);
     split_positions(plan);
     plan_sweeps(patches, plan);
@@ -661,6 +666,10 @@ bool keeps_grey(const PatchSet& patches, const Links& links) {
     return true;
 }
 
+bool keeps_grey(const GlossyRows& rows) {
+    return std::all_of(rows.albedo.begin(), rows.albedo.end(), [](const Rgb& a) { return is_grey(a); });
+}
+
 bool scene_keeps_grey(const Scene& scene) {
     for (const Object& o : scene.objects)
         if (!is_grey(o.albedo) || !is_grey(o.emission) || !is_grey(o.material.reflectance)) return false;
@@ -739,7 +748,6 @@ MarchSizing solve_sizing(const PatchSet& patches, const LinkSet& set, const Time
     TPRF_CHECK_LE(1, illuminations);
     TPRF_CHECK_LE(illuminations, kMaxBatch);
     TPRF_CHECK(channels == 1 || channels == 3);
-    TPRF_CHECK_EQ(set.patches(), patches.size());
     check_tints(set.links);
     MarchSizing out;
     out.inputs = plan_inputs(patches, set, time, options, illuminations, channels);

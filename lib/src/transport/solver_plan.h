@@ -220,6 +220,10 @@ struct SolvePlan {
     /// Nodes: the patches, then the clusters (each keeps a ring and gathers).
     std::size_t nodes = 0;
     const ClusterTree* tree = nullptr;
+    const LinkSet* set = nullptr;      ///< what the plan marches (its rows' albedos: LinkSet::albedo)
+    /// Rows [out_begin, patches) are glossy out-cells (glossy_rows.h): they gather from their in-cells'
+    /// light of the same bounce order, so a march of orders reads them from their own layer.
+    std::size_t out_begin = 0;
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the
     // clusters above them, in preorder.

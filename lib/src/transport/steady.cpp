@@ -32,13 +32,13 @@ double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i, int 
 // (link_set.h).
 Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen::VectorXd& x, int c) {
     check_cancelled();  // once per iteration of the solver, outside its parallel loops
-    const Eigen::Index n = Eigen::Index(patches.size());
+    const Eigen::Index n = Eigen::Index(set.patches());
     const ClusterTree& t = set.tree;
     Eigen::VectorXd y(n);
     if (t.clusters() == 0) {
 #pragma omp parallel for schedule(dynamic, 64)
         for (Eigen::Index i = 0; i < n; ++i)
-            y[i] = patches.albedo[std::size_t(i)][c] * row_sum(set.links, x, std::size_t(i), c);
+            y[i] = set.albedo(patches, std::size_t(i))[c] * row_sum(set.links, x, std::size_t(i), c);
         return y;
     }
     const std::size_t m = t.nodes();
@@ -54,7 +54,7 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
         if (t.parent[cl] != kNoNode) g[Eigen::Index(cl)] += g[t.parent[cl]];
     for (Eigen::Index i = 0; i < n; ++i) {
         const std::uint32_t up = t.parent[std::size_t(i)];
-        y[i] = patches.albedo[std::size_t(i)][c] * (g[i] + (up == kNoNode ? 0.0 : g[up]));
+        y[i] = set.albedo(patches, std::size_t(i))[c] * (g[i] + (up == kNoNode ? 0.0 : g[up]));
     }
     return y;
 }
@@ -83,8 +83,8 @@ public:
     SteadyOperator(const PatchSet& patches, const LinkSet& links, int channel)
         : m_patches(patches), m_links(links), m_channel(channel) {}
 
-    Eigen::Index rows() const { return Eigen::Index(m_patches.size()); }
-    Eigen::Index cols() const { return Eigen::Index(m_patches.size()); }
+    Eigen::Index rows() const { return Eigen::Index(m_links.patches()); }
+    Eigen::Index cols() const { return Eigen::Index(m_links.patches()); }
 
     template <typename Rhs>
     Eigen::Product<SteadyOperator, Rhs, Eigen::AliasFreeProduct> operator*(const Eigen::MatrixBase<Rhs>& x) const {
@@ -120,8 +120,9 @@ namespace tprf {
 
 std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, const Illumination& emission,
                               int max_bounces) {
-    const std::size_t n = patches.size();
-    TPRF_CHECK_EQ(links.patches(), n);
+    const std::size_t n = links.patches();  // the patches and the glossy rows
+    TPRF_CHECK_EQ(links.surface_patches(), patches.size());
+    TPRF_CHECK_EQ(emission.row.size(), n + 1);
     TPRF_CHECK_EQ(links.links.receivers(), links.nodes());
     check_tints(links.links);
     int max_order = 0;
@@ -147,6 +148,10 @@ std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, con
                 Eigen::VectorXd next = k > 0 ? gather(patches, links, r, c) : Eigen::VectorXd::Zero(Eigen::Index(n));
                 if (k <= max_order)
                     for (std::size_t i = 0; i < n; ++i) next[Eigen::Index(i)] += by_order[std::size_t(k)][i][c];
+                // Glossy out-cells pass on this order's light that their in-cells gathered (glossy_rows.h).
+                for (std::size_t i = links.glossy.out_begin(); k > 0 && !links.glossy.empty() && i < n; ++i)
+                    next[Eigen::Index(i)] = (k <= max_order ? by_order[std::size_t(k)][i][c] : 0.0) +
+                                            links.albedo(patches, i)[c] * row_sum(links.links, next, i, c);
                 r = std::move(next);
                 result += r;
             }

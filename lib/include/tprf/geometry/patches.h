@@ -27,9 +27,10 @@ struct PatchSet {
     std::vector<Rgb> emission;         ///< N, radiance L_e, W/(m^2 sr)
     std::vector<std::uint32_t> object; ///< N, index into Scene::objects
     /// Per object (Scene::objects' order): its reflectance when its material is glossy or plastic, else
-    /// none; empty when no object is glossy. A glossy patch's `albedo` is its hemispherical albedo, the
-    /// share it reflects of light arriving alike from every direction: what the transport between
-    /// patches takes it for (docs/materials.md); the camera's direct light uses the BRDF.
+    /// none; empty when no object is glossy. A glossy patch's `albedo` is what its patch row passes on
+    /// as a Lambertian surface: with directional cells (links.glossy_resolution > 0) the Lambertian
+    /// part of its BRDF (lambertian_part_albedo; the cells carry the lobe, transport/glossy_rows.h),
+    /// else its hemispherical albedo (docs/materials.md). The camera's direct light uses the BRDF.
     std::vector<std::optional<GlossyBrdf>> glossy;
 
     /// Patch i's glossy reflectance, or null for a Lambertian (or mirror, or glass) patch.

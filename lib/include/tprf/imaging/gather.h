@@ -21,6 +21,7 @@
 namespace tprf {
 
 struct PatchSet;
+struct GlossyRows;
 struct LightSources;
 class Visibility;
 class SecondBounceLight;
@@ -72,6 +73,9 @@ struct GatherOptions {
     int penumbra_rays = kAreaPenumbraRays;  ///< where those disagree
     /// When given, each tap's shift is second_bounce->shift(patch, point) (camera.shift_second_bounce).
     const SecondBounceLight* second_bounce = nullptr;
+    /// When given (and not empty), a point on a glossy patch takes a second tap beside its patch's: the
+    /// out-cell row facing the sensor along the point's view (glossy_rows.h).
+    const GlossyRows* glossy = nullptr;
 };
 
 /// One output's taps merged where a film on `time` cannot tell them apart: one patch and tint, legs in

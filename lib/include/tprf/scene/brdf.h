@@ -112,6 +112,11 @@ struct CellReflectance {
     double at(const GlossyBrdf& brdf, int c, int out, int in) const;
 };
 
+/// A glossy patch's albedo in a transport with directional cells of `rings` rings (its patch row,
+/// transport/glossy_rows.h): the Lambertian part's, `albedo` (Glossy) or `albedo` times the square of
+/// the base's mean over the cells (Plastic: the coat's 1 - F on the way in and out, each averaged).
+Rgb lambertian_part_albedo(const GlossyBrdf& brdf, int rings);
+
 /// The cells' reflectance of `brdf` (its model, roughness and ior; not its colours), with `samples` >= 1
 /// incoming directions per side of a cell.
 CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& cells, int samples);

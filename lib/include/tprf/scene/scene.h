@@ -123,6 +123,8 @@ enum class LinkMethod {
 
 /// Most pieces links.spread_pieces may ask for one patch link.
 inline constexpr int kMaxSpreadPieces = 8;
+/// The most rings of a glossy patch's directional cells (links.glossy_resolution).
+inline constexpr int kMaxGlossyResolution = 8;
 
 /// The optional `links` block.
 struct LinkSettings {
@@ -135,6 +137,10 @@ struct LinkSettings {
     /// receiver to the points of the sender, in at most n pieces (spread_patch_links)
     /// (docs/links.md).
     int spread_pieces = 0;
+    /// Rings R of a glossy patch's directional cells (4 R^2 cells over its hemisphere) through which the
+    /// transport passes its light on (transport/glossy_rows.h, docs/method.md); 0: glossy patches pass
+    /// light on as Lambertian surfaces of their hemispherical albedo.
+    int glossy_resolution = 0;
 };
 
 /// A grid of points on a relay surface (docs/capture.md): point (a, b) is

@@ -12,7 +12,9 @@
 
 #include "tprf/core/progress.h"
 #include "tprf/geometry/cluster_tree.h"
+#include "tprf/geometry/patches.h"
 #include "tprf/scene/scene.h"
+#include "tprf/transport/glossy_rows.h"
 #include "tprf/transport/links.h"
 
 #include <algorithm>
@@ -46,11 +48,21 @@ struct LinkSet {
     /// keeps its blocks this short, so that those links are applied a block at a time (push and pull
     /// once per block); shorter ones would be applied patch by patch.
     int block_bins = 0;
+    /// The glossy patches' directional rows (add_glossy_links): leaves after the patches, before the
+    /// clusters; empty without glossy transport.
+    GlossyRows glossy;
 
+    /// The rows the march solves that are not clusters: the patches and the glossy rows.
     std::size_t patches() const { return tree.leaves; }
+    /// The first row that is not a patch (the patches' count).
+    std::size_t surface_patches() const { return tree.leaves - glossy.rows(); }
+    /// The albedo the march takes for leaf row i: the patch's, or its glossy row's.
+    const Rgb& albedo(const PatchSet& patches, std::size_t i) const {
+        return i < glossy.patches || glossy.empty() ? patches.albedo[i] : glossy.albedo[i - glossy.patches];
+    }
     std::size_t nodes() const { return tree.nodes(); }
     /// Bytes held by the tree and the links.
-    std::size_t bytes() const { return tree.bytes() + links.bytes(); }
+    std::size_t bytes() const { return tree.bytes() + links.bytes() + glossy.bytes(); }
     /// Links with a cluster at either end (kernel pieces counted one by one).
     std::size_t cluster_links() const {
         std::size_t count = 0;
@@ -93,6 +105,9 @@ struct HierarchyOptions {
     /// in bins, between 1 and kLongestMinLag (a fixed length would leave every pair within it as
     /// patch-to-patch links where bins are coarse against the patches).
     int min_lag_bins = 0;
+    /// The least min_lag_bins that its default (0) takes: 2 where glossy rows are added, whose links
+    /// from in-cells to out-cells one bin long must be shorter than the solver's blocks.
+    int least_lag_bins = 1;
     /// The most bins min_lag_bins is set to by default: the solver's longest window.
     static constexpr int kLongestMinLag = 32;
 };
@@ -126,6 +141,15 @@ LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibil
 std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visibility& visibility,
                                const LinkOptions& options, double bin_width_m);
 
+/// Adds the glossy patches' directional rows at `rings` rings (links.glossy_resolution; 0 or no glossy
+/// patch: nothing) to a set built over `patches`: the rows as leaves after the patches (clusters and
+/// their links renumbered), their links merged into the rows in the order the solver expects
+/// (`bin_width_m`: the march's bins, as make_link_set's), set.glossy filled (glossy_rows.h). Returns the
+/// links added. Cost: every glossy patch against every patch, as the flat method, and the lobe's
+/// nonzero cell pairs per glossy patch.
+std::uint64_t add_glossy_links(LinkSet& set, const PatchSet& patches, const Visibility& visibility,
+                               const LinkOptions& options, double bin_width_m, int rings);
+
 /// Where make_link_set reports its counts, when given: a hierarchical build's, a flat build's.
 struct LinkSetStats {
     HierarchyStats* hierarchy = nullptr;
@@ -133,7 +157,8 @@ struct LinkSetStats {
 };
 
 /// The link set that `settings` asks for: flat, or hierarchical with delay kernels for bins of
-/// `bin_width_m`, its patch links spread when settings.spread_pieces > 0 (spread_patch_links). Links
+/// `bin_width_m`, its patch links spread when settings.spread_pieces > 0 (spread_patch_links), and the
+/// glossy patches' rows when settings.glossy_resolution > 0 (add_glossy_links). Links
 /// through mirrors are the caller's next step (add_mirror_links), so that it can report them.
 LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, const LinkSettings& settings,
                       double bin_width_m, const LinkOptions& options = {}, LinkSetStats stats = {});

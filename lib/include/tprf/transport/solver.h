@@ -31,6 +31,7 @@ struct PatchSet;
 struct LinkSet;
 struct Illumination;
 struct Links;
+struct GlossyRows;
 
 /// Most illuminations one march takes.
 inline constexpr int kMaxBatch = 16;
@@ -128,6 +129,8 @@ constexpr int march_channels(bool grey) { return grey ? 1 : 3; }
 /// Whether the patches and links keep grey light grey: every albedo and the tint of every link
 /// (Links::tint) is grey. With grey sources, a march of them keeps one channel (march_channels).
 bool keeps_grey(const PatchSet& patches, const Links& links);
+/// Whether the glossy rows keep grey light grey: the lobe colour of every glossy patch grey.
+bool keeps_grey(const GlossyRows& rows);
 
 /// Whether a march of the scene as written stays grey (march_channels), before anything is built: every
 /// object's albedo, emission and mirror or glass reflectance, every light's colour and a capture's

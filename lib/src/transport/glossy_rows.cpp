@@ -1,0 +1,238 @@
+#include "tprf/transport/glossy_rows.h"
+
+#include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
+#include "tprf/geometry/visibility.h"
+#include "tprf/transport/illumination.h"
+#include "tprf/transport/light_sources.h"
+#include "tprf/transport/link_set.h"
+#include "patch_pairs.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tprf {
+
+namespace {
+
+// Incoming directions sampled per side of a cell for the cells' reflectance.
+constexpr int kCellSamples = 8;
+// A lobe entry below this share of its in-cell's largest is dropped (its column keeps its sum).
+constexpr double kDropBelow = 1e-4;
+
+// The lobe of `brdf` between the cells, small entries dropped and each column rescaled to its sum.
+CellReflectance sparse_lobe(const GlossyBrdf& brdf, const HemisphereCells& cells) {
+    CellReflectance r = cell_reflectance(brdf, cells, kCellSamples);
+    const std::size_t m = std::size_t(r.cells);
+    for (std::size_t in = 0; in < m; ++in) {
+        double top = 0.0, sum = 0.0, kept = 0.0;
+        for (std::size_t out = 0; out < m; ++out) {
+            top = std::max(top, r.lobe[out * m + in]);
+            sum += r.lobe[out * m + in];
+        }
+        for (std::size_t out = 0; out < m; ++out) {
+            double& v = r.lobe[out * m + in];
+            if (v < kDropBelow * top) v = 0.0;
+            kept += v;
+        }
+        if (kept > 0.0)
+            for (std::size_t out = 0; out < m; ++out) r.lobe[out * m + in] *= sum / kept;
+    }
+    return r;
+}
+
+// The smallest float distance whose delay in the solver's arithmetic (delay_bins_f) is a whole bin.
+float one_bin_step(double bin_width_m) {
+    const float inv_bin = float(1.0 / bin_width_m);
+    float step = float(bin_width_m);
+    while (step * inv_bin < 1.0f) step = std::nextafter(step, INFINITY);
+    return step;
+}
+
+// `set` with rows.rows() leaves more, numbered from the patches' end: clusters and their links move up.
+void insert_rows(LinkSet& set, const PatchSet& patches, const GlossyRows& rows) {
+    ClusterTree& t = set.tree;
+    const std::size_t n = t.leaves, extra = rows.rows();
+    const auto moved = [&](std::uint32_t m) { return m >= n && m != kNoNode ? std::uint32_t(m + extra) : m; };
+    for (std::uint32_t& p : t.parent) p = moved(p);
+    for (auto& c : t.children) c = {moved(c[0]), moved(c[1])};
+    // Per-node arrays: the new leaves go after the old ones, before the clusters.
+    const auto insert = [&](auto& v, auto value_of) {
+        using T = typename std::decay_t<decltype(v)>::value_type;
+        std::vector<T> add(extra);
+        for (std::size_t k = 0; k < extra; ++k) add[k] = value_of(k);
+        v.insert(v.begin() + std::ptrdiff_t(n), add.begin(), add.end());
+    };
+    const auto patch_of = [&](std::size_t k) {
+        return rows.glossy[(k % (rows.rows() / 2)) / std::size_t(rows.cells())];
+    };
+    insert(t.parent, [](std::size_t) { return kNoNode; });
+    insert(t.area, [&](std::size_t k) { return patches.area[patch_of(k)]; });
+    insert(t.centre, [&](std::size_t k) { return patches.centroid[patch_of(k)]; });
+    insert(t.radius, [&](std::size_t k) { return circumradius(patches, patch_of(k)); });
+    insert(t.cone_axis, [&](std::size_t k) { return patches.normal[patch_of(k)]; });
+    insert(t.cone_cos, [](std::size_t) { return 1.0; });
+    insert(t.first, [&](std::size_t k) { return std::uint32_t(n + k); });
+    insert(t.last, [&](std::size_t k) { return std::uint32_t(n + k + 1); });
+    for (std::size_t k = 0; k < extra; ++k) {
+        t.leaf_order.push_back(std::uint32_t(n + k));
+        t.area_prefix.push_back(t.area_prefix.back() + patches.area[patch_of(k)]);
+    }
+    t.leaves = n + extra;
+    Links& l = set.links;
+    for (std::uint32_t& s : l.source) s = moved(s);
+    l.row.insert(l.row.begin() + std::ptrdiff_t(n + 1), extra, l.row[n]);
+}
+
+// The glossy rows' links of glossy patch g and every patch j it faces (see glossy_rows.h).
+void glossy_pair_links(const PairScene& scene, const GlossyRows& rows, std::size_t g, std::vector<ExtraLink>& out,
+                       LinkStats& counts) {
+    const PatchSet& patches = scene.patches;
+    const std::size_t p = rows.glossy[g];
+    const auto early = [&](double d) { return float(std::max(0.0, d - double(rows.step_m))); };
+    for (std::size_t j = 0; j < patches.size(); ++j) {
+        if (j == p) continue;
+        const std::int32_t h = rows.slot[j];
+        if (h < 0 && inert(patches, j)) continue;
+        PairFormFactors f;
+        if (!patch_pair(scene, p, j, near_pair(patches, scene.radius, scene.options.near_factor, p, j), f, counts))
+            continue;
+        const Vec3 towards = patches.centroid[j] - patches.centroid[p];
+        const double d = towards.norm();
+        const std::uint32_t in = rows.in_row(g, rows.cell_towards(patches, p, towards));
+        if (!inert(patches, j)) out.push_back({in, std::uint32_t(j), float(f.ij), early(d), 0});
+        if (h >= 0) {  // j is glossy: its lobe towards p reaches p's in-cell and p's patch row
+            const std::uint32_t from = rows.out_row(std::size_t(h), rows.cell_towards(patches, j, -towards));
+            out.push_back({in, from, float(f.ij), early(d), 0});
+            if (!inert(patches, p)) out.push_back({std::uint32_t(p), from, float(f.ij), float(d), 0});
+        } else {  // j's patch row takes p's lobe towards it (a glossy j takes it in its own turn)
+            out.push_back({std::uint32_t(j), rows.out_row(g, rows.cell_towards(patches, p, towards)), float(f.ji),
+                           float(d), 0});
+        }
+    }
+    // The lobe: every out-cell from the in-cells, one bin later.
+    const CellReflectance& r = rows.reflectance[patches.object[p]];
+    for (int c = 0; c < r.cells; ++c)
+        for (int c_in = 0; c_in < r.cells; ++c_in)
+            if (const double w = r.lobe_at(c, c_in); w > 0.0)
+                out.push_back({rows.out_row(g, c), rows.in_row(g, c_in), float(w), rows.step_m, 0});
+}
+
+}  // namespace
+
+void cell_frame(const Vec3& n, Vec3& t, Vec3& b) {
+    const Vec3 helper = std::abs(n.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+    t = (helper - n * n.dot(helper)).normalized();
+    b = n.cross(t);
+}
+
+int GlossyRows::cell_towards(const PatchSet& set, std::size_t i, const Vec3& dir) const {
+    const Vec3& n = set.normal[i];
+    Vec3 t, b;
+    cell_frame(n, t, b);
+    const Vec3 local = Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized();
+    return HemisphereCells(rings).cell_of(local);
+}
+
+std::size_t GlossyRows::bytes() const {
+    std::size_t b = glossy.size() * sizeof(std::uint32_t) + slot.size() * sizeof(std::int32_t) + albedo.size() * sizeof(Rgb);
+    for (const CellReflectance& r : reflectance) b += (r.lobe.size() + r.base.size()) * sizeof(double);
+    return b;
+}
+
+GlossyRows make_glossy_rows(const PatchSet& patches, int rings, double bin_width_m) {
+    GlossyRows rows;
+    rows.patches = patches.size();
+    if (rings <= 0 || patches.glossy.empty()) return rows;
+    rows.rings = rings;
+    rows.step_m = one_bin_step(bin_width_m);
+    const HemisphereCells cells(rings);
+    rows.reflectance.resize(patches.glossy.size());
+    for (std::size_t k = 0; k < patches.glossy.size(); ++k)
+        if (patches.glossy[k]) rows.reflectance[k] = sparse_lobe(*patches.glossy[k], cells);
+    rows.slot.assign(patches.size(), -1);
+    for (std::size_t i = 0; i < patches.size(); ++i)
+        if (patches.brdf(i)) {
+            rows.slot[i] = std::int32_t(rows.glossy.size());
+            rows.glossy.push_back(std::uint32_t(i));
+        }
+    if (rows.glossy.empty()) return rows;
+    const std::size_t m = std::size_t(rows.cells());
+    rows.albedo.assign(rows.rows(), Rgb::Ones());  // in-cells: the irradiance itself
+    for (std::size_t g = 0; g < rows.glossy.size(); ++g)
+        std::fill_n(rows.albedo.begin() + std::ptrdiff_t(rows.glossy.size() * m + g * m), m,
+                    patches.brdf(rows.glossy[g])->lobe_colour());
+    return rows;
+}
+
+std::uint64_t add_glossy_links(LinkSet& set, const PatchSet& patches, const Visibility& vis,
+                               const LinkOptions& options, double bin_width_m, int rings) {
+    set.glossy = make_glossy_rows(patches, rings, bin_width_m);
+    const GlossyRows& rows = set.glossy;
+    if (rows.empty()) return 0;
+    TPRF_CHECK_EQ(set.patches(), patches.size());
+    insert_rows(set, patches, rows);
+    const std::vector<double> radius = circumradii(patches);
+    std::vector<std::vector<ExtraLink>> per(rows.glossy.size());
+    parallel_for(rows.glossy.size(), {options.threads, 1, true}, [&](std::size_t g) {
+        LinkStats counts;
+        glossy_pair_links({patches, vis, options, radius}, rows, g, per[g], counts);
+    });
+    std::vector<ExtraLink> extra;
+    for (auto& v : per) {
+        extra.insert(extra.end(), v.begin(), v.end());
+        std::vector<ExtraLink>().swap(v);
+    }
+    const std::uint64_t added = extra.size();
+    merge_extra_links(set, extra, bin_width_m);
+    return added;
+}
+
+Illumination glossy_illumination(const GlossyRows& rows, const PatchSet& patches, const LightSources& sources,
+                                 const Illumination& unit) {
+    const std::size_t n = patches.size(), total = n + rows.rows();
+    std::vector<std::vector<Pulse>> extra(rows.rows());
+    Illumination out;
+    out.row.assign(total + 1, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::int32_t g = rows.slot.empty() ? -1 : rows.slot[i];
+        for (std::uint64_t k = unit.row[i]; k < unit.row[i + 1]; ++k) {
+            Pulse p = unit.pulses[k];
+            if (g < 0) {
+                out.pulses.push_back(p);
+                continue;
+            }
+            const Rgb irradiance = p.energy;
+            if (p.order > 0) p.energy = irradiance * patches.albedo[i];
+            if ((p.energy > 0.0).any()) out.pulses.push_back(p);
+            if (p.order == 0) continue;
+            // The source's direction: a point source's position, an area source's centroid.
+            Vec3 from;
+            if (p.point_source >= 0) {
+                from = sources.points[std::size_t(p.point_source)].position;
+            } else if (p.area_source >= 0) {
+                from = sources.areas[std::size_t(p.area_source)].centroid;
+            } else {
+                continue;
+            }
+            const CellReflectance& r = rows.reflectance[patches.object[i]];
+            const int c_in = rows.cell_towards(patches, i, from - patches.centroid[i]);
+            const Rgb colour = patches.brdf(i)->lobe_colour();
+            for (int c = 0; c < r.cells; ++c)
+                if (const double w = r.lobe_at(c, c_in); w > 0.0) {
+                    Pulse q = p;
+                    q.energy = irradiance * colour * w;
+                    extra[rows.out_row(std::size_t(g), c) - n].push_back(q);
+                }
+        }
+        out.row[i + 1] = out.pulses.size();
+    }
+    for (std::size_t r = 0; r < rows.rows(); ++r) {
+        out.pulses.insert(out.pulses.end(), extra[r].begin(), extra[r].end());
+        out.row[n + r + 1] = out.pulses.size();
+    }
+    return out;
+}
+
+}  // namespace tprf
