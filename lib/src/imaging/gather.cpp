@@ -634,10 +634,15 @@ Gather gather_points(const SensingPoints& points, int width, int height, const G
             for (const auto& [q, w] : weights) {
                 const float shift = options.second_bounce ? float(options.second_bounce->shift(q, sp.point)) : 0.0f;
                 run_taps[k].push_back({q, float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
-                if (glossy && glossy->slot[q] >= 0 && !sp.view.isZero())
-                    run_taps[k].push_back({glossy->out_row(std::size_t(glossy->slot[q]),
-                                                           glossy->cell_towards(patches, q, sp.view.cast<double>())),
-                                           float(w * share / M_PI), sp.leg, earliest, sp.tint, shift});
+                if (glossy && glossy->slot[q] >= 0 && !sp.view.isZero()) {
+                    int cell[4];
+                    double part[4];
+                    glossy->cells_about(patches, q, sp.view.cast<double>(), cell, part);
+                    for (int e = 0; e < 4; ++e)
+                        if (part[e] > 0.0)
+                            run_taps[k].push_back({glossy->out_row(std::size_t(glossy->slot[q]), cell[e]),
+                                                   float(w * part[e] * share / M_PI), sp.leg, earliest, sp.tint, shift});
+                }
             }
             const std::size_t first = direct.size();
             direct_arrivals(direct_scene, sp, {h - run_start[k], count}, share, done.data() + (h - run_start[k]) * areas,

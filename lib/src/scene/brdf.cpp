@@ -1,6 +1,7 @@
 #include "tprf/scene/brdf.h"
 
 #include "tprf/scene/scene.h"
+#include "tprf/core/parallel.h"
 
 #include <algorithm>
 #include <array>
@@ -204,6 +205,27 @@ int HemisphereCells::cell_of(const Vec3& local) const {
     return 4 * k * k + sector;
 }
 
+void HemisphereCells::interpolate(const Vec3& local, int cell[4], double weight[4]) const {
+    const double r = std::min(1.0, std::hypot(local.x(), local.y()));
+    const double rho = std::clamp(r * m_rings - 0.5, 0.0, double(m_rings - 1));
+    const int k0 = std::min(m_rings - 1, int(rho)), k1 = std::min(m_rings - 1, k0 + 1);
+    const double t = rho - k0;
+    double phi = std::atan2(local.y(), local.x());
+    if (phi < 0.0) phi += 2.0 * kPi;
+    const int rings[2] = {k0, k1};
+    const double ring_weight[2] = {1.0 - t, t};
+    for (int e = 0; e < 2; ++e) {
+        const int k = rings[e], sectors = 4 * (2 * k + 1);
+        const double sigma = phi / (2.0 * kPi) * sectors - 0.5;
+        const double below = std::floor(sigma), f = sigma - below;
+        const int s0 = (int(below) % sectors + sectors) % sectors, s1 = (s0 + 1) % sectors;
+        cell[2 * e] = 4 * k * k + s0;
+        cell[2 * e + 1] = 4 * k * k + s1;
+        weight[2 * e] = ring_weight[e] * (1.0 - f);
+        weight[2 * e + 1] = ring_weight[e] * f;
+    }
+}
+
 Vec3 HemisphereCells::direction(int cell, double u, double v) const {
     int k = int(std::sqrt(cell / 4.0));
     while (4 * (k + 1) * (k + 1) <= cell) ++k;
@@ -227,15 +249,15 @@ CellReflectance cell_reflectance(const GlossyBrdf& brdf, const HemisphereCells& 
     // Each of a cell's samples^2 directions carries 1/samples^2 of its projected solid angle pi/M; the
     // light it brings, per unit of the cell's irradiance, is then M / samples^2 of what it reflects.
     const double weight = double(m) / (samples * samples);
-    std::vector<double> column(size);
-    for (int c = 0; c < m; ++c) {
-        std::fill(column.begin(), column.end(), 0.0);
+    // The in-cells' columns on every core (each its own sums: the same bits for any thread count).
+    parallel_for(size, {0, 1, true}, [&](std::size_t c) {
+        std::vector<double> column(size, 0.0);
         for (int a = 0; a < samples; ++a)
             for (int b = 0; b < samples; ++b)
-                bin_reflection(brdf, cells, cells.direction(c, (a + 0.5) / samples, (b + 0.5) / samples), weight,
+                bin_reflection(brdf, cells, cells.direction(int(c), (a + 0.5) / samples, (b + 0.5) / samples), weight,
                                column);
-        for (std::size_t o = 0; o < size; ++o) out.lobe[o * size + std::size_t(c)] = column[o];
-    }
+        for (std::size_t o = 0; o < size; ++o) out.lobe[o * size + c] = column[o];
+    });
     if (brdf.model == GlossyModel::Plastic) {
         // 1 - F depends on the ring alone; its mean over a ring, uniform in projected solid angle (u).
         const Quadrature& q = rule(256);

@@ -17,31 +17,7 @@ namespace tprf {
 namespace {
 
 // Incoming directions sampled per side of a cell for the cells' reflectance.
-constexpr int kCellSamples = 8;
-// A lobe entry below this share of its in-cell's largest is dropped (its column keeps its sum).
-constexpr double kDropBelow = 1e-4;
-
-// The lobe of `brdf` between the cells, small entries dropped and each column rescaled to its sum.
-CellReflectance sparse_lobe(const GlossyBrdf& brdf, const HemisphereCells& cells) {
-    CellReflectance r = cell_reflectance(brdf, cells, kCellSamples);
-    const std::size_t m = std::size_t(r.cells);
-    for (std::size_t in = 0; in < m; ++in) {
-        double top = 0.0, sum = 0.0, kept = 0.0;
-        for (std::size_t out = 0; out < m; ++out) {
-            top = std::max(top, r.lobe[out * m + in]);
-            sum += r.lobe[out * m + in];
-        }
-        for (std::size_t out = 0; out < m; ++out) {
-            double& v = r.lobe[out * m + in];
-            if (v < kDropBelow * top) v = 0.0;
-            kept += v;
-        }
-        if (kept > 0.0)
-            for (std::size_t out = 0; out < m; ++out) r.lobe[out * m + in] *= sum / kept;
-    }
-    return r;
-}
-
+constexpr int kCellSamples = 4;
 // The smallest float distance whose delay in the solver's arithmetic (delay_bins_f) is a whole bin.
 float one_bin_step(double bin_width_m) {
     const float inv_bin = float(1.0 / bin_width_m);
@@ -111,12 +87,6 @@ void glossy_pair_links(const PairScene& scene, const GlossyRows& rows, std::size
                            float(d), 0});
         }
     }
-    // The lobe: every out-cell from the in-cells, one bin later.
-    const CellReflectance& r = rows.reflectance[patches.object[p]];
-    for (int c = 0; c < r.cells; ++c)
-        for (int c_in = 0; c_in < r.cells; ++c_in)
-            if (const double w = r.lobe_at(c, c_in); w > 0.0)
-                out.push_back({rows.out_row(g, c), rows.in_row(g, c_in), float(w), rows.step_m, 0});
 }
 
 }  // namespace
@@ -135,9 +105,22 @@ int GlossyRows::cell_towards(const PatchSet& set, std::size_t i, const Vec3& dir
     return HemisphereCells(rings).cell_of(local);
 }
 
+void GlossyRows::cells_about(const PatchSet& set, std::size_t i, const Vec3& dir, int cell[4], double weight[4]) const {
+    const Vec3& n = set.normal[i];
+    Vec3 t, b;
+    cell_frame(n, t, b);
+    HemisphereCells(rings).interpolate(Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized(), cell, weight);
+}
+
+const float* GlossyRows::lobe_row_of(const PatchSet& set, std::size_t i) const {
+    const std::size_t j = i - out_begin(), m = std::size_t(cells());
+    return lobe[set.object[glossy[j / m]]].data() + (j % m) * m;
+}
+
 std::size_t GlossyRows::bytes() const {
     std::size_t b = glossy.size() * sizeof(std::uint32_t) + slot.size() * sizeof(std::int32_t) + albedo.size() * sizeof(Rgb);
     for (const CellReflectance& r : reflectance) b += (r.lobe.size() + r.base.size()) * sizeof(double);
+    for (const auto& l : lobe) b += l.size() * sizeof(float);
     return b;
 }
 
@@ -149,8 +132,19 @@ GlossyRows make_glossy_rows(const PatchSet& patches, int rings, double bin_width
     rows.step_m = one_bin_step(bin_width_m);
     const HemisphereCells cells(rings);
     rows.reflectance.resize(patches.glossy.size());
+    rows.lobe.resize(patches.glossy.size());
     for (std::size_t k = 0; k < patches.glossy.size(); ++k)
-        if (patches.glossy[k]) rows.reflectance[k] = sparse_lobe(*patches.glossy[k], cells);
+        if (const auto& brdf = patches.glossy[k]) {
+            // The lobe depends on the model, roughness and ior alone (not the colours): objects that
+            // share them share its cells' reflectance.
+            std::size_t same = 0;
+            while (same < k && !(patches.glossy[same] && patches.glossy[same]->model == brdf->model &&
+                                 patches.glossy[same]->roughness == brdf->roughness && patches.glossy[same]->ior == brdf->ior))
+                ++same;
+            rows.reflectance[k] =
+                same < k ? rows.reflectance[same] : cell_reflectance(*brdf, cells, kCellSamples);
+            rows.lobe[k].assign(rows.reflectance[k].lobe.begin(), rows.reflectance[k].lobe.end());
+        }
     rows.slot.assign(patches.size(), -1);
     for (std::size_t i = 0; i < patches.size(); ++i)
         if (patches.brdf(i)) {

@@ -539,7 +539,7 @@ int min_lag(const PatchSet& patches, const HierarchyOptions& hierarchy) {
     if (hierarchy.min_lag_bins > 0 || !(hierarchy.bin_width_m > 0.0) || patches.size() == 0) return hierarchy.min_lag_bins;
     std::vector<double> radius = circumradii(patches);
     std::nth_element(radius.begin(), radius.begin() + std::ptrdiff_t(radius.size() / 2), radius.end());
-    return std::max(hierarchy.least_lag_bins, default_min_lag_bins(2.0 * radius[radius.size() / 2], hierarchy.bin_width_m));
+    return default_min_lag_bins(2.0 * radius[radius.size() / 2], hierarchy.bin_width_m);
 }
 
 LinkSet hierarchical_link_set(const PatchSet& patches, const Visibility& visibility, const LinkOptions& options,

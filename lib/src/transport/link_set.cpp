@@ -26,7 +26,6 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
         hierarchy.tolerance = settings.tolerance;
         hierarchy.bin_width_m = bin_width_m;
         hierarchy.time_bins = settings.time_bins;
-        if (glossy) hierarchy.least_lag_bins = 2;
         set = hierarchical_link_set(patches, visibility, options, hierarchy, stats);
     }
     if (settings.spread_pieces > 0 && bin_width_m > 0.0)

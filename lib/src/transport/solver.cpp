@@ -115,6 +115,8 @@ private:
     void short_pass_lanes(std::int64_t b0);
     template <int CT>
     void short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed);
+    template <int CT>
+    void add_lobe(int layer, std::size_t i, std::int64_t bin, float* g) const;
     // g += the short links (or the same-bin links), grey and tinted, of the patch at position q at `bin`,
     // from layer src.
     template <int CT>
@@ -338,6 +340,28 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
 }
 
 template <int CT>
+void March::add_lobe(int layer, std::size_t i, std::int64_t bin, float* g) const {
+    const SolvePlan& p = m_plan;
+    const int C = CT > 0 ? CT : p.lanes;
+    const GlossyRows& rows = p.set->glossy;
+    const float* lobe = rows.lobe_row_of(*p.patches_of, i);
+    const float* h = recent(layer, p.position[rows.first_in_of(i)], bin - 1);  // the in-cells, one after the other
+    const int m = rows.cells();  // a multiple of 4
+    if (C == 1) {  // four partial sums, which the compiler keeps in one vector
+        float part[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+        for (int c = 0; c < m; c += 4)
+            for (int e = 0; e < 4; ++e) part[e] += lobe[c + e] * h[c + e];
+        g[0] += (part[0] + part[1]) + (part[2] + part[3]);
+        return;
+    }
+    float sum[CT > 0 ? CT : kMaxLanes];
+    std::fill_n(sum, C, 0.0f);
+    for (int c = 0; c < m; ++c)
+        for (int ch = 0; ch < C; ++ch) sum[ch] += lobe[c] * h[std::size_t(c) * std::size_t(C) + std::size_t(ch)];
+    for (int ch = 0; ch < C; ++ch) g[ch] += sum[ch];
+}
+
+template <int CT>
 void March::add_same_links(const float* x, int src, std::size_t r, float* g) const {
     const SolvePlan& p = m_plan;
     const int C = CT > 0 ? CT : p.lanes;
@@ -369,8 +393,9 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
             g[c] = acc[c];
             acc[c] = 0.0f;
         }
-        // A glossy out-cell passes on its in-cells' light of the same order (SolvePlan::out_begin).
-        if (src >= 0) add_short_links<CT>(m_plan.order[q] >= p.out_begin ? l : src, q, bin, g);
+        if (src >= 0) add_short_links<CT>(src, q, bin, g);
+        // A glossy out-cell: its lobe over its in-cells' light of the same order, one bin before.
+        if (const std::size_t i = p.order[q]; i >= p.out_begin) add_lobe<CT>(l, i, bin, g);
         float b[CT > 0 ? CT : kMaxLanes];
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);

@@ -395,6 +395,7 @@ void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
 void split_positions(SolvePlan& plan) {
     auto work = [&](std::size_t q) {
         std::uint64_t w = kShortPatchLinks + (plan.short_row[q + 1] - plan.short_row[q]);
+        if (plan.order[q] >= plan.out_begin) w += std::uint64_t(plan.set->glossy.cells());  // its lobe's row
         if (!plan.tinted_short_row.empty()) w += plan.tinted_short_row[q + 1] - plan.tinted_short_row[q];
         return w;
     };
@@ -536,6 +537,7 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.nodes = shape.nodes;
     plan.tree = &set.tree;
     plan.set = &set;
+    plan.patches_of = &patches;
     plan.out_begin = set.glossy.empty() ? plan.patches : set.glossy.out_begin();
     plan.clusters = set.tree.clusters() > 0;
     plan.threads = shape.threads;
@@ -558,10 +560,12 @@ SolvePlan make_plan(const PatchSet& patches, const LinkSet& set, const TimeAxis&
     plan.recent_bins = shape.recent_bins;
     const bool wide = options.wide_vectors && cpu_has_wide_kernels();
     plan_windows(links, plan, wide, !sizing_only);
-    // Out-cells read their in-cells (one bin away) in the bin-by-bin pass, from their own layer.
-    if (!set.glossy.empty() && plan.layer_count > 1) TPRF_CHECK_LE(2, plan.block_bins);
     split_links(patches, links, plan);
     split_positions(plan);
+    // Each glossy patch's in-cells at consecutive positions (the march reads them as one row).
+    for (std::size_t g = 0; g < set.glossy.glossy.size(); ++g)
+        for (int c = 1; c < set.glossy.cells(); ++c)
+            TPRF_CHECK_EQ(plan.position[set.glossy.in_row(g, c)], plan.position[set.glossy.in_row(g, 0)] + std::uint32_t(c));
     plan_sweeps(patches, plan);
     compact_same_bin(plan);
     plan_rings(plan);

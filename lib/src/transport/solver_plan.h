@@ -221,8 +221,10 @@ struct SolvePlan {
     std::size_t nodes = 0;
     const ClusterTree* tree = nullptr;
     const LinkSet* set = nullptr;      ///< what the plan marches (its rows' albedos: LinkSet::albedo)
-    /// Rows [out_begin, patches) are glossy out-cells (glossy_rows.h): they gather from their in-cells'
-    /// light of the same bounce order, so a march of orders reads them from their own layer.
+    const PatchSet* patches_of = nullptr;  ///< the patches it marches
+    /// Rows [out_begin, patches) are glossy out-cells (glossy_rows.h): each takes its lobe over its
+    /// patch's in-cells of the bin before, of the same bounce order; the in-cells of a patch lie at
+    /// consecutive positions.
     std::size_t out_begin = 0;
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the

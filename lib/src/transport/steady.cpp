@@ -27,6 +27,15 @@ double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i, int 
     return s;
 }
 
+// Glossy out-cell i's lobe over its patch's in-cells in x (glossy_rows.h).
+double lobe_sum(const PatchSet& patches, const GlossyRows& rows, const Eigen::VectorXd& x, std::size_t i) {
+    const float* lobe = rows.lobe_row_of(patches, i);
+    const Eigen::Index first = Eigen::Index(rows.first_in_of(i));
+    double s = 0.0;
+    for (int c = 0; c < rows.cells(); ++c) s += double(lobe[c]) * x[first + c];
+    return s;
+}
+
 // y = diag(albedo_c) F_c x for one channel (F_c: the form factors, tinted links' times their tint):
 // with clusters, their values pulled from x, every node's gather pushed down to the patches below it
 // (link_set.h).
@@ -35,10 +44,14 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
     const Eigen::Index n = Eigen::Index(set.patches());
     const ClusterTree& t = set.tree;
     Eigen::VectorXd y(n);
+    const std::size_t out_begin = set.glossy.empty() ? std::size_t(n) : set.glossy.out_begin();
+    // A row's gathered light: its links, or (a glossy out-cell) its lobe over its in-cells.
+    const auto gathered = [&](const Eigen::VectorXd& v, std::size_t i) {
+        return i >= out_begin && i < std::size_t(n) ? lobe_sum(patches, set.glossy, x, i) : row_sum(set.links, v, i, c);
+    };
     if (t.clusters() == 0) {
 #pragma omp parallel for schedule(dynamic, 64)
-        for (Eigen::Index i = 0; i < n; ++i)
-            y[i] = set.albedo(patches, std::size_t(i))[c] * row_sum(set.links, x, std::size_t(i), c);
+        for (Eigen::Index i = 0; i < n; ++i) y[i] = set.albedo(patches, std::size_t(i))[c] * gathered(x, std::size_t(i));
         return y;
     }
     const std::size_t m = t.nodes();
@@ -49,7 +62,7 @@ Eigen::VectorXd gather(const PatchSet& patches, const LinkSet& set, const Eigen:
         v[cl] = (t.area[a] * v[a] + t.area[b] * v[b]) / t.area[cl];
     }
 #pragma omp parallel for schedule(dynamic, 64)
-    for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = row_sum(set.links, v, i, c);
+    for (std::size_t i = 0; i < m; ++i) g[Eigen::Index(i)] = gathered(v, i);
     for (std::size_t cl = t.leaves; cl < m; ++cl)  // preorder ids: parents first
         if (t.parent[cl] != kNoNode) g[Eigen::Index(cl)] += g[t.parent[cl]];
     for (Eigen::Index i = 0; i < n; ++i) {
@@ -151,7 +164,7 @@ std::vector<Rgb> solve_steady(const PatchSet& patches, const LinkSet& links, con
                 // Glossy out-cells pass on this order's light that their in-cells gathered (glossy_rows.h).
                 for (std::size_t i = links.glossy.out_begin(); k > 0 && !links.glossy.empty() && i < n; ++i)
                     next[Eigen::Index(i)] = (k <= max_order ? by_order[std::size_t(k)][i][c] : 0.0) +
-                                            links.albedo(patches, i)[c] * row_sum(links.links, next, i, c);
+                                            links.albedo(patches, i)[c] * lobe_sum(patches, links.glossy, next, i);
                 r = std::move(next);
                 result += r;
             }

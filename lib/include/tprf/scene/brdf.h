@@ -79,6 +79,11 @@ public:
     int count() const { return 4 * m_rings * m_rings; }
     /// The cell holding a direction of the frame (z > 0; z <= 0 is taken as the horizon's ring).
     int cell_of(const Vec3& local) const;
+    /// The cells about a direction of the frame and their weights (summing to 1), to read a quantity
+    /// held per cell (at the cell's middle) smoothly: linear between the two nearest rings' middles
+    /// (radius sin(theta)) and, within each ring, between its two nearest sectors' middles (azimuth).
+    /// Writes 4 cells and weights (a cell may repeat).
+    void interpolate(const Vec3& local, int cell[4], double weight[4]) const;
     /// The direction at fractional coordinates (u, v) in [0, 1)^2 of a cell: u across its ring, v along
     /// its sector, both uniform in projected solid angle.
     Vec3 direction(int cell, double u, double v) const;

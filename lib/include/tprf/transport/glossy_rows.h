@@ -7,10 +7,11 @@
 ///  - in-cell rows I(p, c'): the irradiance arriving through cell c', one patch link from every patch
 ///    that p sees (the light leaving a glossy source towards p read from its out-cell facing p);
 ///  - out-cell rows O(p, c): pi times the mean radiance leaving through cell c, the lobe's part of the
-///    BRDF over the cells: O(p, c) = lobe_colour sum_c' lobe(c, c') I(p, c') (CellReflectance).
+///    BRDF over the cells: O(p, c) = lobe_colour sum_c' lobe(c, c') I(p, c') (CellReflectance), applied
+///    by the march (and the steady solve) as one M x M product per patch and bin, not as links.
 /// Every receiver that sees p takes p's patch row (as before) and the out-cell facing it, at the pair's
 /// distance. So a path keeps its length: an in-cell gathers its links one bin early (each link's
-/// distance less `step_m`, one bin) and the out-cell reads it one bin late; light between patches less
+/// distance less `step_m`, one bin) and the out-cell reads it one bin later; light between patches less
 /// than a bin apart arrives one bin after it left instead of within that bin. Rows are numbered
 /// after the patches: the in-cells of every glossy patch, then the out-cells (out-cells gather from
 /// in-cells only, so a bounce-order march reads them from the same order, LinkSet::out_rows).
@@ -34,9 +35,13 @@ struct GlossyRows {
     std::vector<std::uint32_t> glossy;    ///< the glossy patches, increasing
     std::vector<std::int32_t> slot;       ///< per patch: its index in `glossy`, or -1 (empty: none glossy)
     std::vector<Rgb> albedo;              ///< per row after the patches: what the march multiplies its gathered light by
-    /// Per object (PatchSet::glossy's order): the cells' lobe, out-cell by in-cell, entries below 1e-4
-    /// of their in-cell's largest dropped (its column rescaled to keep its sum); empty for other objects.
+    /// Per object (PatchSet::glossy's order): the cells' lobe, out-cell by in-cell (cell_reflectance,
+    /// 4 x 4 incoming directions per cell); empty for other objects.
     std::vector<CellReflectance> reflectance;
+    /// The same lobes in single precision, as the march applies them, per object: lobe[object][out * M +
+    /// in]. (Dense: even at roughness 0.1 and R = 4 the out-cells that carry 99% of an in-cell's
+    /// reflection are two thirds of them, GGX's tails and the in-cells' spread of directions.)
+    std::vector<std::vector<float>> lobe;
     float step_m = 0.0f;                  ///< the in-cell to out-cell delay, metres: one bin
 
     bool empty() const { return glossy.empty(); }
@@ -53,6 +58,15 @@ struct GlossyRows {
     /// The cell of glossy patch `i` (slot[i] >= 0) that the direction `dir` (world, any length) leaves
     /// or arrives through.
     int cell_towards(const PatchSet& set, std::size_t i, const Vec3& dir) const;
+    /// The cells of glossy patch `i` about the direction `dir` (world) with their weights, as
+    /// HemisphereCells::interpolate: what the camera reads along its view.
+    void cells_about(const PatchSet& set, std::size_t i, const Vec3& dir, int cell[4], double weight[4]) const;
+    /// Glossy row i's patch's in-cells (i an out-cell: out_begin() <= i < patches + rows()): the first
+    /// in-cell's row, and the lobe's row of i's cell (M values, by in-cell).
+    std::uint32_t first_in_of(std::size_t i) const {
+        return std::uint32_t(patches + (i - out_begin()) / std::size_t(cells()) * std::size_t(cells()));
+    }
+    const float* lobe_row_of(const PatchSet& set, std::size_t i) const;
     /// Bytes held.
     std::size_t bytes() const;
 };

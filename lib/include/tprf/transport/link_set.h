@@ -105,9 +105,6 @@ struct HierarchyOptions {
     /// in bins, between 1 and kLongestMinLag (a fixed length would leave every pair within it as
     /// patch-to-patch links where bins are coarse against the patches).
     int min_lag_bins = 0;
-    /// The least min_lag_bins that its default (0) takes: 2 where glossy rows are added, whose links
-    /// from in-cells to out-cells one bin long must be shorter than the solver's blocks.
-    int least_lag_bins = 1;
     /// The most bins min_lag_bins is set to by default: the solver's longest window.
     static constexpr int kLongestMinLag = 32;
 };
@@ -145,8 +142,8 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
 /// patch: nothing) to a set built over `patches`: the rows as leaves after the patches (clusters and
 /// their links renumbered), their links merged into the rows in the order the solver expects
 /// (`bin_width_m`: the march's bins, as make_link_set's), set.glossy filled (glossy_rows.h). Returns the
-/// links added. Cost: every glossy patch against every patch, as the flat method, and the lobe's
-/// nonzero cell pairs per glossy patch.
+/// links added. Cost: every glossy patch against every patch, as the flat method (the lobe between its
+/// cells is no link: the march and the steady solve apply it, GlossyRows::lobe).
 std::uint64_t add_glossy_links(LinkSet& set, const PatchSet& patches, const Visibility& visibility,
                                const LinkOptions& options, double bin_width_m, int rings);
 
