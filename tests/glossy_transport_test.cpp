@@ -5,6 +5,7 @@
 // and hierarchical links give the same light.
 
 #include "tprf/imaging/camera.h"
+#include "tprf/pipeline/info.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 
@@ -241,6 +242,20 @@ TEST(GlossyTransport, ErrorAgainstTheResolution) {
                         roughness, rings, median, p90, e.ratios[e.ratios.size() / 10], e.ratios[e.ratios.size() / 2],
                         e.ratios[e.ratios.size() * 9 / 10], e.seconds, e.errors.size());
         }
+}
+
+TEST(GlossyTransport, TheEstimateCountsTheCellsRowsAndTheirMemory) {
+    const tprf::Scene without = tprf::parse_scene(corner(metal(0.8, 0.2), 0.1, 0).dump(), "glossy_transport_test.json");
+    const tprf::Scene with = tprf::parse_scene(corner(metal(0.8, 0.2), 0.1, 4).dump(), "glossy_transport_test.json");
+    const tprf::ResourceEstimate a = tprf::estimate_resources(without, {});
+    const tprf::ResourceEstimate b = tprf::estimate_resources(with, {});
+    // The floor is half the patches (100 of 200 at max_edge 0.1): 2 x 64 rows each.
+    EXPECT_EQ(a.glossy_rows, 0u);
+    EXPECT_NEAR(double(b.glossy_rows), 2.0 * 64 * 100, 0.2 * 2.0 * 64 * 100);
+    EXPECT_DOUBLE_EQ(b.glossy_lobe_fmas, double(b.glossy_rows) / 2.0 * 64);
+    EXPECT_GT(b.solver_bytes, a.solver_bytes);
+    EXPECT_GT(b.links, a.links);
+    EXPECT_GT(b.seconds.solve, a.seconds.solve);
 }
 
 TEST(GlossyTransport, ACaptureRefusesGlossyCells) {

@@ -170,6 +170,11 @@ constexpr double kSpreadSecondsPerLink = 2e-7;  // BM_SpreadPatchLinks: seconds_
 constexpr double kSteadySecondsPerLink = 3e-8;  // BM_SteadyState: seconds_per_link
 // Links through mirrors: ordered pairs of patches judged a second.
 constexpr double kMirrorPairsPerSecond = 1.0e6;  // BM_MirrorLinks: pairs_per_s
+// Glossy cells (links.glossy_resolution), measured on the glossy Cornell box of bench/RESULTS.md at R = 4:
+// one incoming direction of a lobe's cell reflectance (16 per cell), and one multiply-add of a lobe in
+// the march per channel.
+constexpr double kCellDirectionSeconds = 1.3e-3;
+constexpr double kLobeSeconds = 8e-10;
 
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
@@ -393,6 +398,33 @@ void estimate_mirror_links(const Scene& scene, const PatchCensus& census, Resour
     e.seconds.links += pairs / kMirrorPairsPerSecond;
 }
 
+// The glossy patches' cells (transport/glossy_rows.h): 2 M rows per glossy patch (the census' share of
+// glossy samples), links from every patch each faces into its in-cells and from its out-cells to every
+// patch facing it, M^2 multiply-adds per glossy patch and bin; each distinct lobe's cell reflectance.
+void estimate_glossy(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
+    const int rings = scene.links.glossy_resolution;
+    if (rings <= 0 || census.samples.empty()) return;
+    std::size_t on_glossy = 0;
+    for (const PatchSample& s : census.samples) on_glossy += scene.objects[s.object].material.glossy();
+    if (on_glossy == 0) return;
+    const double g = double(census.patches) * double(on_glossy) / double(census.samples.size());
+    const double m = 4.0 * rings * rings;
+    std::vector<std::array<double, 3>> lobes;  // the distinct lobes: model, roughness, ior
+    for (const Object& o : scene.objects)
+        if (o.material.glossy()) {
+            const std::array<double, 3> key{double(o.material.type == MaterialType::Plastic), o.material.roughness,
+                                            o.material.ior};
+            if (std::find(lobes.begin(), lobes.end(), key) == lobes.end()) lobes.push_back(key);
+        }
+    const double links = 2.0 * shares.facing * g * double(census.patches);
+    e.glossy_rows = to_size(2.0 * m * g);
+    e.glossy_lobe_fmas = g * m * m;
+    e.links += to_size(links);
+    e.link_bytes += to_size(double(Links::kLinkBytes) * links + double(Links::kRowBytes) * 2.0 * m * g);
+    e.link_build_bytes = std::max(e.link_build_bytes, to_size(double(link_build_sizes().mirror_link) * links));
+    e.seconds.links += 0.5 * links / kPairsPerSecond + double(lobes.size()) * 16.0 * m * kCellDirectionSeconds;
+}
+
 // Area sources as illuminate() makes them (light_sources.h): one per side of an emissive rectangle,
 // one per emissive patch of a mesh. Returns their count and, summed over them, the bins their paths
 // span from a patch (their diameter in bins, plus one for where the patch's points fall).
@@ -455,8 +487,8 @@ MarchEstimate estimate_march(const Scene& scene, const PatchCensus& census, cons
     MarchEstimate m;
     m.max_lag = int(std::min(census.diagonal / bin_m, 1e8));
     MarchInputs in;
-    in.patches = census.patches;
-    in.nodes = e.nodes;
+    in.patches = census.patches + e.glossy_rows;
+    in.nodes = e.nodes + e.glossy_rows;
     in.links = e.links;
     in.clusters = hierarchical && e.nodes > census.patches;
     in.cluster_block_bins = hierarchical ? cluster_block_bins(census, bin_m) : 0;
@@ -509,6 +541,7 @@ std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCe
     // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
     if (scene.links.method == LinkMethod::Hierarchical)
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * double(census.patches) * scene.time.bins);
+    e.seconds.solve += e.glossy_lobe_fmas * scene.time.bins * s.layers.fed * s.lanes * kLobeSeconds;
     if (!scene.capture || scene.camera) return {one.inputs, 0.0};
     const MarchEstimate all = estimate_march(scene, census, shares, e, options, kMaxBatch);
     return {one.inputs, std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1)};
@@ -530,7 +563,8 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
         if (scene.sensor) measurements = pixels * (measurement_count(*scene.sensor, scene.time) * 3 + 1) * 4;
     }
     e.cube_bytes = to_size(cube);
-    const double steady = 12.0 * n * 8;  // BiCGSTAB's vectors, one channel at a time, and the N radiosities
+    // BiCGSTAB's vectors, one channel at a time, and the radiosities (of the glossy rows too)
+    const double steady = 12.0 * (n + double(e.glossy_rows)) * 8;
     e.write_bytes = to_size(steady + image + measurements);
     e.seconds.write = kWriteSeconds + (cube + measurements) / kCubeBytesPerSecond +
                       kSteadySecondsPerLink * double(e.links);
@@ -676,6 +710,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     e.facing_fraction = shares.facing;
     estimate_links(marched, census, shares, e);
     estimate_mirror_links(marched, census, e);
+    estimate_glossy(marched, census, shares, e);
     estimate_camera(scene, census, shares, e);
     const auto [march, per_illumination] = estimate_solver(marched, census, shares, solver, e);
     estimate_outputs(scene, census, patch_profiles, e);

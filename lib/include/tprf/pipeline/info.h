@@ -60,6 +60,8 @@ struct ResourceEstimate {
     std::size_t near_links = 0;          ///< hierarchical: facing patch pairs nearer than its shortest cluster link
     double near_gap_m = 0.0;             ///< hierarchical: that distance, metres
     std::size_t mirror_links = 0;        ///< of `links`, those through mirrors and glass
+    std::size_t glossy_rows = 0;         ///< rows of the glossy patches' cells (links.glossy_resolution)
+    double glossy_lobe_fmas = 0.0;       ///< the march's multiply-adds of their lobes per bin and channel
     double facing_fraction = 0.0;        ///< share of sampled patch pairs that face each other
     int channels = 3;                    ///< 1 for a grey scene
     int ring_bins = 0;                   ///< history per node and layer
