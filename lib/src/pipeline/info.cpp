@@ -174,7 +174,7 @@ constexpr double kMirrorPairsPerSecond = 1.0e6;  // BM_MirrorLinks: pairs_per_s
 // one incoming direction of a lobe's cell reflectance (16 per cell), and one multiply-add of a lobe in
 // the march per channel.
 constexpr double kCellDirectionSeconds = 1.3e-3;
-constexpr double kLobeSeconds = 8e-10;
+constexpr double kLobeSeconds = 4e-10;
 
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }

@@ -112,9 +112,8 @@ void GlossyRows::cells_about(const PatchSet& set, std::size_t i, const Vec3& dir
     HemisphereCells(rings).interpolate(Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized(), cell, weight);
 }
 
-const float* GlossyRows::lobe_row_of(const PatchSet& set, std::size_t i) const {
-    const std::size_t j = i - out_begin(), m = std::size_t(cells());
-    return lobe[set.object[glossy[j / m]]].data() + (j % m) * m;
+const float* GlossyRows::lobe_of_patch(const PatchSet& set, std::size_t g) const {
+    return lobe[set.object[glossy[g]]].data();
 }
 
 std::size_t GlossyRows::bytes() const {
@@ -143,7 +142,11 @@ GlossyRows make_glossy_rows(const PatchSet& patches, int rings, double bin_width
                 ++same;
             rows.reflectance[k] =
                 same < k ? rows.reflectance[same] : cell_reflectance(*brdf, cells, kCellSamples);
-            rows.lobe[k].assign(rows.reflectance[k].lobe.begin(), rows.reflectance[k].lobe.end());
+            const std::size_t m = std::size_t(rows.cells());
+            rows.lobe[k].resize(m * m);
+            for (std::size_t in = 0; in < m; ++in)
+                for (std::size_t out = 0; out < m; ++out)
+                    rows.lobe[k][in * m + out] = float(rows.reflectance[k].lobe[out * m + in]);
         }
     rows.slot.assign(patches.size(), -1);
     for (std::size_t i = 0; i < patches.size(); ++i)

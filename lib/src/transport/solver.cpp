@@ -55,7 +55,9 @@ public:
           m_out_total(plan.patches * std::size_t(plan.emit_bins()) * std::size_t(plan.illuminations) * 3),
           m_out_terms(std::size_t(plan.layers.terms) * plan.patches * std::size_t(plan.emit_bins()) *
                       std::size_t(plan.illuminations) * 3),
-          m_tile_sums(std::size_t(plan.threads), std::vector<float>(plan.tile_sum_floats())) {
+          m_tile_sums(std::size_t(plan.threads), std::vector<float>(plan.tile_sum_floats())),
+          m_lobe_out(std::size_t(plan.layer_count),
+                     std::vector<float>(plan.set->glossy.rows() / 2 * std::size_t(plan.lanes), 0.0f)) {
         if (plan.same_bin())
             for (int k = 0; k < plan.sweep_buffers(); ++k)
                 m_sweep[k].assign(std::size_t(plan.layer_count) * plan.sweep_rows.size() * std::size_t(plan.lanes), 0.0f);
@@ -115,8 +117,7 @@ private:
     void short_pass_lanes(std::int64_t b0);
     template <int CT>
     void short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed);
-    template <int CT>
-    void add_lobe(int layer, std::size_t i, std::int64_t bin, float* g) const;
+    void lobe_products(std::size_t g, std::int64_t bin);
     // g += the short links (or the same-bin links), grey and tinted, of the patch at position q at `bin`,
     // from layer src.
     template <int CT>
@@ -164,6 +165,9 @@ private:
     std::vector<float> m_out_total, m_out_terms;
     // Per thread: a receiver tile's sums over its source tiles (SolvePlan::tile_sum_floats).
     std::vector<std::vector<float>> m_tile_sums;
+    /// Per layer, every glossy patch's out-cells' lobe products of the bin (lane-major within a patch:
+    /// [(g * lanes + lane) * M + cell]), made before the bin's rows (lobe_products).
+    std::vector<std::vector<float>> m_lobe_out;
     std::int64_t m_out_lo = 0;
     int m_out_bins = 0;
     // The Jacobi sweep's max-reductions per lane, by the sweep's parity (a thread still reading one
@@ -339,26 +343,27 @@ void March::add_short_links(int src, std::size_t q, std::int64_t bin, float* g) 
     for (int c = 0; c < C; ++c) g[c] += sum[c];
 }
 
-template <int CT>
-void March::add_lobe(int layer, std::size_t i, std::int64_t bin, float* g) const {
+// Glossy patch g's out-cells at `bin`: its lobe over its in-cells of the bin before, every layer and
+// lane, into m_lobe_out. A sum over in-cells of a column of the lobe times one in-cell's value (the
+// lobe is stored in-cell by in-cell), so that the inner loop runs over the out-cells in one vector.
+void March::lobe_products(std::size_t g, std::int64_t bin) {
     const SolvePlan& p = m_plan;
-    const int C = CT > 0 ? CT : p.lanes;
     const GlossyRows& rows = p.set->glossy;
-    const float* lobe = rows.lobe_row_of(*p.patches_of, i);
-    const float* h = recent(layer, p.position[rows.first_in_of(i)], bin - 1);  // the in-cells, one after the other
-    const int m = rows.cells();  // a multiple of 4
-    if (C == 1) {  // four partial sums, which the compiler keeps in one vector
-        float part[4] = {0.0f, 0.0f, 0.0f, 0.0f};
-        for (int c = 0; c < m; c += 4)
-            for (int e = 0; e < 4; ++e) part[e] += lobe[c + e] * h[c + e];
-        g[0] += (part[0] + part[1]) + (part[2] + part[3]);
-        return;
+    const std::size_t m = std::size_t(rows.cells()), C = std::size_t(p.lanes);
+    const float* lobe = rows.lobe_of_patch(*p.patches_of, g);
+    for (int l = 0; l < p.layer_count; ++l) {
+        const float* h = recent(l, p.position[rows.in_row(g, 0)], bin - 1);  // the in-cells, one after the other
+        float* out = m_lobe_out[std::size_t(l)].data() + g * C * m;
+        std::fill_n(out, C * m, 0.0f);
+        for (std::size_t in = 0; in < m; ++in) {
+            const float* column = lobe + in * m;
+            for (std::size_t ch = 0; ch < C; ++ch) {
+                const float v = h[in * C + ch];
+                float* o = out + ch * m;
+                for (std::size_t c = 0; c < m; ++c) o[c] += column[c] * v;
+            }
+        }
     }
-    float sum[CT > 0 ? CT : kMaxLanes];
-    std::fill_n(sum, C, 0.0f);
-    for (int c = 0; c < m; ++c)
-        for (int ch = 0; ch < C; ++ch) sum[ch] += lobe[c] * h[std::size_t(c) * std::size_t(C) + std::size_t(ch)];
-    for (int ch = 0; ch < C; ++ch) g[ch] += sum[ch];
 }
 
 template <int CT>
@@ -395,7 +400,11 @@ void March::short_links_of(std::size_t q, std::int64_t b0, int o, float* fixed) 
         }
         if (src >= 0) add_short_links<CT>(src, q, bin, g);
         // A glossy out-cell: its lobe over its in-cells' light of the same order, one bin before.
-        if (const std::size_t i = p.order[q]; i >= p.out_begin) add_lobe<CT>(l, i, bin, g);
+        if (const std::size_t i = p.order[q]; i >= p.out_begin) {
+            const std::size_t m = std::size_t(p.set->glossy.cells()), j = i - p.out_begin;
+            const float* lobe = m_lobe_out[std::size_t(l)].data() + (j / m) * std::size_t(C) * m + j % m;
+            for (int c = 0; c < C; ++c) g[c] += lobe[std::size_t(c) * m];
+        }
         float b[CT > 0 ? CT : kMaxLanes];
         for (int c = 0; c < C; ++c) b[c] = m_emit[std::size_t(l)][at + std::size_t(c)] + albedo[c] * g[c];
         float* keep = m_base.data() + state_at(l, q);
@@ -588,6 +597,11 @@ void March::short_pass_lanes(std::int64_t b0) {
             std::fill_n(m_fixed, p.lanes, 0.0f);
         }
         if (m_stop) break;
+        // The glossy patches' lobes (their in-cells of the bin before are final).
+        if (!p.set->glossy.empty()) {
+#pragma omp for schedule(static)
+            for (std::size_t g = 0; g < p.set->glossy.glossy.size(); ++g) lobe_products(g, b0 + o);
+        }
         float fixed[kMaxLanes];
         std::fill_n(fixed, p.lanes, 0.0f);
         // Each thread its share of the positions, balanced by their links (SolvePlan::short_split).

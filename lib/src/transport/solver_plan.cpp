@@ -395,7 +395,6 @@ void plan_sweeps(const PatchSet& patches, SolvePlan& plan) {
 void split_positions(SolvePlan& plan) {
     auto work = [&](std::size_t q) {
         std::uint64_t w = kShortPatchLinks + (plan.short_row[q + 1] - plan.short_row[q]);
-        if (plan.order[q] >= plan.out_begin) w += std::uint64_t(plan.set->glossy.cells());  // its lobe's row
         if (!plan.tinted_short_row.empty()) w += plan.tinted_short_row[q + 1] - plan.tinted_short_row[q];
         return w;
     };

@@ -29,10 +29,11 @@ double row_sum(const Links& links, const Eigen::VectorXd& v, std::size_t i, int 
 
 // Glossy out-cell i's lobe over its patch's in-cells in x (glossy_rows.h).
 double lobe_sum(const PatchSet& patches, const GlossyRows& rows, const Eigen::VectorXd& x, std::size_t i) {
-    const float* lobe = rows.lobe_row_of(patches, i);
+    const std::size_t m = std::size_t(rows.cells()), j = i - rows.out_begin();
+    const float* lobe = rows.lobe_of_patch(patches, j / m);  // in-cell by in-cell
     const Eigen::Index first = Eigen::Index(rows.first_in_of(i));
     double s = 0.0;
-    for (int c = 0; c < rows.cells(); ++c) s += double(lobe[c]) * x[first + c];
+    for (std::size_t c = 0; c < m; ++c) s += double(lobe[c * m + j % m]) * x[first + Eigen::Index(c)];
     return s;
 }
 

@@ -38,8 +38,8 @@ struct GlossyRows {
     /// Per object (PatchSet::glossy's order): the cells' lobe, out-cell by in-cell (cell_reflectance,
     /// 4 x 4 incoming directions per cell); empty for other objects.
     std::vector<CellReflectance> reflectance;
-    /// The same lobes in single precision, as the march applies them, per object: lobe[object][out * M +
-    /// in]. (Dense: even at roughness 0.1 and R = 4 the out-cells that carry 99% of an in-cell's
+    /// The same lobes in single precision, as the march applies them, per object, in-cell by in-cell:
+    /// lobe[object][in * M + out]. (Dense: even at roughness 0.1 and R = 4 the out-cells that carry 99% of an in-cell's
     /// reflection are two thirds of them, GGX's tails and the in-cells' spread of directions.)
     std::vector<std::vector<float>> lobe;
     float step_m = 0.0f;                  ///< the in-cell to out-cell delay, metres: one bin
@@ -62,11 +62,12 @@ struct GlossyRows {
     /// HemisphereCells::interpolate: what the camera reads along its view.
     void cells_about(const PatchSet& set, std::size_t i, const Vec3& dir, int cell[4], double weight[4]) const;
     /// Glossy row i's patch's in-cells (i an out-cell: out_begin() <= i < patches + rows()): the first
-    /// in-cell's row, and the lobe's row of i's cell (M values, by in-cell).
+    /// in-cell's row.
     std::uint32_t first_in_of(std::size_t i) const {
         return std::uint32_t(patches + (i - out_begin()) / std::size_t(cells()) * std::size_t(cells()));
     }
-    const float* lobe_row_of(const PatchSet& set, std::size_t i) const;
+    /// Glossy patch g's lobe (`lobe`'s layout).
+    const float* lobe_of_patch(const PatchSet& set, std::size_t g) const;
     /// Bytes held.
     std::size_t bytes() const;
 };
