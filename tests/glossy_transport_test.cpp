@@ -1,8 +1,8 @@
 // Glossy patches in the transport (links.glossy_resolution, transport/glossy_rows.h): answers fixed in
 // advance: a wall's light reflected by a metal floor against the integral over the wall written here;
 // and the method's own invariants. A lobe of reflectance 0 leaves a Lambertian surface of the same
-// albedo; the time integral of the cube is the steady solve; the bounce cubes add up to the cube; flat
-// and hierarchical links give the same light.
+// albedo (in a camera's render and in a capture); the time integral of the cube is the steady solve; the
+// bounce cubes add up to the cube; flat and hierarchical links give the same light.
 
 #include "tprf/imaging/camera.h"
 #include "tprf/pipeline/info.h"
@@ -258,19 +258,69 @@ TEST(GlossyTransport, TheEstimateCountsTheCellsRowsAndTheirMemory) {
     EXPECT_GT(b.seconds.solve, a.seconds.solve);
 }
 
-TEST(GlossyTransport, ACaptureRefusesGlossyCells) {
-    json scene = corner(metal(0.8, 0.2), 0.1, 4);
-    scene.erase("camera");
-    scene.erase("lights");
-    scene["capture"] = {{"type", "confocal"},
-                        {"laser", {{"position", {0.5, -1, 0.5}}, {"power", 1.0}}},
-                        {"sensor", {{"position", {0.5, -1, 0.5}}}},
-                        {"grid", {{"origin", {0.1, 1, 0.1}}, {"u", {0.8, 0, 0}}, {"v", {0, 0, 0.8}}, {"nu", 2}, {"nv", 2}}}};
+// A confocal capture: a diffuse relay wall at z = 0 and, 0.6 m in front of it, a hidden square facing
+// it, glossy or Lambertian; every bounce up to the sixth.
+json hidden_square(const json& material, double albedo, int rings, int grid_step = 1) {
+    json hidden = {{"type", "rectangle"}, {"origin", {-0.2, -0.2, 0.6}}, {"u", {0, 0.4, 0}}, {"v", {0.4, 0, 0}},
+                   {"albedo", albedo}};
+    if (!material.is_null()) hidden["material"] = material;
+    json capture = {{"type", "confocal"},
+                    {"laser", {{"position", {0, -1, 0.5}}, {"power", 1.0}}},
+                    {"sensor", {{"position", {0, -1, 0.5}}}},
+                    {"grid", {{"origin", {-0.4, -0.4, 0}}, {"u", {0.8, 0, 0}}, {"v", {0, 0.8, 0}}, {"nu", 4}, {"nv", 4}}},
+                    {"max_bounces", 6}};
+    if (grid_step > 1) capture["march_grid_step"] = grid_step;
+    return {{"time", {{"bins", 400}, {"bin_width", 0.01}, {"start", 0.0}, {"unit", "m"}}},
+            {"objects",
+             {{{"type", "rectangle"}, {"origin", {-0.5, -0.5, 0}}, {"u", {1, 0, 0}}, {"v", {0, 1, 0}}, {"albedo", 0.8}},
+              hidden}},
+            {"patches", {{"max_edge", 0.1}}},
+            {"links", {{"glossy_resolution", rings}}},
+            {"capture", capture}};
+}
+
+TEST(GlossyTransport, ACaptureOfAHiddenSquareWithALobeOfReflectanceZeroIsTheLambertianOne) {
+    const auto lambertian = render(hidden_square(nullptr, 0.5, 0));
+    const auto glossy = render(hidden_square({{"type", "glossy"}, {"reflectance", 0.0}, {"roughness", 0.3}}, 0.5, 4));
+    const tprf::FloatArray& a = array(lambertian, "capture");
+    const tprf::FloatArray& b = array(glossy, "capture");
+    EXPECT_GT(peak(a), 0.0);
+    EXPECT_LT(largest_difference(a, b), 1e-5 * peak(a));
+}
+
+TEST(GlossyTransport, AGlossyHiddenSquareSendsItsLobeIntoTheCapturesLaterBounces) {
+    // The same square as a metal of reflectance 0.5 (no diffuse part) and as a Lambertian square of albedo
+    // 0.5: each one's light is its capture less the wall's alone. Every value is finite, the hidden light
+    // is there, and the metal's differs from the Lambertian's (the BRDF, not albedo / pi).
+    const json metal_scene = hidden_square({{"type", "glossy"}, {"reflectance", 0.5}, {"roughness", 0.3}}, 0.0, 4);
+    json wall_scene = metal_scene;
+    wall_scene["objects"].erase(1);
+    const auto metal = render(metal_scene);
+    const auto lambertian = render(hidden_square(nullptr, 0.5, 0));
+    const auto wall = render(wall_scene);
+    const tprf::FloatArray& c = array(metal, "capture");
+    const tprf::FloatArray& l = array(lambertian, "capture");
+    const tprf::FloatArray& w = array(wall, "capture");
+    ASSERT_EQ(c.shape, w.shape);
+    double metal_light = 0.0, lambertian_light = 0.0, apart = 0.0;
+    for (std::size_t k = 0; k < c.data.size(); ++k) {
+        ASSERT_TRUE(std::isfinite(c.data[k]));
+        metal_light += c.data[k] - w.data[k];
+        lambertian_light += l.data[k] - w.data[k];
+        apart += std::abs(c.data[k] - l.data[k]);
+    }
+    EXPECT_GT(metal_light, 0.0);
+    EXPECT_GT(lambertian_light, 0.0);
+    EXPECT_GT(apart, 0.05 * lambertian_light);
+}
+
+TEST(GlossyTransport, ACaptureOnALatticeRefusesGlossyCells) {
     try {
-        (void)tprf::parse_scene(scene.dump(), "glossy_transport_test.json");
-        FAIL() << "a capture with glossy cells was accepted";
+        (void)tprf::parse_scene(hidden_square({{"type", "glossy"}, {"reflectance", 0.5}, {"roughness", 0.3}}, 0.0, 4, 2).dump(),
+                                "glossy_transport_test.json");
+        FAIL() << "a lattice with glossy cells was accepted";
     } catch (const std::exception& e) {
-        EXPECT_NE(std::string(e.what()).find("links.glossy_resolution"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("march_grid_step"), std::string::npos) << e.what();
     }
 }
 

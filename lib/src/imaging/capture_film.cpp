@@ -1,4 +1,5 @@
 #include "tprf/imaging/capture_film.h"
+#include "tprf/transport/glossy_rows.h"
 
 #include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
@@ -62,14 +63,23 @@ void exact_light(const CaptureScene& scene, const WallPair& pair, std::vector<Pa
 }
 
 std::vector<SensorTap> sensor_taps(const PatchSet& patches, const WallPoint& sensor, double leg,
-                                   const std::vector<PatchView>& views) {
+                                   const std::vector<PatchView>& views, const GlossyRows* glossy) {
+    if (glossy && glossy->empty()) glossy = nullptr;
     const Rgb albedo = patches.albedo[sensor.patch] / (M_PI * M_PI * kViewSamples);
     std::vector<SensorTap> taps;
     taps.reserve(views.size());
     for (const PatchView& v : views) {
         const MeanView m = mean_view(v);
         if (!(m.sum > 0.0)) continue;
-        taps.push_back({v.patch, albedo * v.tint * patches.area[v.patch] * m.sum, m.path + leg});
+        const Rgb weight = albedo * v.tint * patches.area[v.patch] * m.sum;
+        taps.push_back({v.patch, weight, m.path + leg});
+        if (!glossy || glossy->slot[v.patch] < 0) continue;
+        int cell[4];
+        double part[4];
+        glossy->cells_about(patches, v.patch, sensor.point - patches.centroid[v.patch], cell, part);
+        for (int e = 0; e < 4; ++e)
+            if (part[e] > 0.0)
+                taps.push_back({glossy->out_row(std::size_t(glossy->slot[v.patch]), cell[e]), weight * part[e], m.path + leg});
     }
     return taps;
 }

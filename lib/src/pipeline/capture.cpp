@@ -155,8 +155,9 @@ void solve_batch(const CaptureRun& run, const Batch& batch, CaptureResult& resul
     parallel_for(K, {run.options.threads, 1, true}, [&](std::size_t k) {
         const std::size_t l = batch.lasers[k];
         illuminations[k] = spot_pulses(p.patches, wall_spot(p.points.laser[l], p.capture.laser_power, p.laser_leg(l)),
-                                       batch.laser_views[k], p.march);
-        if (p.confocal) taps[k] = {sensor_taps(p.patches, p.points.sensor[l], p.sensor_leg(l), batch.laser_views[k])};
+                                       batch.laser_views[k], p.march, &run.links->glossy);
+        if (p.confocal)
+            taps[k] = {sensor_taps(p.patches, p.points.sensor[l], p.sensor_leg(l), batch.laser_views[k], &run.links->glossy)};
     });
     std::vector<const Illumination*> marched;
     for (const Illumination& i : illuminations) marched.push_back(&i);
@@ -381,7 +382,8 @@ CaptureResult compute_capture(const Scene& scene, const PatchSet& patches, const
         sensors.views = view_all(p, p.points.sensor, 0, p.sensors, options.threads);
         if (p.solve)
             for (std::size_t s = 0; s < p.sensors; ++s)
-                sensors.taps.push_back(sensor_taps(p.patches, p.points.sensor[s], p.sensor_leg(s), sensors.views[s]));
+                sensors.taps.push_back(
+                    sensor_taps(p.patches, p.points.sensor[s], p.sensor_leg(s), sensors.views[s], &links->glossy));
         share.seconds_views += seconds_from(t0);
     }
     compute_share(run, {first, last}, sensors, result, share);

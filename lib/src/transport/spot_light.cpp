@@ -1,4 +1,5 @@
 #include "tprf/transport/spot_light.h"
+#include "tprf/transport/glossy_rows.h"
 
 #include "tprf/core/time_axis.h"
 #include "tprf/geometry/patches.h"
@@ -102,7 +103,9 @@ void third_bounce(const PatchSet& patches, const ThirdBounce& ends, std::vector<
 }
 
 Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const std::vector<PatchView>& views,
-                         const TimeAxis& time) {
+                         const TimeAxis& time, const GlossyRows* glossy) {
+    if (glossy && glossy->empty()) glossy = nullptr;
+    std::vector<std::vector<Pulse>> cells(glossy ? glossy->rows() : 0);
     const Rgb exitance = patches.albedo[spot.patch] * spot.power / (M_PI * kViewSamples);
     const double leg = spot.path;
     const BinMap map = time.bin_map();
@@ -120,14 +123,31 @@ Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const s
             if (!(share > 0.0)) continue;
             Pulse pulse;
             pulse.path = start + (whole + side + 0.5) * bin_width;  // the middle of its bin
-            pulse.energy = patches.albedo[v.patch] * exitance * v.tint * (m.sum * share);
+            const Rgb irradiance = exitance * v.tint * (m.sum * share);
+            pulse.energy = patches.albedo[v.patch] * irradiance;
             pulse.order = 2;
             pulse.point_source = 0;
             out.pulses.push_back(pulse);
             ++out.row[v.patch + 1];
+            if (!glossy || glossy->slot[v.patch] < 0) continue;
+            // A glossy patch's lobe: its out-cells through the cells' reflectance from the spot's cell.
+            const std::size_t g = std::size_t(glossy->slot[v.patch]);
+            const CellReflectance& r = glossy->reflectance[patches.object[v.patch]];
+            const int from = glossy->cell_towards(patches, v.patch, spot.point - patches.centroid[v.patch]);
+            const Rgb colour = patches.brdf(v.patch)->lobe_colour() * irradiance;
+            for (int c = 0; c < r.cells; ++c)
+                if (const double w = r.lobe_at(c, from); w > 0.0) {
+                    Pulse q = pulse;
+                    q.energy = colour * w;
+                    cells[glossy->out_row(g, c) - patches.size()].push_back(q);
+                }
         }
     }
     for (std::size_t i = 0; i < patches.size(); ++i) out.row[i + 1] += out.row[i];
+    for (std::size_t r = 0; r < cells.size(); ++r) {
+        out.pulses.insert(out.pulses.end(), cells[r].begin(), cells[r].end());
+        out.row.push_back(out.pulses.size());
+    }
     return out;
 }
 

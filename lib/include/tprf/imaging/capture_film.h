@@ -19,6 +19,8 @@
 
 namespace tprf {
 
+struct GlossyRows;
+
 struct PatchSet;
 struct Illumination;
 class Visibility;
@@ -80,8 +82,10 @@ struct SensorTap {
 
 /// A sensor point's taps on the patches it sees (`views`, PatchViewer::view), one per view with any
 /// light, in the views' order (patch order): `leg` (its device leg, or 0) joins every tap's.
+/// With `glossy` rows (not empty), a glossy patch's tap is joined by taps on its out-cells about the
+/// direction to the sensor point (GlossyRows::cells_about), the same weight shared among them.
 std::vector<SensorTap> sensor_taps(const PatchSet& patches, const WallPoint& sensor, double leg,
-                                   const std::vector<PatchView>& views);
+                                   const std::vector<PatchView>& views, const GlossyRows* glossy = nullptr);
 
 /// Films a batch of laser points marched together (lane k of every block is laser point k's
 /// illumination) at their sensor points, into their rows of H. Each lane's profiles, less the pulses

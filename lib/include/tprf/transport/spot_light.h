@@ -15,6 +15,8 @@
 
 namespace tprf {
 
+struct GlossyRows;
+
 struct PatchSet;
 struct TimeAxis;
 class Visibility;
@@ -75,8 +77,10 @@ void third_bounce(const PatchSet& patches, const ThirdBounce& ends, std::vector<
 /// `views`, what the spot sees) plus the spot's path, split between the two bins of the march about it
 /// as a tap splits its leg, each piece in the middle of its bin. The pulses are order 2 and belong to
 /// point source 0 (the spot): a film takes them out of the profiles again (their light is
-/// third_bounce's, exact per sample); they only feed the later reflections.
+/// third_bounce's, exact per sample); they only feed the later reflections. With `glossy` rows (not
+/// empty), a glossy patch's pulse also goes to its out-cells through the lobe from the spot's direction
+/// (the rows after the patches: the CSR has a row for each).
 Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const std::vector<PatchView>& views,
-                         const TimeAxis& time);
+                         const TimeAxis& time, const GlossyRows* glossy = nullptr);
 
 }  // namespace tprf
