@@ -199,6 +199,9 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     if (s.mirror_links > 0)
         std::printf("mirrors  %llu of the links go through mirrors and glass\n",
                     static_cast<unsigned long long>(s.mirror_links));
+    if (s.glossy_rows > 0)
+        std::printf("glossy   %zu patches with directional cells, %zu rows of the march (links.glossy_resolution %d)\n",
+                    s.glossy_patches, s.glossy_rows, scene.links.glossy_resolution);
     print_time(scene);
     std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
     return 0;

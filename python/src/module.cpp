@@ -266,6 +266,7 @@ py::dict info(const PyScene& s, int threads, bool links, const py::object& progr
     d["max_edge"] = summary.max_edge;
     d["links"] = summary.links;
     d["mirror_links"] = summary.mirror_links;
+    d["glossy_rows"] = summary.glossy_rows;
     d["link_bytes"] = summary.link_bytes;
     d["clusters"] = summary.clusters;
     d["seconds"] = py::dict(py::arg("patches") = summary.seconds_patches, py::arg("links") = summary.seconds_links);

@@ -72,6 +72,8 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
         s.candidates = stats.candidates;
     }
     s.mirror_links = add_mirror_links(links, patches, visibility, link_options, bin_m);
+    s.glossy_patches = links.glossy.glossy.size();
+    s.glossy_rows = links.glossy.rows();
     s.links = links.links.size();
     s.link_bytes = links.bytes();
     s.pairs_tested = link_stats.pairs_tested;
@@ -171,10 +173,11 @@ constexpr double kSteadySecondsPerLink = 3e-8;  // BM_SteadyState: seconds_per_l
 // Links through mirrors: ordered pairs of patches judged a second.
 constexpr double kMirrorPairsPerSecond = 1.0e6;  // BM_MirrorLinks: pairs_per_s
 // Glossy cells (links.glossy_resolution), measured on the glossy Cornell box of bench/RESULTS.md at R = 4:
-// one incoming direction of a lobe's cell reflectance (16 per cell), and one multiply-add of a lobe in
-// the march per channel.
+// one incoming direction of a lobe's cell reflectance (16 per cell), one multiply-add of a lobe in the
+// march per channel, and a glossy row's bin in the bin-by-bin pass and the rings besides.
 constexpr double kCellDirectionSeconds = 1.3e-3;
 constexpr double kLobeSeconds = 4e-10;
+constexpr double kGlossyRowBinSeconds = 1.9e-8;
 
 // A count or a byte size from the model's doubles, held under 1e18 so that sums of them cannot overflow.
 std::size_t to_size(double v) { return v >= 1e18 ? std::size_t(1e18) : v > 0.0 ? std::size_t(v) : 0; }
@@ -541,7 +544,8 @@ std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCe
     // Hierarchical sets are bound by the bin-by-bin pass and the windows, per patch and bin.
     if (scene.links.method == LinkMethod::Hierarchical)
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * double(census.patches) * scene.time.bins);
-    e.seconds.solve += e.glossy_lobe_fmas * scene.time.bins * s.layers.fed * s.lanes * kLobeSeconds;
+    e.seconds.solve += (e.glossy_lobe_fmas * s.lanes * kLobeSeconds + double(e.glossy_rows) * kGlossyRowBinSeconds) *
+                       scene.time.bins * s.layers.fed;
     if (!scene.capture || scene.camera) return {one.inputs, 0.0};
     const MarchEstimate all = estimate_march(scene, census, shares, e, options, kMaxBatch);
     return {one.inputs, std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1)};

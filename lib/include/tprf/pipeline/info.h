@@ -22,6 +22,8 @@ struct SceneSummary {
     std::size_t link_bytes = 0;
     std::uint64_t pairs_tested = 0; ///< unordered pairs facing each other (flat)
     std::uint64_t mirror_links = 0; ///< of `links`, those through mirrors and glass (both directions)
+    std::size_t glossy_patches = 0; ///< patches with directional cells (links.glossy_resolution > 0)
+    std::size_t glossy_rows = 0;    ///< their rows in the march (2 x 4 R^2 each)
     std::size_t clusters = 0;       ///< clusters of the tree (hierarchical)
     std::uint64_t cluster_links = 0;///< links with a cluster at either end, pieces counted once (hierarchical)
     std::uint64_t patch_links = 0;  ///< patch-to-patch links (hierarchical)
