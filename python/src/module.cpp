@@ -179,13 +179,29 @@ py::dict arrays_dict(const std::shared_ptr<Owner>& r) {
 }
 
 // A scene (or sensor) given as a dict: its JSON text through Python's json module, so that the
-// parser sees exactly what a file with the same content would hold.
+// parser sees exactly what a file with the same content would hold. numpy's scalars and arrays (whatever
+// has `tolist`) are written as the numbers and lists they hold.
 std::string json_text(const py::dict& d) {
-    return py::module_::import("json").attr("dumps")(d, py::arg("allow_nan") = true).cast<std::string>();
+    const py::cpp_function plain([](const py::object& o) -> py::object {
+        if (py::hasattr(o, "tolist")) return o.attr("tolist")();
+        throw py::type_error("Object of type " + py::str(py::type::of(o).attr("__name__")).cast<std::string>() +
+                             " is not JSON serializable");
+    });
+    return py::module_::import("json")
+        .attr("dumps")(d, py::arg("allow_nan") = true, py::arg("default") = plain)
+        .cast<std::string>();
+}
+
+// `defines` as -D takes them: each name with its value as text (str() of any scalar: 4, 0.5, "x").
+tprf::XmlDefines define_texts(const py::dict& defines) {
+    tprf::XmlDefines out;
+    for (const auto& [name, value] : defines) out[py::str(name).cast<std::string>()] = py::str(value).cast<std::string>();
+    return out;
 }
 
 PyScene load_scene(const py::object& source, std::optional<double> max_edge, const py::object& base,
-                   const tprf::XmlDefines& defines) {
+                   const py::dict& define_values) {
+    const tprf::XmlDefines defines = define_texts(define_values);
     tprf::Scene scene;
     if (py::isinstance<py::dict>(source)) {
         if (!defines.empty()) throw tprf::Error("defines: apply to Mitsuba XML scene files only, not to a dict");
@@ -386,7 +402,7 @@ PYBIND11_MODULE(_tprf, m) {
         });
 
     m.def("load_scene", &load_scene, py::arg("scene"), py::arg("max_edge") = py::none(), py::arg("base") = py::none(),
-          py::arg("defines") = tprf::XmlDefines{},
+          py::arg("defines") = py::dict(),
           "Loads a scene from a file path (JSON, or Mitsuba 3 XML with `defines` as -D name=value) or a dict "
           "(the scene JSON of docs/scene.md); `base`: the folder that a dict's relative mesh paths start from (default: the "
           "working directory). Raises tprf.Error (a ValueError).");

@@ -260,3 +260,23 @@ def test_a_capture_equals_the_command_lines_capture(tmp_path):
     assert on_disk.shape == (6, 6, 20, 3)
     assert np.array_equal(result.measurements, on_disk)
     assert np.array_equal(tprf.apply_sensor(result, GATES)["measurements"], on_disk)
+
+
+def test_numpy_values_in_a_dict_scene_and_any_scalar_in_defines():
+    # numpy scalars and arrays read as the numbers and lists they hold: the same scene as plain Python.
+    scene = copy.deepcopy(CORNER)
+    scene["time"]["bins"] = np.int64(300)
+    scene["camera"]["fov"] = np.float32(45.0)
+    scene["objects"][0]["origin"] = np.zeros(3)
+    scene["objects"][1]["albedo"] = np.array([0.5, 0.4, 0.3])
+    loaded, plain = tprf.load_scene(scene), tprf.load_scene(CORNER)
+    assert loaded.time == plain.time and loaded.objects == plain.objects
+    assert loaded.camera["fov"] == pytest.approx(45.0)
+    with pytest.raises(TypeError, match="not JSON serializable"):
+        tprf.load_scene({**CORNER, "patches": {"max_edge": object()}})
+    # defines: each value as its text, as -D name=value gives it.
+    xml = str(SOURCE / "meshes" / "cornell-box.xml")
+    as_text = tprf.load_scene(xml, defines={"res": "8", "bins": "32"})
+    as_ints = tprf.load_scene(xml, defines={"res": 8, "bins": np.int32(32)})
+    assert as_ints.camera["width"] == as_text.camera["width"] == 8
+    assert as_ints.time == as_text.time
