@@ -97,19 +97,38 @@ void cell_frame(const Vec3& n, Vec3& t, Vec3& b) {
     b = n.cross(t);
 }
 
-int GlossyRows::cell_towards(const PatchSet& set, std::size_t i, const Vec3& dir) const {
+namespace {
+
+// `dir` (world) in the frame of patch i's cells, unit.
+Vec3 in_cell_frame(const PatchSet& set, std::size_t i, const Vec3& dir) {
     const Vec3& n = set.normal[i];
     Vec3 t, b;
     cell_frame(n, t, b);
-    const Vec3 local = Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized();
-    return HemisphereCells(rings).cell_of(local);
+    return Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized();
+}
+
+}  // namespace
+
+int GlossyRows::cell_towards(const PatchSet& set, std::size_t i, const Vec3& dir) const {
+    return HemisphereCells(rings).cell_of(in_cell_frame(set, i, dir));
 }
 
 void GlossyRows::cells_about(const PatchSet& set, std::size_t i, const Vec3& dir, int cell[4], double weight[4]) const {
-    const Vec3& n = set.normal[i];
-    Vec3 t, b;
-    cell_frame(n, t, b);
-    HemisphereCells(rings).interpolate(Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized(), cell, weight);
+    HemisphereCells(rings).interpolate(in_cell_frame(set, i, dir), cell, weight);
+}
+
+void GlossyRows::lobe_pulses(const PatchSet& set, std::size_t i, const Vec3& from, const Pulse& pulse,
+                             const Rgb& irradiance, std::vector<std::vector<Pulse>>& cells) const {
+    const std::size_t g = std::size_t(slot[i]);
+    const CellReflectance& r = reflectance[set.object[i]];
+    const int c_in = cell_towards(set, i, from - set.centroid[i]);
+    const Rgb light = set.brdf(i)->lobe_colour() * irradiance;
+    for (int c = 0; c < r.cells; ++c)
+        if (const double w = r.lobe_at(c, c_in); w > 0.0) {
+            Pulse q = pulse;
+            q.energy = light * w;
+            cells[out_row(g, c) - patches].push_back(q);
+        }
 }
 
 const float* GlossyRows::lobe_of_patch(const PatchSet& set, std::size_t g) const {
@@ -213,15 +232,7 @@ Illumination glossy_illumination(const GlossyRows& rows, const PatchSet& patches
             } else {
                 continue;
             }
-            const CellReflectance& r = rows.reflectance[patches.object[i]];
-            const int c_in = rows.cell_towards(patches, i, from - patches.centroid[i]);
-            const Rgb colour = patches.brdf(i)->lobe_colour();
-            for (int c = 0; c < r.cells; ++c)
-                if (const double w = r.lobe_at(c, c_in); w > 0.0) {
-                    Pulse q = p;
-                    q.energy = irradiance * colour * w;
-                    extra[rows.out_row(std::size_t(g), c) - n].push_back(q);
-                }
+            rows.lobe_pulses(patches, i, from, p, irradiance, extra);
         }
         out.row[i + 1] = out.pulses.size();
     }

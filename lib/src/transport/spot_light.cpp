@@ -130,17 +130,8 @@ Illumination spot_pulses(const PatchSet& patches, const LaserSpot& spot, const s
             out.pulses.push_back(pulse);
             ++out.row[v.patch + 1];
             if (!glossy || glossy->slot[v.patch] < 0) continue;
-            // A glossy patch's lobe: its out-cells through the cells' reflectance from the spot's cell.
-            const std::size_t g = std::size_t(glossy->slot[v.patch]);
-            const CellReflectance& r = glossy->reflectance[patches.object[v.patch]];
-            const int from = glossy->cell_towards(patches, v.patch, spot.point - patches.centroid[v.patch]);
-            const Rgb colour = patches.brdf(v.patch)->lobe_colour() * irradiance;
-            for (int c = 0; c < r.cells; ++c)
-                if (const double w = r.lobe_at(c, from); w > 0.0) {
-                    Pulse q = pulse;
-                    q.energy = colour * w;
-                    cells[glossy->out_row(g, c) - patches.size()].push_back(q);
-                }
+            // A glossy patch's lobe: its out-cells through the cells' reflectance from the spot.
+            glossy->lobe_pulses(patches, v.patch, spot.point, pulse, irradiance, cells);
         }
     }
     for (std::size_t i = 0; i < patches.size(); ++i) out.row[i + 1] += out.row[i];

@@ -27,6 +27,7 @@ namespace tprf {
 
 struct PatchSet;
 struct Illumination;
+struct Pulse;
 struct LightSources;
 
 struct GlossyRows {
@@ -68,6 +69,11 @@ struct GlossyRows {
     }
     /// Glossy patch g's lobe (`lobe`'s layout).
     const float* lobe_of_patch(const PatchSet& set, std::size_t g) const;
+    /// Glossy patch i's share of a pulse that brings `irradiance` from the point `from`: one pulse per
+    /// out-cell the lobe reaches from the cell facing `from`, appended to cells[out_row - patches]
+    /// (`pulse` gives their time, order and source).
+    void lobe_pulses(const PatchSet& set, std::size_t i, const Vec3& from, const Pulse& pulse, const Rgb& irradiance,
+                     std::vector<std::vector<Pulse>>& cells) const;
     /// Bytes held.
     std::size_t bytes() const;
 };
