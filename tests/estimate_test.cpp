@@ -342,8 +342,8 @@ TEST(EstimateRules, AgreeWithTheCaptureMarch) {
     }
 }
 
-// Under a memory budget the capture chooses its batch by the rule the estimate applies (batch_that_fits),
-// each to its own sizes of the march: a budget of one illumination's march and 5.5 more lanes is 6 for both.
+// Under a memory budget the capture and the estimate choose the batch by one rule (capture_batch), each
+// on its own sizes of the march: a budget of one illumination's march and 5.5 more lanes is 6 for both.
 TEST(EstimateRules, CaptureBatchUnderABudget) {
     tprf::Scene scene = small_letter_capture();
     tprf::PipelineOptions roomy;
@@ -361,6 +361,9 @@ TEST(EstimateRules, CaptureBatchUnderABudget) {
     EXPECT_EQ(tprf::batch_that_fits(one, full, budget), 6);
     EXPECT_EQ(tprf::batch_that_fits(one, full, 0.5 * one), 1);
     EXPECT_EQ(tprf::batch_that_fits(one, full, 2.0 * full), tprf::kMaxBatch);
+    // Where the straight line promises more lanes than the march of that many needs, the rule takes one fewer.
+    const auto bulging = [&](int b) { return b == 6 ? budget + 1.0 : one + (b - 1) * (full - one) / (tprf::kMaxBatch - 1); };
+    EXPECT_EQ(tprf::capture_batch(bulging, budget), 5);
 
     const tprf::PatchSet patches = tprf::build_patches(scene);
     const tprf::Visibility visibility(patches);

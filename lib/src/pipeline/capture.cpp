@@ -195,20 +195,17 @@ int choose_batch(const CaptureSetup& p, const LinkSet& links, const CaptureOptio
     const int channels = march_channels(power[0] == power[1] && power[1] == power[2] && keeps_grey(p.patches, links.links));
     SolverOptions solver;
     solver.max_bounces = capture_march_bounces(p.capture);
-    const double one = double(solve_working_bytes(p.patches, links, p.march, solver, 1, channels));
-    const double all = double(solve_working_bytes(p.patches, links, p.march, solver, kMaxBatch, channels));
-    if (one > double(options.memory_bytes))
+    std::vector<double> sized(kMaxBatch + 1, -1.0);  // each size planned once (the plan sorts the lists)
+    const auto working = [&](int batch) {
+        double& bytes = sized[std::size_t(batch)];
+        if (bytes < 0.0) bytes = double(solve_working_bytes(p.patches, links, p.march, solver, batch, channels));
+        return bytes;
+    };
+    if (const double one = working(1); one > double(options.memory_bytes))
         throw Error("a capture's march needs about " + std::to_string(std::size_t(one / 1e6)) +
                     " MB for one illumination, over the memory left (" +
                     std::to_string(options.memory_bytes / 1000000) + " MB): raise --max-memory or patches.max_edge");
-    int batch = batch_that_fits(one, all, double(options.memory_bytes));
-    // The lane count also picks the march's kernels (a flat set's links are packed for 1, 3, 8, 16 and 24
-    // lanes, not for 48), so the straight line is checked where it lands (tprf info, which builds no
-    // links, stops at the straight line).
-    while (batch > 1 && double(solve_working_bytes(p.patches, links, p.march, solver, batch, channels)) >
-                            double(options.memory_bytes))
-        --batch;
-    return batch;
+    return capture_batch(working, double(options.memory_bytes));
 }
 
 // Laser points [first, last) of `rank`: whole units of `unit` laser points (a batch, so that every rank

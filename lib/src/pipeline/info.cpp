@@ -523,9 +523,8 @@ MarchEstimate estimate_march(const Scene& scene, const PatchCensus& census, cons
 }
 
 // The march and the films' kept profiles; the seconds of the solve. Returns the march's inputs for one
-// illumination and the bytes that one more illumination of a batch adds (a capture's, which marches
-// its laser points in batches).
-std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares,
+// illumination.
+MarchInputs estimate_solver(const Scene& scene, const PatchCensus& census, const PairShares& shares,
                                                const SolverOptions& options, ResourceEstimate& e) {
     e.channels = march_channels(scene_keeps_grey(scene));
     const MarchEstimate one = estimate_march(scene, census, shares, e, options, 1);
@@ -546,9 +545,7 @@ std::pair<MarchInputs, double> estimate_solver(const Scene& scene, const PatchCe
         e.seconds.solve = std::max(e.seconds.solve, kHierarchicalPatchBinSeconds * double(census.patches) * scene.time.bins);
     e.seconds.solve += (e.glossy_lobe_fmas * s.lanes * kLobeSeconds + double(e.glossy_rows) * kGlossyRowBinSeconds) *
                        scene.time.bins * s.layers.fed;
-    if (!scene.capture || scene.camera) return {one.inputs, 0.0};
-    const MarchEstimate all = estimate_march(scene, census, shares, e, options, kMaxBatch);
-    return {one.inputs, std::max(0.0, double(all.working_bytes) - double(one.working_bytes)) / (kMaxBatch - 1)};
+    return one.inputs;
 }
 
 // The memory-mapped cubes the solve fills (render_cubes: the transient cube, per-bounce cubes, patch
@@ -576,11 +573,11 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
 
 // A capture's H (and its time-first copy while it is written); a scene with only a capture that stops at
 // the third bounce builds no links and marches nothing. A capture that marches solves its laser points
-// in batches of B illuminations, as pipeline/capture.cpp chooses B: the most, up to kMaxBatch, whose
-// lanes fit in the limit beside everything else held then (B = 1 when none fit: the peak then exceeds
-// the limit and the render is refused). ceil(L / B) marches are run, each costing 1 + (B - 1) x
-// kBatchLaneCost single ones.
-void estimate_capture(const Scene& scene, const PipelineOptions& options, double per_illumination,
+// in batches of B illuminations, B by the capture's own rule (capture_batch) applied to this model of
+// its march (`marched(B)`: working bytes) within the limit less everything else held then (B = 1 when
+// none fit: the peak then exceeds the limit and the render is refused). ceil(L / B) marches are run,
+// each costing 1 + (B - 1) x kBatchLaneCost single ones.
+void estimate_capture(const Scene& scene, const PipelineOptions& options, const std::function<double(int)>& marched,
                       ResourceEstimate& e) {
     if (!scene.capture) return;
     e.cube_bytes += to_size(2.0 * double(scene.capture->pairs()) * scene.time.bins * 4);
@@ -597,13 +594,12 @@ void estimate_capture(const Scene& scene, const PipelineOptions& options, double
     if (scene.capture->march_grid_step > 1)
         e.solver_bytes += to_size(double(lasers) * (double(scene.time.bins) * 4.0 + double(e.patches) * 16.0));
     const std::size_t limit = memory_limit_bytes(options);
-    const double one = double(e.solver_bytes), fixed = one - per_illumination;  // fixed: what does not grow
+    const double fixed = double(e.solver_bytes) - marched(1);  // what does not grow with the batch
     const double beside = double(e.base_bytes + e.patch_bytes + e.visibility_bytes + e.link_bytes + e.cube_bytes);
-    const int batch = limit > 0 ? batch_that_fits(one, one + (kMaxBatch - 1) * per_illumination, double(limit) - beside)
-                                : kMaxBatch;
+    const int batch = limit > 0 ? capture_batch(marched, double(limit) - beside - fixed) : kMaxBatch;
     e.capture_batch = batch;
     e.capture_marches = (lasers + std::size_t(batch) - 1) / std::size_t(batch);
-    e.solver_bytes = to_size(fixed + batch * per_illumination);
+    e.solver_bytes = to_size(fixed + marched(batch));
     e.seconds.solve *= double(e.capture_marches) * (1.0 + (batch - 1) * kBatchLaneCost);
 }
 
@@ -716,9 +712,11 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     estimate_mirror_links(marched, census, e);
     estimate_glossy(marched, census, shares, e);
     estimate_camera(scene, census, shares, e);
-    const auto [march, per_illumination] = estimate_solver(marched, census, shares, solver, e);
+    const MarchInputs march = estimate_solver(marched, census, shares, solver, e);
     estimate_outputs(scene, census, patch_profiles, e);
-    estimate_capture(scene, options, per_illumination, e);
+    estimate_capture(
+        scene, options,
+        [&](int batch) { return double(estimate_march(marched, census, shares, e, solver, batch).working_bytes); }, e);
     if (e.capture_batch > 1) {
         MarchInputs batch = march;
         batch.illuminations = e.capture_batch;

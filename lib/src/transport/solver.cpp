@@ -806,6 +806,12 @@ int batch_that_fits(double one_bytes, double full_bytes, double memory_bytes) {
     return int(std::clamp(1.0 + std::floor((memory_bytes - one_bytes) / per_lane), 1.0, double(kMaxBatch)));
 }
 
+int capture_batch(const std::function<double(int)>& working_bytes, double budget_bytes) {
+    int batch = batch_that_fits(working_bytes(1), working_bytes(kMaxBatch), budget_bytes);
+    while (batch > 1 && working_bytes(batch) > budget_bytes) --batch;
+    return batch;
+}
+
 SolveStats solve_transient(const PatchSet& patches, const LinkSet& set, std::span<const Illumination* const> batch,
                            const TimeAxis& time, const SolverOptions& options, const BlockSink& sink) {
     const Links& links = set.links;

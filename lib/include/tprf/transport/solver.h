@@ -146,9 +146,16 @@ std::size_t solve_working_bytes(const PatchSet& patches, const LinkSet& links, c
 
 /// The most illuminations, up to kMaxBatch, whose march fits in `memory_bytes`, on the straight line
 /// through the working bytes of a march of one illumination (`one_bytes`) and of kMaxBatch
-/// (`full_bytes`); 1 when not even one fits. The capture's batch (pipeline/capture.cpp) and its
-/// estimate (tprf info) both take it from here.
+/// (`full_bytes`); 1 when not even one fits.
 int batch_that_fits(double one_bytes, double full_bytes, double memory_bytes);
+
+/// The illuminations a capture marches at once within `budget_bytes`, given the working bytes of a
+/// march of B illuminations (`working_bytes(B)`, B in 1..kMaxBatch): batch_that_fits on the line through
+/// B = 1 and B = kMaxBatch, then one fewer while the march of that many still exceeds the budget (the
+/// lane count also picks the march's kernels, so the line is checked where it lands); 1 when not even
+/// one fits. The one rule of the capture's batch: pipeline/capture.cpp calls it with the plan's sizes
+/// (solve_working_bytes), the resource estimate (tprf info) with its model of the same march.
+int capture_batch(const std::function<double(int)>& working_bytes, double budget_bytes);
 
 // ---- Sizing a march without building it ----
 //
