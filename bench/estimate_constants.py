@@ -30,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 INFO = ROOT / "lib" / "src" / "pipeline" / "info.cpp"
 SCENES = ["corner.json", "cornell-box.json", "cornell-box.xml", "plates.json", "mesh-on-floor.json",
-          "statue-on-floor.json"]
+          "statue-on-floor.json", "glossy-box.json"]
 MIB = 1024.0 * 1024.0  # render.json's peak_rss_mb is VmHWM in MiB
 CONSTANT = re.compile(r"^\s*constexpr double (k\w+) = ([^;]+);(?:\s*//\s*(\S+): (\w+))?")
 
@@ -139,7 +139,8 @@ def render(build, scene, threads, out):
 def report_renders(build, threads):
     worst = 1.0
     print(f"\n{'scene':22} {'peak MB est':>11} {'measured':>9} {'seconds est':>11} {'measured':>9}  phases est/measured")
-    with tempfile.TemporaryDirectory(dir=ROOT / "bench") as scratch:
+    # Outside the tree: an interrupted run leaves no cubes where `git add` would take them.
+    with tempfile.TemporaryDirectory(prefix="tprf-estimate-") as scratch:
         for name in SCENES:
             scene = ROOT / "meshes" / name
             peak, seconds = estimate(build, scene, threads)
