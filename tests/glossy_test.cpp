@@ -7,6 +7,8 @@
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 
+#include "test_scenes.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -210,6 +212,73 @@ TEST(Glossy, ALaserSpotSeenInAGlossyFloorIsTheClosedForm) {
         ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
         std::sort(errors.begin(), errors.end());
         EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
+        fs::remove_all(out.dir);
+    }
+}
+
+// A laser spot on a glossy or plastic floor lights a diffuse wall through the floor's BRDF: the spot is a
+// point source of radiant intensity P f(wi, wo) cos_o (wi back along the beam, wo towards the wall point),
+// so each wall pixel's second bounce (transient_bounce_2.npy) is wall_albedo / pi times that intensity,
+// cos_wall / r^2, to 1%, with its first light in the bin of laser -> spot -> wall point -> camera. (As a
+// Lambertian spot of the floor's albedo, the wall's highlight about the beam's mirror direction is
+// missing.)
+TEST(Glossy, ALaserSpotOnAGlossyFloorLightsAWallThroughItsBrdf) {
+    const Vec3 origin(2.0, 0.0, 1.0), spot(0.6, 0.1, 0.0);
+    const double power = 3.0, wall_albedo = 0.8;
+    for (const Material& m : {Material{"glossy", 0.1, 0.8, 0.2, 1.5}, Material{"plastic", 0.5, 0.0, 0.3, 1.5}}) {
+        nlohmann::json j = floor_scene(m);
+        j["objects"] = {{{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
+                         {"material", material_json(m)}},
+                        {{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {0, 4, 0}}, {"v", {0, 0, 2}},
+                         {"albedo", wall_albedo}}};
+        j["lights"] = {{{"type", "laser"}, {"origin", {origin.x(), origin.y(), origin.z()}},
+                        {"target", {spot.x(), spot.y(), spot.z()}}, {"power", power}}};
+        j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {0.0, 0.1, 0.6}}, {"up", {0, 0, 1}}, {"fov", 50},
+                       {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
+        j["solver"] = {{"bounces", true}, {"max_bounces", 2}};
+        const int bins = 800;  // paths up to 8 m
+        j["time"]["bins"] = bins;
+        const Rendered out = render_json(j, "laser_on_" + m.type);
+        const NpyArray cube = out.read("transient_bounce_2.npy");
+        ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, bins, 3}));
+        const Camera& camera = out.camera;
+        const Vec3 wi = (origin - spot).normalized();
+        std::vector<double> errors;
+        double brightest = 0.0, dimmest = 1e300;
+        for (int r = 0; r < kSide; ++r)
+            for (int c = 0; c < kSide; ++c) {
+                const Vec3 d = camera_ray(camera, c + 0.5, r + 0.5);
+                if (d.x() >= 0.0) continue;
+                const Vec3 x = camera.position + d * (-camera.position.x() / d.x());
+                if (x.z() < 0.02 || x.z() > 2.0 || std::abs(x.y()) > 2.0) continue;  // the wall, clear of the floor
+                const Vec3 to_wall = x - spot;
+                const Vec3 wo = to_wall.normalized();
+                const double intensity = power * brdf(m, wi, wo) * wo.z();
+                const double expected = wall_albedo / M_PI * intensity * (-wo.x()) / to_wall.squaredNorm();
+                const std::size_t px = std::size_t(r) * kSide + std::size_t(c);
+                double got = 0.0;
+                int first = -1;
+                for (int t = 0; t < bins; ++t) {
+                    const float v = cube.data[(px * bins + std::size_t(t)) * 3];
+                    got += v;
+                    if (first < 0 && v != 0.0f) first = t;
+                }
+                errors.push_back(std::abs(got - expected) / expected);
+                brightest = std::max(brightest, expected);
+                dimmest = std::min(dimmest, expected);
+                const double path = (spot - origin).norm() + to_wall.norm() + (x - camera.position).norm();
+                const double edge = path / kBin - std::floor(path / kBin);
+                if (edge > 1e-3 && edge < 1.0 - 1e-3) {
+                    EXPECT_EQ(first, int(std::floor(path / kBin))) << m.type << " pixel " << r << "," << c;
+                }
+            }
+        ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
+        std::sort(errors.begin(), errors.end());
+        MEASURED("laser spot on a %s floor: wall pixels' relative error median %.2g, largest %.2g\n", m.type.c_str(),
+                 errors[errors.size() / 2], errors.back());
+        EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
+        // The lobe is in view: the wall's highlight, not the Lambertian part, sets its brightest pixels.
+        EXPECT_GT(brightest, 3.0 * dimmest) << m.type;
         fs::remove_all(out.dir);
     }
 }

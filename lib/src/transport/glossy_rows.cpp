@@ -287,7 +287,7 @@ Illumination glossy_illumination(const GlossyRows& rows, const PatchSet& patches
         const std::int32_t g = rows.slot.empty() ? -1 : rows.slot[i];
         for (std::uint64_t k = unit.row[i]; k < unit.row[i + 1]; ++k) {
             Pulse p = unit.pulses[k];
-            if (g < 0) {
+            if (g < 0 || !p.propagates) {  // a laser spot's own glow carries what leaves it already
                 out.pulses.push_back(p);
                 continue;
             }

@@ -51,7 +51,7 @@ void light_from_point(const LitPatch& at, const PointSource& source, std::int32_
 Pulse spot_pulse(const PatchSet& patches, std::size_t i, const PointSource& spot) {
     Pulse p;
     p.path = spot.path;
-    p.energy = spot.intensity / patches.area[i];
+    p.energy = spot.power_sent() / patches.area[i];
     p.order = 1;
     p.propagates = false;
     return p;

@@ -55,8 +55,15 @@ PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Vi
     s.position = spot.point + visibility.epsilon() * normal;
     s.origin = spot.point;
     s.path = spot.path;
-    s.intensity = patches.albedo[spot.patch] * spot.power;  // W leaving the spot
     s.lobe = normal;
+    if (const GlossyBrdf* brdf = patches.brdf(spot.patch); brdf && !spot.incoming.isZero()) {
+        s.intensity = spot.power;  // W arriving: the BRDF says what leaves towards each direction
+        s.glossy = true;
+        s.brdf = *brdf;
+        s.incoming = spot.incoming;
+    } else {
+        s.intensity = patches.albedo[spot.patch] * spot.power;  // W leaving the spot
+    }
     s.patch = spot.patch;
     s.order = 2;
     return s;
@@ -65,7 +72,16 @@ PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Vi
 
 Rgb PointSource::intensity_towards(const Vec3& dir) const {
     if (lobe.isZero()) return intensity;
-    return intensity * std::max(0.0, lobe.dot(dir)) / M_PI;
+    const double cos_o = lobe.dot(dir);
+    if (!(cos_o > 0.0)) return Rgb::Zero();
+    if (glossy) return intensity * brdf.eval(lobe, incoming, dir) * cos_o;
+    return intensity * cos_o / M_PI;
+}
+
+Rgb PointSource::power_sent() const {
+    if (lobe.isZero()) return 4.0 * M_PI * intensity;
+    if (glossy) return intensity * brdf.directional_albedo(std::clamp(lobe.dot(incoming), 1e-9, 1.0));
+    return intensity;
 }
 
 LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visibility& visibility) {
@@ -76,6 +92,7 @@ LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visib
     spot.patch = hit.patch;
     spot.point = hit.point;
     spot.path = hit.distance;
+    spot.incoming = -direction.normalized();
     return spot;
 }
 
@@ -98,6 +115,7 @@ std::vector<LaserSpot> trace_laser(const Vec3& origin, const Vec3& direction, co
         spot.point = h.hit.point;
         spot.path = h.path;
         spot.power = power * h.weight * h.tint;
+        spot.incoming = -(h.turn * direction).normalized();
         spots.push_back(spot);
     }
     if (spots.empty()) spots.push_back(LaserSpot{});
@@ -127,6 +145,7 @@ void point_images(const PointSource& s, const Visibility& visibility, std::vecto
         image.position = chain.image(s.position);
         image.origin = chain.image(s.origin);
         image.lobe = chain.unfold.linear * s.lobe;
+        image.incoming = chain.unfold.linear * s.incoming;
         image.patch = kNoPatch;
         image.intensity *= chain.tint;
         image.chain = std::int32_t(c);

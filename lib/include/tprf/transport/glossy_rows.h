@@ -88,7 +88,8 @@ GlossyRows make_glossy_rows(const PatchSet& patches, int rings, double bin_width
 /// Where the direct light of the sources (pulses computed with every glossy patch's albedo taken as 1,
 /// so that they carry its irradiance) goes with glossy rows: a glossy patch's reflected pulses to its
 /// patch row times its Lambertian albedo (patches.albedo), and, for light from a point or area source,
-/// to its out-cells through the lobe from the source's direction. Returns the illumination of every row.
+/// to its out-cells through the lobe from the source's direction; a laser spot's glow on its own patch
+/// (a pulse that does not propagate) as it is. Returns the illumination of every row.
 Illumination glossy_illumination(const GlossyRows& rows, const PatchSet& patches, const LightSources& sources,
                                  const Illumination& unit);
 

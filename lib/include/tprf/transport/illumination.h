@@ -3,7 +3,7 @@
 ///
 /// Every emitter fires one delta pulse at t = 0 (docs/scene.md). What reaches patch i is a handful of pulses,
 /// each at its own exact optical path (not the patch centroid's): a point source (transport/
-/// light_sources.h: a point light, or a laser's spot seen as a Lambertian point) reaches each
+/// light_sources.h: a point light, or a laser's spot, Lambertian or through its BRDF) reaches each
 /// stratified sample point x of a patch at its path plus |source - x|; a laser spot's own patch
 /// holds the reflected power at the spot's path; an emissive patch shows its own pulse at path 0,
 /// and each area source (an emissive polygon, however many patches it is cut into) reaches each

@@ -4,12 +4,14 @@
 /// points (imaging/gather.h) evaluate the same point sources through the same function.
 ///
 /// A point light is a point source; a laser becomes the spot it hits, which sends the light it
-/// reflects on as a Lambertian point (its own patch is lit by the spot's power directly). Emissive
+/// reflects on as a point whose intensity follows the spot's BRDF: Lambertian, or a glossy surface's
+/// f(beam, dir) (its own patch is lit by the spot's power directly). Emissive
 /// surfaces are area sources: whole polygons (an emissive rectangle however finely it is cut into
 /// patches), whose first bounce is integrated from the polygon (transport/illumination.h), so that
 /// its cost does not grow with the emitter's patch count.
 
 #include "tprf/core/types.h"
+#include "tprf/scene/brdf.h"
 
 #include <algorithm>
 #include <array>
@@ -35,9 +37,14 @@ struct PointSource {
     Vec3 origin = Vec3::Zero();     ///< the true point, metres (for the earliest-arrival bound)
     double path = 0.0;              ///< optical path travelled before light leaves it, metres
     /// Isotropic (lobe zero): the radiant intensity, W/sr per channel. With a lobe: the power it sends,
-    /// W per channel, so that the intensity towards dir is intensity * max(0, lobe . dir) / pi.
+    /// W per channel, so that the intensity towards dir is intensity * max(0, lobe . dir) / pi. A glossy
+    /// one (a laser spot on a glossy surface): the power arriving, so that the intensity towards dir is
+    /// intensity * f(incoming, dir) * max(0, lobe . dir).
     Rgb intensity = Rgb::Zero();
     Vec3 lobe = Vec3::Zero();       ///< zero: isotropic; else the unit normal of a Lambertian lobe
+    bool glossy = false;            ///< a glossy spot: `brdf` (about `lobe`) says what leaves
+    GlossyBrdf brdf;                ///< a glossy spot's reflectance
+    Vec3 incoming = Vec3::Zero();   ///< a glossy spot: the unit direction the light came from (back along the beam)
     std::uint32_t patch = kNoPatch; ///< the patch it lies on, which it does not light
     std::uint8_t order = 1;         ///< bounce order of the light it delivers (1: point light, 2: laser spot)
     /// -1: a real source. Else the mirror image of one through Visibility::chains()[chain]: position,
@@ -46,6 +53,9 @@ struct PointSource {
 
     /// Radiant intensity towards the unit direction `dir`, W/sr.
     Rgb intensity_towards(const Vec3& dir) const;
+    /// The power it sends over all directions, W per channel (a glossy spot: the arriving power times
+    /// the BRDF's directional albedo along the beam).
+    Rgb power_sent() const;
 };
 
 /// The hit point of a laser, if it hits a front side.
@@ -55,6 +65,9 @@ struct LaserSpot {
     Vec3 point = Vec3::Zero();  ///< metres
     double path = 0.0;          ///< |origin - point|, metres
     Rgb power = Rgb::Zero();    ///< the laser's power, W per channel
+    /// The unit direction back along the beam's last piece (through mirrors, the turned beam), for a
+    /// glossy spot's BRDF; zero where it is not known (a capture's laser point: its spot is Lambertian).
+    Vec3 incoming = Vec3::Zero();
 };
 
 /// A convex planar polygon that sends radiance L_e from its front: an emissive rectangle (each side of
@@ -105,8 +118,10 @@ LaserSpot find_laser_spot(const Vec3& origin, const Vec3& direction, const Visib
 std::vector<LaserSpot> trace_laser(const Vec3& origin, const Vec3& direction, const Rgb& power,
                                    const PatchSet& patches, const Visibility& visibility);
 
-/// The spot as a Lambertian point source: radiant intensity albedo P cos(theta) / pi about its patch's
-/// normal, its light leaving at spot.path (a laser's spot, or a capture's laser point on the wall).
+/// The spot as a point source, its light leaving at spot.path (a laser's spot, or a capture's laser
+/// point on the wall): on a glossy patch with spot.incoming known, radiant intensity
+/// P f(incoming, dir) cos(theta) (the patch's BRDF); else Lambertian, albedo P cos(theta) / pi about its
+/// patch's normal.
 PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Visibility& visibility);
 
 /// Collects the scene's sources over its patches (lasers traced to their spots).
