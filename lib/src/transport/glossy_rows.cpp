@@ -79,42 +79,29 @@ Vec3 in_cell_frame(const PatchSet& set, std::size_t i, const Vec3& dir) {
     return Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized();
 }
 
-// One of a glossy patch's cells and its share of the light between the patch and another.
-struct CellShare {
-    int cell;
-    double weight;
-};
-
-// Points per side of the grid cell_shares lays on the other patch: fewest and most; and on a near
+// Points per side of the grid cell_shares lays on the other polygon: fewest and most; and on a near
 // glossy patch itself.
 constexpr int kShareGridMin = 2, kShareGridMax = 8, kShareGridNear = 3;
 
-// How the light between glossy patch p and patch j divides among p's cells: the share of the pair's
-// form factor (the integral of cos cos / r^2 over both patches) whose direction from p to j lies in each
-// cell. One cell when j's corners, its edges' midpoints and its centroid all lie in one as p's centroid
-// sees them (and the pair is not near); otherwise k x k points on j, k (kShareGridMin to kShareGridMax)
-// about four points per cell that j spans, seen from p's centroid or, for a near pair (whose form factor
-// is not its centroid's), from kShareGridNear^2 points on p. The shares add up to 1, so that the light a
-// cell sends out reaches patches whose form factors add up to the cell's own share of the hemisphere: a
-// pair's form factor given whole to the cell of j's centroid leaves some cells with too few receivers
-// and others with too many, and a closed room of glossy walls then loses or makes light.
-std::vector<CellShare> cell_shares(const PatchSet& patches, const HemisphereCells& cells, std::size_t p,
-                                   std::size_t j, double radius_j, bool near) {
+}  // namespace
+
+std::vector<CellShare> cell_shares(const PatchSet& patches, int rings, std::size_t p, const SharedPolygon& other) {
+    const HemisphereCells cells(rings);
     const Vec3& n = patches.normal[p];
     const auto cell_of = [&](const Vec3& dir) { return cells.cell_of(in_cell_frame(patches, p, dir)); };
-    const Vec3* corners = patches.polygon(j);
-    const std::size_t count = patches.corners(j);
+    const Vec3* corners = other.corners;
+    const std::size_t count = other.count;
     const Vec3& o = patches.centroid[p];
-    const int centre = cell_of(patches.centroid[j] - o);
-    bool one = !near;
+    const int centre = cell_of(other.centroid - o);
+    bool one = !other.near;
     for (std::size_t k = 0; k < count && one; ++k)
         one = cell_of(corners[k] - o) == centre && cell_of(0.5 * (corners[k] + corners[(k + 1) % count]) - o) == centre;
     if (one) return {{centre, 1.0}};
-    const double d = (patches.centroid[j] - o).norm();
-    const double span = 2.0 * radius_j / std::max(d, radius_j) * cells.rings();  // cells across, about
+    const double d = (other.centroid - o).norm();
+    const double span = 2.0 * other.radius / std::max(d, other.radius) * rings;  // cells across, about
     const int k = std::clamp(int(std::ceil(2.0 * span)), kShareGridMin, kShareGridMax);
     std::vector<Vec3> from;
-    if (near) {
+    if (other.near) {
         for (int a = 0; a < kShareGridNear; ++a)
             for (int c = 0; c < kShareGridNear; ++c)
                 from.push_back(patch_point(patches, p, (a + 0.5) / kShareGridNear, (c + 0.5) / kShareGridNear));
@@ -129,53 +116,72 @@ std::vector<CellShare> cell_shares(const PatchSet& patches, const HemisphereCell
             for (const Vec3& x : from) {
                 const Vec3 r = y - x;
                 const double r2 = r.squaredNorm();
-                const double w = std::max(0.0, r.dot(n)) * std::max(0.0, -r.dot(patches.normal[j])) / (r2 * r2);
+                const double w = std::max(0.0, r.dot(n)) * std::max(0.0, -r.dot(other.normal)) / (r2 * r2);
                 if (!(w > 0.0)) continue;
                 const int cell = cell_of(r);
-                auto it = std::find_if(shares.begin(), shares.end(), [&](const CellShare& s) { return s.cell == cell; });
+                auto it = std::find_if(shares.begin(), shares.end(), [&](const CellShare& q) { return q.cell == cell; });
                 if (it == shares.end()) shares.push_back({cell, w});
                 else it->weight += w;
                 total += w;
             }
         }
     if (!(total > 0.0)) return {{centre, 1.0}};
-    for (CellShare& s : shares) s.weight /= total;
+    for (CellShare& q : shares) q.weight /= total;
     std::sort(shares.begin(), shares.end(), [](const CellShare& x, const CellShare& y) { return x.cell < y.cell; });
     return shares;
 }
 
+SharedPolygon shared_patch(const PatchSet& patches, std::size_t j, double radius, bool near) {
+    return {patches.polygon(j), patches.corners(j), patches.normal[j], patches.centroid[j], radius, near};
+}
+
+void glossy_pair_cells(const GlossyRows& rows, const GlossyPair& pair, std::vector<ExtraLink>& out) {
+    const std::int32_t gi = rows.slot[pair.i], gj = rows.slot[pair.j];
+    TPRF_CHECK(gi >= 0);
+    const float late = pair.distance, early = float(std::max(0.0, double(pair.distance) - double(rows.step_m)));
+    const auto sent = [&](std::uint32_t receiver, std::uint32_t source, double ff, bool to_cell) {
+        out.push_back({receiver, source, float(ff), to_cell ? early : late, pair.tint});
+    };
+    // i's in-cells gather j (its patch row, and its out-cells facing i); j's patch row takes i's out-cells.
+    for (const CellShare& q : pair.at_i) {
+        const std::uint32_t in = rows.in_row(std::size_t(gi), q.cell);
+        if (pair.j_sends) sent(in, std::uint32_t(pair.j), pair.f_ij * q.weight, true);
+        for (const CellShare& s : pair.at_j) sent(in, rows.out_row(std::size_t(gj), s.cell), pair.f_ij * q.weight * s.weight, true);
+        if (pair.j_sends && gj < 0) sent(std::uint32_t(pair.j), rows.out_row(std::size_t(gi), q.cell), pair.f_ji * q.weight, false);
+    }
+    // i's patch row takes j's out-cells facing it.
+    if (gj >= 0 && pair.i_sends)
+        for (const CellShare& s : pair.at_j) sent(std::uint32_t(pair.i), rows.out_row(std::size_t(gj), s.cell), pair.f_ij * s.weight, false);
+}
+
+namespace {
+
 // The glossy rows' links of glossy patch g and every patch j it faces (see glossy_rows.h), each pair's
-// form factor shared among the cells at either glossy end (cell_shares).
+// form factor shared among the cells at either glossy end (cell_shares). A pair of glossy patches is
+// made twice, once from each end's turn: each turn gives the links into its own patch's rows and, for
+// a Lambertian j, j's links from its out-cells.
 void glossy_pair_links(const PairScene& scene, const GlossyRows& rows, std::size_t g, std::vector<ExtraLink>& out,
                        LinkStats& counts) {
     const PatchSet& patches = scene.patches;
-    const HemisphereCells cells(rows.rings);
     const std::size_t p = rows.glossy[g];
-    const auto early = [&](double d) { return float(std::max(0.0, d - double(rows.step_m))); };
     for (std::size_t j = 0; j < patches.size(); ++j) {
         if (j == p) continue;
-        const std::int32_t h = rows.slot[j];
-        if (h < 0 && inert(patches, j)) continue;
+        const bool glossy_j = rows.slot[j] >= 0;
+        if (!glossy_j && inert(patches, j)) continue;
         PairFormFactors f;
         const bool near = near_pair(patches, scene.radius, scene.options.near_factor, p, j);
         if (!patch_pair(scene, p, j, near, f, counts)) continue;
-        const double d = (patches.centroid[j] - patches.centroid[p]).norm();
-        const std::vector<CellShare> at_p = cell_shares(patches, cells, p, j, scene.radius[j], near);
-        if (h >= 0) {  // j is glossy: its lobe towards p reaches p's in-cells and p's patch row
-            const std::vector<CellShare> at_j = cell_shares(patches, cells, j, p, scene.radius[p], near);
-            for (const CellShare& s : at_j) {
-                const std::uint32_t from = rows.out_row(std::size_t(h), s.cell);
-                for (const CellShare& q : at_p)
-                    out.push_back({rows.in_row(g, q.cell), from, float(f.ij * q.weight * s.weight), early(d), 0});
-                if (!inert(patches, p)) out.push_back({std::uint32_t(p), from, float(f.ij * s.weight), float(d), 0});
-            }
-        }
-        for (const CellShare& q : at_p) {
-            if (!inert(patches, j))  // p's in-cells gather j's patch row
-                out.push_back({rows.in_row(g, q.cell), std::uint32_t(j), float(f.ij * q.weight), early(d), 0});
-            if (h < 0)  // j's patch row takes p's lobe towards it (a glossy j takes it in its own turn)
-                out.push_back({std::uint32_t(j), rows.out_row(g, q.cell), float(f.ji * q.weight), float(d), 0});
-        }
+        GlossyPair pair;
+        pair.i = p;
+        pair.j = j;
+        pair.f_ij = f.ij;
+        pair.f_ji = f.ji;
+        pair.distance = float((patches.centroid[j] - patches.centroid[p]).norm());
+        pair.i_sends = !inert(patches, p);
+        pair.j_sends = !inert(patches, j);
+        pair.at_i = cell_shares(patches, rows.rings, p, shared_patch(patches, j, scene.radius[j], near));
+        if (glossy_j) pair.at_j = cell_shares(patches, rows.rings, j, shared_patch(patches, p, scene.radius[p], near));
+        glossy_pair_cells(rows, pair, out);
     }
 }
 

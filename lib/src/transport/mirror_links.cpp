@@ -11,6 +11,7 @@
 #include "tprf/geometry/mirror_images.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/transport/glossy_rows.h"
 #include "patch_pairs.h"
 
 #include <algorithm>
@@ -138,9 +139,53 @@ double chain_form_factor(const ChainPair& c, std::size_t i, std::size_t j, const
     return f * chain_visibility(c, i, j, options);
 }
 
-// The links along one chain (and, by reciprocity, along its reverse), each with the chain's tint.
+// A patch's polygon through the chain's unfolding (`forward`: as the receiving end sees the sending
+// end; else its inverse, as the sending end sees the receiving end), with its normal and centroid.
+struct ImagePolygon {
+    std::vector<Vec3> corners;
+    Vec3 normal, centroid;
+};
+
+ImagePolygon image_of(const PatchSet& p, std::size_t j, const MirrorChain& chain, bool forward) {
+    const auto map = [&](const Vec3& x) { return forward ? chain.unfold(x) : chain.unfold.inverse(x); };
+    ImagePolygon out;
+    for (std::size_t k = p.corners(j); k-- > 0;) out.corners.push_back(map(p.polygon(j)[k]));
+    out.normal = forward ? Vec3(chain.unfold.linear * p.normal[j]) : Vec3(chain.unfold.linear.transpose() * p.normal[j]);
+    out.centroid = map(p.centroid[j]);
+    return out;
+}
+
+// A chain's pair (i receiving, j sending along the chain) with a glossy end: its cells' links, from
+// each glossy end's side (glossy_pair_cells): the chain's direction and its reverse, one and the same
+// for a patch that sees itself through a palindrome.
+void glossy_chain_links(const ChainPair& c, const GlossyRows& rows, const GlossyPair& base, bool palindrome,
+                        double near_factor, std::vector<Extra>& out) {
+    const PatchSet& p = c.patches;
+    const std::size_t i = base.i, j = base.j;
+    const ImagePolygon from_i = image_of(p, j, c.chain, true), from_j = image_of(p, i, c.chain, false);
+    const bool near = (p.centroid[i] - from_i.centroid).norm() < near_factor * (c.radius[i] + c.radius[j]);
+    const auto shares = [&](std::size_t at, const ImagePolygon& other, std::size_t other_patch) {
+        return cell_shares(p, rows.rings, at,
+                           {other.corners.data(), other.corners.size(), other.normal, other.centroid,
+                            c.radius[other_patch], near});
+    };
+    GlossyPair pair = base;
+    if (rows.slot[i] >= 0) pair.at_i = shares(i, from_i, j);
+    if (rows.slot[j] >= 0) pair.at_j = shares(j, from_j, i);
+    if (rows.slot[i] >= 0) glossy_pair_cells(rows, pair, out);
+    if (rows.slot[j] < 0 || (i == j && palindrome)) return;
+    GlossyPair back = pair;  // the same pair from j's side
+    std::swap(back.i, back.j);
+    std::swap(back.f_ij, back.f_ji);
+    std::swap(back.i_sends, back.j_sends);
+    std::swap(back.at_i, back.at_j);
+    glossy_pair_cells(rows, back, out);
+}
+
+// The links along one chain (and, by reciprocity, along its reverse), each with the chain's tint; with
+// glossy rows, a glossy end's cells too (glossy_chain_links).
 void chain_links(const PairScene& scene, const MirrorChain& chain, bool palindrome, std::uint16_t tint,
-                 std::vector<std::vector<Extra>>& rows) {
+                 const GlossyRows& glossy, std::vector<std::vector<Extra>>& rows) {
     const PatchSet& patches = scene.patches;
     const Visibility& vis = scene.vis;
     const LinkOptions& options = scene.options;
@@ -149,8 +194,9 @@ void chain_links(const PairScene& scene, const MirrorChain& chain, bool palindro
     const SpecularPlane& first = planes[chain.plane[0]];
     const SpecularPlane& last = planes[chain.plane[std::size_t(chain.length - 1)]];
     std::vector<std::uint32_t> receivers, sources;
+    const auto is_glossy = [&](std::size_t i) { return !glossy.empty() && glossy.slot[i] >= 0; };
     for (std::uint32_t i = 0; i < patches.size(); ++i) {
-        if (inert(patches, i)) continue;
+        if (inert(patches, i) && !is_glossy(i)) continue;
         if (on_side(first, chain.side[0], patches.polygon(i), patches.corners(i))) receivers.push_back(i);
         if (on_side(last, chain.side[std::size_t(chain.length - 1)], patches.polygon(i), patches.corners(i)))
             sources.push_back(i);
@@ -165,8 +211,24 @@ void chain_links(const PairScene& scene, const MirrorChain& chain, bool palindro
             float distance = 0.0f;
             const double f = chain_form_factor(pair, i, j, options, distance);
             if (!(f > 0.0)) continue;
-            out.push_back({i, j, float(f), distance, tint});
-            if (i != j || !palindrome) out.push_back({j, i, float(f * patches.area[i] / patches.area[j]), distance, tint});
+            const double f_ji = f * patches.area[i] / patches.area[j];
+            const bool i_sends = !inert(patches, i), j_sends = !inert(patches, j);
+            if (i_sends && j_sends) {
+                out.push_back({i, j, float(f), distance, tint});
+                if (i != j || !palindrome) out.push_back({j, i, float(f_ji), distance, tint});
+            }
+            if ((is_glossy(i) || is_glossy(j))) {
+                GlossyPair g;
+                g.i = i;
+                g.j = j;
+                g.f_ij = f;
+                g.f_ji = f_ji;
+                g.distance = distance;
+                g.tint = tint;
+                g.i_sends = i_sends;
+                g.j_sends = j_sends;
+                glossy_chain_links(pair, glossy, g, palindrome, options.near_factor, out);
+            }
         }
     });
 }
@@ -207,7 +269,7 @@ std::uint64_t add_mirror_links(LinkSet& set, const PatchSet& patches, const Visi
             tint = std::uint16_t(tints.size() - 1);
         }
         std::vector<std::vector<Extra>> rows(patches.size());
-        chain_links({patches, vis, options, radius}, chain, same(chain, back), tint, rows);
+        chain_links({patches, vis, options, radius}, chain, same(chain, back), tint, set.glossy, rows);
         for (auto& r : rows) extra.insert(extra.end(), r.begin(), r.end());
     }
     const std::uint64_t added = extra.size();

@@ -146,4 +146,56 @@ void merge_extra_links(LinkSet& set, std::vector<ExtraLink>& extra, double bin_w
 /// Circumradius of every patch.
 std::vector<double> circumradii(const PatchSet& patches);
 
+// ---- Glossy patches' cells (glossy_rows.cpp) ----
+
+struct GlossyRows;
+
+/// One of a glossy patch's cells and its share of the light between the patch and another polygon.
+struct CellShare {
+    int cell;
+    double weight;
+};
+
+/// The polygon on the other end of a glossy patch's pair: a patch, or a patch's image through mirrors.
+struct SharedPolygon {
+    const Vec3* corners;
+    std::size_t count;
+    Vec3 normal;      ///< its front, towards the glossy patch
+    Vec3 centroid;
+    double radius;    ///< circumradius
+    bool near;        ///< a near pair (near_pair): its form factor is not its centroid's
+};
+
+/// Patch j as the other end of a pair.
+SharedPolygon shared_patch(const PatchSet& patches, std::size_t j, double radius, bool near);
+
+/// How the light between glossy patch p (its cells of `rings` rings) and `other` divides among p's
+/// cells: the share of the pair's form factor (the integral of cos cos / r^2 over both) whose direction
+/// from p to `other` lies in each cell. One cell when other's corners, its edges' midpoints and its
+/// centroid all lie in one as p's centroid sees them (and the pair is not near); otherwise k x k points
+/// on `other`, k from 2 to 8, about four points per cell it spans, seen from p's centroid or, for a near
+/// pair, from 3 x 3 points on p. The shares add up to 1, in increasing cell order. So the light a cell
+/// sends out reaches patches whose form factors add up to the cell's own share of the hemisphere (a
+/// pair's form factor given whole to the cell of its centroid leaves some cells with too few receivers
+/// and others with too many, and a closed room of glossy walls then loses or makes light).
+std::vector<CellShare> cell_shares(const PatchSet& patches, int rings, std::size_t p, const SharedPolygon& other);
+
+/// Patches i and j linked directly or through a chain of mirrors, i glossy: F_ij and F_ji (the chain's
+/// weights included), the distance (unfolded), the chain's tint, whether each end's patch row sends (is
+/// not inert), and the cell shares at i (towards j as i sees it) and at j (towards i; empty when j is not
+/// glossy).
+struct GlossyPair {
+    std::size_t i = 0, j = 0;
+    double f_ij = 0.0, f_ji = 0.0;
+    float distance = 0.0f;
+    std::uint16_t tint = 0;
+    bool i_sends = true, j_sends = true;
+    std::vector<CellShare> at_i, at_j;
+};
+
+/// The glossy rows' links of a pair, from glossy i's side: i's in-cells gather j's patch row and j's
+/// out-cells facing i (one bin early), i's patch row takes j's out-cells facing it, and a Lambertian j's
+/// patch row takes i's out-cells facing it. A pair of glossy patches is given once from each end.
+void glossy_pair_cells(const GlossyRows& rows, const GlossyPair& pair, std::vector<ExtraLink>& out);
+
 }  // namespace tprf
