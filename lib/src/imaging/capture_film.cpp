@@ -72,14 +72,15 @@ std::vector<SensorTap> sensor_taps(const PatchSet& patches, const WallPoint& sen
         const MeanView m = mean_view(v);
         if (!(m.sum > 0.0)) continue;
         const Rgb weight = albedo * v.tint * patches.area[v.patch] * m.sum;
-        taps.push_back({v.patch, weight, m.path + leg});
+        taps.push_back({v.patch, weight, m.path + leg, v.patch});
         if (!glossy || glossy->slot[v.patch] < 0) continue;
         int cell[4];
         double part[4];
         glossy->cells_about(patches, v.patch, sensor.point - patches.centroid[v.patch], cell, part);
         for (int e = 0; e < 4; ++e)
             if (part[e] > 0.0)
-                taps.push_back({glossy->out_row(std::size_t(glossy->slot[v.patch]), cell[e]), weight * part[e], m.path + leg});
+                taps.push_back({glossy->out_row(std::size_t(glossy->slot[v.patch]), cell[e]), weight * part[e], m.path + leg,
+                                v.patch});
     }
     return taps;
 }

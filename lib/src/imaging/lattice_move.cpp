@@ -27,9 +27,9 @@ std::vector<PatchLeg> patch_legs(const std::vector<SensorTap>& taps, const doubl
         factor += w;
         moment += w * taps[i].leg;
         if (received) light += received[i];
-        if (i + 1 < taps.size() && taps[i + 1].patch == taps[i].patch) continue;
+        if (i + 1 < taps.size() && taps[i + 1].surface == taps[i].surface) continue;
         if (factor > 0.0 && (!received || light > 0.0))
-            out.push_back({taps[i].patch, float(factor), float(moment / factor), float(light)});
+            out.push_back({taps[i].surface, float(factor), float(moment / factor), float(light)});
         factor = moment = light = 0.0;
     }
     return out;

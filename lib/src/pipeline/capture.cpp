@@ -298,7 +298,8 @@ void compute_share(const CaptureRun& run, std::pair<std::size_t, std::size_t> la
             add_exact(p, l, laser_views[k], sensors.views, result.H);
             if (!moved) return;
             const std::vector<PatchLeg> legs =
-                patch_legs(sensor_taps(p.patches, p.points.sensor[l], p.sensor_leg(l), laser_views[k]), nullptr);
+                patch_legs(sensor_taps(p.patches, p.points.sensor[l], p.sensor_leg(l), laser_views[k], &run.links->glossy),
+                           nullptr);
             add_moved(lattice_light, {int(l / nv), int(l % nv), p.laser_leg(l), p.sensor_leg(l), legs}, p.bins,
                       p.rows_of(result.H, l));
         });

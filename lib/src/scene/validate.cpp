@@ -484,10 +484,6 @@ void validate(const Scene& scene) {
     if (scene.capture) {
         const At capture{scene.file, scene.capture->json_path};
         check_capture(*scene.capture, capture);
-        if (scene.links.glossy_resolution > 0 && scene.capture->march_grid_step > 1)
-            capture.key("march_grid_step").fail(
-                "must be 1 with links.glossy_resolution > 0: the light moved between a lattice's points does not "
-                "follow glossy cells yet");
         if (scene.capture->march_bin_factor > 1 && scene.camera)
             capture.key("march_bin_factor").fail("must be 1 in a scene with a camera (the camera's links are marched on "
                                                  "the scene's bins): render the capture from a scene without one");

@@ -75,9 +75,10 @@ void exact_light(const CaptureScene& scene, const WallPair& pair, std::vector<Pa
 
 /// One sensor point's share of a patch's profile: radiance = weight . B_patch(t - leg), per colour.
 struct SensorTap {
-    std::uint32_t patch = 0;
+    std::uint32_t patch = 0;   ///< the row it reads: a patch's, or a glossy patch's out-cell
     Rgb weight = Rgb::Zero();  ///< albedo_s A_j / (pi^2 S) sum g, per colour (sr^-1)
     double leg = 0.0;          ///< the g-weighted mean path from the patch to the point, metres
+    std::uint32_t surface = 0; ///< the patch it lies on (`patch`, or the out-cell's patch)
 };
 
 /// A sensor point's taps on the patches it sees (`views`, PatchViewer::view), one per view with any

@@ -16,7 +16,8 @@
 
 namespace tprf {
 
-/// A confocal point's last legs by patch: a patch's taps added up (straight and through mirrors),
+/// A confocal point's last legs by patch: a patch's taps added up (straight and through mirrors, and a
+/// glossy patch's out-cells with its own patch row: the lobe's change between points is left out),
 /// `factor` the colour mean of their weights and `leg` their factor-weighted mean leg, metres; at a
 /// marched point, `light` is the later light the point received by way of the patch (summed over the
 /// bins).
@@ -27,8 +28,8 @@ struct PatchLeg {
     float light = 0.0f;
 };
 
-/// `taps` (sensor_taps: in patch order) by patch; `received`, if not null, each tap's light (only
-/// patches that received some are kept then).
+/// `taps` (sensor_taps: in patch order) by the patch they lie on (SensorTap::surface); `received`, if
+/// not null, each tap's light (only patches that received some are kept then).
 std::vector<PatchLeg> patch_legs(const std::vector<SensorTap>& taps, const double* received);
 
 /// The marched coordinates along a grid side of `count` points: every step-th from 0, and the last.
