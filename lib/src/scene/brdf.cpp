@@ -98,6 +98,12 @@ void bin_reflection(const GlossyBrdf& brdf, const HemisphereCells& cells, const 
     const double alpha = brdf.roughness, cos_i = wi.z();
     const Quadrature& radial = rule(128);
     const Quadrature& azimuth = rule(256);
+    // The azimuths' cosines and sines, the same for every direction: once.
+    static const std::vector<std::array<double, 2>> turn = [&] {
+        std::vector<std::array<double, 2>> t;
+        for (const double x : azimuth.x) t.push_back({std::cos(2.0 * kPi * x), std::sin(2.0 * kPi * x)});
+        return t;
+    }();
     const Vec3 t1 = Vec3::UnitZ().cross(wi).norm() > 1e-12 ? Vec3(wi.x(), wi.y(), 0.0).normalized() : Vec3::UnitX();
     const Vec3 t2 = Vec3::UnitZ().cross(t1);
     const double scale = weight * smith_g1(alpha, cos_i) / cos_i;
@@ -106,8 +112,7 @@ void bin_reflection(const GlossyBrdf& brdf, const HemisphereCells& cells, const 
         const double cos_h = 1.0 / std::sqrt(1.0 + alpha * alpha * xi / (1.0 - xi));
         const double sin_h = std::sqrt(std::max(0.0, 1.0 - cos_h * cos_h));
         for (std::size_t b = 0; b < azimuth.x.size(); ++b) {
-            const double phi = 2.0 * kPi * azimuth.x[b];
-            const Vec3 h = sin_h * (std::cos(phi) * t1 + std::sin(phi) * t2) + cos_h * Vec3::UnitZ();
+            const Vec3 h = sin_h * (turn[b][0] * t1 + turn[b][1] * t2) + cos_h * Vec3::UnitZ();
             const double i_h = wi.dot(h);
             if (i_h <= 0.0) continue;
             const Vec3 wo = 2.0 * i_h * h - wi;
