@@ -101,10 +101,15 @@ void CaptureFilm::add_lane(const SolveBlock& block, std::size_t lane, std::vecto
     const Illumination& pulses = *l.pulses;
     const std::size_t n = block.patches, bins = std::size_t(block.bins), K = std::size_t(block.illuminations);
     indirect.resize(n * bins * 3);
-    for (std::size_t j = 0; j < n; ++j)
+    for (std::size_t j = 0; j < n; ++j) {
+        if (block.unread(j)) {  // a glossy in-cell: no tap reads it
+            std::fill_n(indirect.data() + j * bins * 3, bins * 3, 0.0f);
+            continue;
+        }
         for (std::size_t b = 0; b < bins; ++b)
             for (std::size_t c = 0; c < 3; ++c)
                 indirect[(j * bins + b) * 3 + c] = block.radiosity[((j * bins + b) * K + lane) * 3 + c];
+    }
     for (std::size_t j = 0; j < n; ++j)
         for (std::uint64_t k = pulses.row[j]; k < pulses.row[j + 1]; ++k) {
             const Pulse& pulse = pulses.pulses[k];

@@ -169,6 +169,7 @@ void TransientFilm::copy_indirect(const SolveBlock& block) {
     TPRF_CHECK_LE(m_kept + bins, m_capacity);
     const BinMap time_bins = m_time.bin_map();
     parallel_for(n, {m_threads, 64, true}, [&](std::size_t i) {  // each patch's row is its own
+        if (block.unread(i)) return;  // a glossy in-cell: no tap reads it (its row stays zero)
         float* row = m_indirect.data() + i * stride + (pad + m_kept) * 3;
         std::copy_n(source + i * bins * 3, bins * 3, row);
         for (std::uint64_t k = m_illumination.row[i]; k < m_illumination.row[i + 1]; ++k) {

@@ -226,6 +226,9 @@ struct SolvePlan {
     /// patch's in-cells of the bin before, of the same bounce order; the in-cells of a patch lie at
     /// consecutive positions.
     std::size_t out_begin = 0;
+    /// The first glossy in-cell row (out_begin when there are none): rows [in_begin(), out_begin) are
+    /// read by their patches' out-cells alone, and the output leaves them zero (SolveBlock::unread).
+    std::size_t in_begin() const { return set && !set->glossy.empty() ? set->glossy.patches : out_begin; }
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the
     // clusters above them, in preorder.

@@ -67,6 +67,10 @@ struct SolveBlock {
     int terms = 0;
     /// terms x N x bins x K x 3, same layout as `radiosity` per term.
     const float* per_order = nullptr;
+    /// Rows [unread_first, unread_last) are left zero: the glossy patches' in-cells, which only their
+    /// out-cells read (transport/glossy_rows.h); a sink need not copy them.
+    std::size_t unread_first = 0, unread_last = 0;
+    bool unread(std::size_t row) const { return row >= unread_first && row < unread_last; }
 };
 
 /// The march's own blocks, when shorter, reach the sink together: up to kSinkBins bins in one SolveBlock,
