@@ -158,119 +158,122 @@ TEST(Glossy, PointLightOverAPlasticFloorIsTheClosedFormAtEveryPixel) {
     for (const double roughness : {0.05, 0.2, 0.5}) expect_exact_direct_light({"plastic", 0.6, 0.0, roughness, 1.5});
 }
 
+// A glossy or plastic floor at z = 0 and a diffuse wall (albedo kWallAlbedo) at x = 0, 4 m wide, lit by
+// a laser of kLaserPower from `origin` through `target`, seen from (2.5, 0, 1.2) looking at `look_at`
+// (one sample at each pixel's centre, no footprint): the second bounce (transient_bounce_2.npy), paths up
+// to 8 m.
+constexpr double kLaserPower = 3.0, kWallAlbedo = 0.8;
+constexpr int kLaserBins = 800;
+
+struct LaserScene {
+    Vec3 origin, target, look_at;
+    std::string name;
+};
+
+struct LaserRender {
+    Rendered out;
+    NpyArray cube;
+};
+
+LaserRender render_laser_scene(const Material& m, const LaserScene& s) {
+    nlohmann::json j = floor_scene(m);
+    j["objects"] = {{{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
+                     {"material", material_json(m)}},
+                    {{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {0, 4, 0}}, {"v", {0, 0, 2}},
+                     {"albedo", kWallAlbedo}}};
+    j["lights"] = {{{"type", "laser"}, {"origin", {s.origin.x(), s.origin.y(), s.origin.z()}},
+                    {"target", {s.target.x(), s.target.y(), s.target.z()}}, {"power", kLaserPower}}};
+    j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {s.look_at.x(), s.look_at.y(), s.look_at.z()}},
+                   {"up", {0, 0, 1}}, {"fov", 50}, {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
+    j["solver"] = {{"bounces", true}, {"max_bounces", 2}};
+    j["time"]["bins"] = kLaserBins;
+    LaserRender r{render_json(j, s.name + "_" + m.type), {}};
+    r.cube = r.out.read("transient_bounce_2.npy");
+    EXPECT_EQ(r.cube.shape, (std::vector<std::size_t>{kSide, kSide, kLaserBins, 3}));
+    return r;
+}
+
+// Pixel px's light summed over time, and (unless its path lies within 0.1% of a bin's edge, where either
+// bin is right) that its first light is in the bin of `path`.
+double expect_pixel(const NpyArray& cube, std::size_t px, double path, const std::string& what) {
+    double got = 0.0;
+    int first = -1;
+    for (int t = 0; t < kLaserBins; ++t) {
+        const float v = cube.data[(px * kLaserBins + std::size_t(t)) * 3];
+        got += v;
+        if (first < 0 && v != 0.0f) first = t;
+    }
+    const double edge = path / kBin - std::floor(path / kBin);
+    if (edge > 1e-3 && edge < 1.0 - 1e-3) {
+        EXPECT_EQ(first, int(std::floor(path / kBin))) << what;
+    }
+    return got;
+}
+
 // A laser spot on a diffuse wall, seen in a glossy floor: the spot is a Lambertian point source of
-// radiant intensity a P cos(theta) / pi, so the floor's second bounce (transient_bounce_2.npy) at each
-// pixel is f(wi, wo) times that intensity, cos_i / r^2, to 1%, with its first light in the bin of the
-// path laser -> spot -> floor point -> camera.
+// radiant intensity a P cos(theta) / pi, so the floor's second bounce at each pixel is f(wi, wo) times
+// that intensity, cos_i / r^2, to 1%, with its first light in the bin of the path laser -> spot -> floor
+// point -> camera.
 TEST(Glossy, ALaserSpotSeenInAGlossyFloorIsTheClosedForm) {
-    const Vec3 origin(2.0, 0.0, 1.0), spot(0.0, 0.3, 0.6);
-    const double power = 3.0, wall_albedo = 0.8;
+    const LaserScene scene{{2.0, 0.0, 1.0}, {0.0, 0.3, 0.6}, {0.6, 0.15, 0.0}, "laser"};
+    const Vec3& spot = scene.target;
     for (const Material& m : {Material{"glossy", 0.1, 0.8, 0.1, 1.5}, Material{"plastic", 0.5, 0.0, 0.3, 1.5}}) {
-        nlohmann::json j = floor_scene(m);
-        j["objects"] = {{{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
-                         {"material", material_json(m)}},
-                        {{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {0, 4, 0}}, {"v", {0, 0, 2}},
-                         {"albedo", wall_albedo}}};
-        j["lights"] = {{{"type", "laser"}, {"origin", {origin.x(), origin.y(), origin.z()}},
-                        {"target", {spot.x(), spot.y(), spot.z()}}, {"power", power}}};
-        j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {0.6, 0.15, 0.0}}, {"up", {0, 0, 1}}, {"fov", 50},
-                       {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
-        j["solver"] = {{"bounces", true}, {"max_bounces", 2}};
-        const int bins = 800;  // paths up to 8 m
-        j["time"]["bins"] = bins;
-        const Rendered out = render_json(j, "laser_" + m.type);
-        const NpyArray cube = out.read("transient_bounce_2.npy");
-        ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, bins, 3}));
-        const Camera& camera = out.camera;
+        const LaserRender r = render_laser_scene(m, scene);
+        const Camera& camera = r.out.camera;
         std::vector<double> errors;
-        for (int r = 0; r < kSide; ++r)
+        for (int row = 0; row < kSide; ++row)
             for (int c = 0; c < kSide; ++c) {
-                const Vec3 d = camera_ray(camera, c + 0.5, r + 0.5);
+                const Vec3 d = camera_ray(camera, c + 0.5, row + 0.5);
                 if (d.z() >= 0.0) continue;
                 const Vec3 x = camera.position + d * (-camera.position.z() / d.z());
                 if (x.x() < 0.02 || x.x() > 4.0 || std::abs(x.y()) > 2.0) continue;  // the floor, clear of the wall
                 const Vec3 to_spot = spot - x;
                 const Vec3 wi = to_spot.normalized();
                 const double cos_spot = -wi.x();  // the wall's normal is +x
-                const double intensity = wall_albedo * power * cos_spot / M_PI;
+                const double intensity = kWallAlbedo * kLaserPower * cos_spot / M_PI;
                 const double expected = brdf(m, wi, -d) * intensity * wi.z() / to_spot.squaredNorm();
-                const std::size_t px = std::size_t(r) * kSide + std::size_t(c);
-                double got = 0.0;
-                int first = -1;
-                for (int t = 0; t < bins; ++t) {
-                    const float v = cube.data[(px * bins + std::size_t(t)) * 3];
-                    got += v;
-                    if (first < 0 && v != 0.0f) first = t;
-                }
+                const double path = (spot - scene.origin).norm() + to_spot.norm() + (x - camera.position).norm();
+                const double got = expect_pixel(r.cube, std::size_t(row) * kSide + std::size_t(c), path,
+                                                m.type + " pixel " + std::to_string(row) + "," + std::to_string(c));
                 errors.push_back(std::abs(got - expected) / expected);
-                const double path = (spot - origin).norm() + to_spot.norm() + (x - camera.position).norm();
-                const double edge = path / kBin - std::floor(path / kBin);
-                if (edge > 1e-3 && edge < 1.0 - 1e-3) {
-                    EXPECT_EQ(first, int(std::floor(path / kBin))) << m.type << " pixel " << r << "," << c;
-                }
             }
         ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
         std::sort(errors.begin(), errors.end());
         EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
-        fs::remove_all(out.dir);
+        fs::remove_all(r.out.dir);
     }
 }
 
 // A laser spot on a glossy or plastic floor lights a diffuse wall through the floor's BRDF: the spot is a
 // point source of radiant intensity P f(wi, wo) cos_o (wi back along the beam, wo towards the wall point),
-// so each wall pixel's second bounce (transient_bounce_2.npy) is wall_albedo / pi times that intensity,
-// cos_wall / r^2, to 1%, with its first light in the bin of laser -> spot -> wall point -> camera. (As a
-// Lambertian spot of the floor's albedo, the wall's highlight about the beam's mirror direction is
-// missing.)
+// so each wall pixel's second bounce is wall_albedo / pi times that intensity, cos_wall / r^2, to 1%, with
+// its first light in the bin of laser -> spot -> wall point -> camera. (As a Lambertian spot of the
+// floor's albedo, the wall's highlight about the beam's mirror direction is missing.)
 TEST(Glossy, ALaserSpotOnAGlossyFloorLightsAWallThroughItsBrdf) {
-    const Vec3 origin(2.0, 0.0, 1.0), spot(0.6, 0.1, 0.0);
-    const double power = 3.0, wall_albedo = 0.8;
+    const LaserScene scene{{2.0, 0.0, 1.0}, {0.6, 0.1, 0.0}, {0.0, 0.1, 0.6}, "laser_on"};
+    const Vec3& spot = scene.target;
+    const Vec3 wi = (scene.origin - spot).normalized();
     for (const Material& m : {Material{"glossy", 0.1, 0.8, 0.2, 1.5}, Material{"plastic", 0.5, 0.0, 0.3, 1.5}}) {
-        nlohmann::json j = floor_scene(m);
-        j["objects"] = {{{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
-                         {"material", material_json(m)}},
-                        {{"type", "rectangle"}, {"origin", {0, -2, 0}}, {"u", {0, 4, 0}}, {"v", {0, 0, 2}},
-                         {"albedo", wall_albedo}}};
-        j["lights"] = {{{"type", "laser"}, {"origin", {origin.x(), origin.y(), origin.z()}},
-                        {"target", {spot.x(), spot.y(), spot.z()}}, {"power", power}}};
-        j["camera"] = {{"position", {2.5, 0.0, 1.2}}, {"look_at", {0.0, 0.1, 0.6}}, {"up", {0, 0, 1}}, {"fov", 50},
-                       {"width", kSide}, {"height", kSide}, {"spp", 1}, {"footprint", false}};
-        j["solver"] = {{"bounces", true}, {"max_bounces", 2}};
-        const int bins = 800;  // paths up to 8 m
-        j["time"]["bins"] = bins;
-        const Rendered out = render_json(j, "laser_on_" + m.type);
-        const NpyArray cube = out.read("transient_bounce_2.npy");
-        ASSERT_EQ(cube.shape, (std::vector<std::size_t>{kSide, kSide, bins, 3}));
-        const Camera& camera = out.camera;
-        const Vec3 wi = (origin - spot).normalized();
+        const LaserRender r = render_laser_scene(m, scene);
+        const Camera& camera = r.out.camera;
         std::vector<double> errors;
         double brightest = 0.0, dimmest = 1e300;
-        for (int r = 0; r < kSide; ++r)
+        for (int row = 0; row < kSide; ++row)
             for (int c = 0; c < kSide; ++c) {
-                const Vec3 d = camera_ray(camera, c + 0.5, r + 0.5);
+                const Vec3 d = camera_ray(camera, c + 0.5, row + 0.5);
                 if (d.x() >= 0.0) continue;
                 const Vec3 x = camera.position + d * (-camera.position.x() / d.x());
                 if (x.z() < 0.02 || x.z() > 2.0 || std::abs(x.y()) > 2.0) continue;  // the wall, clear of the floor
                 const Vec3 to_wall = x - spot;
                 const Vec3 wo = to_wall.normalized();
-                const double intensity = power * brdf(m, wi, wo) * wo.z();
-                const double expected = wall_albedo / M_PI * intensity * (-wo.x()) / to_wall.squaredNorm();
-                const std::size_t px = std::size_t(r) * kSide + std::size_t(c);
-                double got = 0.0;
-                int first = -1;
-                for (int t = 0; t < bins; ++t) {
-                    const float v = cube.data[(px * bins + std::size_t(t)) * 3];
-                    got += v;
-                    if (first < 0 && v != 0.0f) first = t;
-                }
+                const double intensity = kLaserPower * brdf(m, wi, wo) * wo.z();
+                const double expected = kWallAlbedo / M_PI * intensity * (-wo.x()) / to_wall.squaredNorm();
+                const double path = (spot - scene.origin).norm() + to_wall.norm() + (x - camera.position).norm();
+                const double got = expect_pixel(r.cube, std::size_t(row) * kSide + std::size_t(c), path,
+                                                m.type + " pixel " + std::to_string(row) + "," + std::to_string(c));
                 errors.push_back(std::abs(got - expected) / expected);
                 brightest = std::max(brightest, expected);
                 dimmest = std::min(dimmest, expected);
-                const double path = (spot - origin).norm() + to_wall.norm() + (x - camera.position).norm();
-                const double edge = path / kBin - std::floor(path / kBin);
-                if (edge > 1e-3 && edge < 1.0 - 1e-3) {
-                    EXPECT_EQ(first, int(std::floor(path / kBin))) << m.type << " pixel " << r << "," << c;
-                }
             }
         ASSERT_GT(errors.size(), std::size_t(kSide * kSide / 3));
         std::sort(errors.begin(), errors.end());
@@ -279,7 +282,7 @@ TEST(Glossy, ALaserSpotOnAGlossyFloorLightsAWallThroughItsBrdf) {
         EXPECT_LT(errors.back(), 0.01) << m.type << ": median " << errors[errors.size() / 2];
         // The lobe is in view: the wall's highlight, not the Lambertian part, sets its brightest pixels.
         EXPECT_GT(brightest, 3.0 * dimmest) << m.type;
-        fs::remove_all(out.dir);
+        fs::remove_all(r.out.dir);
     }
 }
 
