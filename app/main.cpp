@@ -200,8 +200,11 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
         std::printf("mirrors  %llu of the links go through mirrors and glass\n",
                     static_cast<unsigned long long>(s.mirror_links));
     if (s.glossy_rows > 0)
-        std::printf("glossy   %zu patches with directional cells, %zu rows of the march (links.glossy_resolution %d)\n",
-                    s.glossy_patches, s.glossy_rows, scene.links.glossy_resolution);
+        std::printf("glossy   %zu patches with directional cells of %d rings, %zu rows of the march "
+                    "(links.glossy_resolution %s)\n",
+                    s.glossy_patches, s.glossy_rings, s.glossy_rows,
+                    scene.links.glossy_resolution == tprf::kGlossyAuto ? "\"auto\""
+                                                                        : std::to_string(scene.links.glossy_resolution).c_str());
     print_time(scene);
     std::printf("seconds  patches %.2f, links %.2f\n", s.seconds_patches, s.seconds_links);
     return 0;

@@ -102,7 +102,10 @@ nlohmann::json floor_scene(const Material& m) {
             {"lights", {{{"type", "point"}, {"position", {kLight.x(), kLight.y(), kLight.z()}}, {"intensity", kIntensity}}}},
             {"objects", {{{"type", "rectangle"}, {"origin", {-2, -2, 0}}, {"u", {4, 0, 0}}, {"v", {0, 4, 0}},
                           {"material", material_json(m)}}}},
-            {"patches", {{"max_edge", 0.25}}}};
+            {"patches", {{"max_edge", 0.25}}},
+            // Direct light, what these tests check, is exact with or without directional cells; the cells'
+            // own tests are tests/glossy_transport_test.cpp's.
+            {"links", {{"glossy_resolution", 0}}}};
 }
 
 // Every pixel's steady value is f(wi, wo) I cos_i / r^2 (p99 of the relative error within 0.5%), and its

@@ -268,6 +268,45 @@ TEST(GlossyTransport, TheEstimateCountsTheCellsRowsAndTheirMemory) {
     EXPECT_GT(b.seconds.solve, a.seconds.solve);
 }
 
+// links.glossy_resolution "auto" (the default): kAutoGlossyRings rings while glossy patches x patches
+// stay within kAutoGlossyPairs, none beyond (the glossy patches then pass their light on as Lambertian
+// surfaces of their hemispherical albedo); the patches, the links and the estimate take it from one rule.
+TEST(GlossyTransport, AutoGivesCellsWhereTheirPairsAreAffordable) {
+    json small = corner(metal(0.8, 0.2), 0.1, 0, "flat");
+    small["links"].erase("glossy_resolution");
+    const tprf::Scene a = tprf::parse_scene(small.dump(), "glossy_transport_test.json");
+    EXPECT_EQ(a.links.glossy_resolution, tprf::kGlossyAuto);
+    const tprf::PatchSet pa = tprf::build_patches(a);
+    EXPECT_EQ(pa.glossy_rings_for(a.links.glossy_resolution), tprf::kAutoGlossyRings);
+    const auto va = tprf::scene_visibility(a, pa);
+    EXPECT_EQ(tprf::make_link_set(pa, *va, a.links, a.time.bin_width_m()).glossy.rings, tprf::kAutoGlossyRings);
+    EXPECT_EQ(tprf::estimate_resources(a, {}).glossy_rings, tprf::kAutoGlossyRings);
+    small["links"]["glossy_resolution"] = "auto";
+    EXPECT_EQ(tprf::parse_scene(small.dump(), "glossy_transport_test.json").links.glossy_resolution, tprf::kGlossyAuto);
+
+    // 6,400 glossy patches beside 6,400 diffuse ones: 8.2e7 pairs.
+    json large = small;
+    large["patches"]["max_edge"] = 0.0125;
+    const tprf::Scene b = tprf::parse_scene(large.dump(), "glossy_transport_test.json");
+    const tprf::PatchSet pb = tprf::build_patches(b);
+    ASSERT_EQ(pb.glossy_patches(), 6400u);
+    ASSERT_EQ(pb.size(), 12800u);
+    EXPECT_EQ(pb.glossy_rings_for(b.links.glossy_resolution), 0);
+    EXPECT_EQ(tprf::estimate_resources(b, {}).glossy_rings, 0);
+    const std::uint32_t g = pb.object[0] == 0 ? 0 : std::uint32_t(pb.size() - 1);
+    ASSERT_NE(pb.brdf(g), nullptr);
+    EXPECT_EQ(pb.albedo[g][0], pb.brdf(g)->hemispherical_albedo()[0]);
+    EXPECT_EQ(pb.glossy_rings_for(2), 2);  // an integer is taken as it is
+
+    large["links"]["glossy_resolution"] = "fine";
+    try {
+        (void)tprf::parse_scene(large.dump(), "glossy_transport_test.json");
+        FAIL() << "glossy_resolution \"fine\" was accepted";
+    } catch (const std::exception& e) {
+        EXPECT_NE(std::string(e.what()).find("links.glossy_resolution"), std::string::npos) << e.what();
+    }
+}
+
 // A confocal capture: a diffuse relay wall at z = 0 and, 0.6 m in front of it, a hidden square facing
 // it, glossy or Lambertian; every bounce up to the sixth.
 json hidden_square(const json& material, double albedo, int rings) {

@@ -347,6 +347,13 @@ void add_patch(PatchSet& patches, const Vec3* corners, std::size_t count, const 
     patches.object.push_back(object);
 }
 
+std::size_t PatchSet::glossy_patches() const {
+    if (glossy.empty()) return 0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < size(); ++i) n += brdf(i) != nullptr;
+    return n;
+}
+
 std::size_t dropped_faces(const std::vector<MeshReport>& meshes) {
     std::size_t n = 0;
     for (const MeshReport& m : meshes) n += m.repairs.dropped_faces();
@@ -362,14 +369,14 @@ void add_glossy(const Scene& scene, PatchSet& patches) {
     const auto& objects = scene.objects;
     if (std::none_of(objects.begin(), objects.end(), [](const Object& o) { return o.material.glossy(); })) return;
     patches.glossy.resize(objects.size());
+    for (std::size_t k = 0; k < objects.size(); ++k)
+        if (objects[k].material.glossy()) patches.glossy[k] = glossy_brdf(objects[k]);
+    const int rings = patches.glossy_rings_for(scene.links.glossy_resolution);
     std::vector<Rgb> albedo(objects.size());
     for (std::size_t k = 0; k < objects.size(); ++k)
-        if (objects[k].material.glossy()) {
-            patches.glossy[k] = glossy_brdf(objects[k]);
-            const int rings = scene.links.glossy_resolution;
+        if (patches.glossy[k])
             albedo[k] = rings > 0 ? lambertian_part_albedo(*patches.glossy[k], rings)
                                   : patches.glossy[k]->hemispherical_albedo();
-        }
     for (std::size_t i = 0; i < patches.size(); ++i)
         if (patches.brdf(i)) patches.albedo[i] = albedo[patches.object[i]];
 }

@@ -74,6 +74,7 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     s.mirror_links = add_mirror_links(links, patches, visibility, link_options, bin_m);
     s.glossy_patches = links.glossy.glossy.size();
     s.glossy_rows = links.glossy.rows();
+    s.glossy_rings = links.glossy.rings;
     s.links = links.links.size();
     s.link_bytes = links.bytes();
     s.pairs_tested = link_stats.pairs_tested;
@@ -401,16 +402,23 @@ void estimate_mirror_links(const Scene& scene, const PatchCensus& census, Resour
     e.seconds.links += pairs / kMirrorPairsPerSecond;
 }
 
-// The glossy patches' cells (transport/glossy_rows.h): 2 M rows per glossy patch (the census' share of
-// glossy samples), links from every patch each faces into its in-cells and from its out-cells to every
+// The glossy patches build_patches makes: the census' counts of the glossy objects' patches.
+std::size_t census_glossy_patches(const Scene& scene, const PatchCensus& census) {
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < scene.objects.size() && k < census.object_patches.size(); ++k)
+        if (scene.objects[k].material.glossy()) n += census.object_patches[k];
+    return n;
+}
+
+// The glossy patches' cells (transport/glossy_rows.h) at the rings glossy_rings gives: 2 M rows per glossy
+// patch, links from every patch each faces into its in-cells and from its out-cells to every
 // patch facing it, M^2 multiply-adds per glossy patch and bin; each distinct lobe's cell reflectance.
 void estimate_glossy(const Scene& scene, const PatchCensus& census, const PairShares& shares, ResourceEstimate& e) {
-    const int rings = scene.links.glossy_resolution;
-    if (rings <= 0 || census.samples.empty()) return;
-    std::size_t on_glossy = 0;
-    for (const PatchSample& s : census.samples) on_glossy += scene.objects[s.object].material.glossy();
-    if (on_glossy == 0) return;
-    const double g = double(census.patches) * double(on_glossy) / double(census.samples.size());
+    const std::size_t glossy = census_glossy_patches(scene, census);
+    const int rings = glossy_rings(scene.links.glossy_resolution, glossy, census.patches);
+    e.glossy_rings = rings;
+    if (rings <= 0) return;
+    const double g = double(glossy);
     const double m = 4.0 * rings * rings;
     std::vector<std::array<double, 3>> lobes;  // the distinct lobes: model, roughness, ior
     for (const Object& o : scene.objects)

@@ -28,6 +28,7 @@
 #include "tprf/transport/steady.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <exception>
 #include <memory>
@@ -86,19 +87,28 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
     return shares;
 }
 
-// What the scene's reading found to say (Scene::warnings), and what glossy objects do in this version of
-// the method, said once per render that has one.
-void note_scene(const Scene& scene, RenderReport& report) {
+// What the scene's reading found to say (Scene::warnings), and, when glossy objects get no directional
+// cells, what they do then, said once per render that has one.
+void note_scene(const Scene& scene, const PatchSet& patches, RenderReport& report) {
     report.warnings.insert(report.warnings.end(), scene.warnings.begin(), scene.warnings.end());
-    if (scene.links.glossy_resolution > 0) return;  // glossy patches pass their light on through their cells
+    const std::size_t glossy = patches.glossy_patches();
+    if (glossy == 0 || patches.glossy_rings_for(scene.links.glossy_resolution) > 0) return;
     for (std::size_t k = 0; k < scene.objects.size(); ++k)
         if (scene.objects[k].material.glossy()) {
+            char why[160];
+            if (scene.links.glossy_resolution == kGlossyAuto)
+                std::snprintf(why, sizeof why,
+                              "links.glossy_resolution \"auto\": %zu glossy patches x %zu patches exceed %.3g pairs; "
+                              "an integer 1 to 8 gives them cells",
+                              glossy, patches.size(), kAutoGlossyPairs);
+            else
+                std::snprintf(why, sizeof why, "links.glossy_resolution 0");
             report.warnings.push_back(
                 scene.object_path(k) +
                 " is glossy: point lights, laser spots and emitters reach the camera, and a capture's laser spot "
                 "its sensor points, through its BRDF; the light it passes on to other surfaces and what the camera "
-                "sees of its indirect light take it for a Lambertian surface of its hemispherical albedo "
-                "(links.glossy_resolution 0; docs/materials.md, \"Glossy surfaces\")");
+                "sees of its indirect light take it for a Lambertian surface of its hemispherical albedo (" +
+                why + "; docs/materials.md, \"Glossy surfaces\")");
             return;
         }
 }
@@ -111,7 +121,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
     t.patches = build_patches(scene, {options.progress}, &patch_stats);
     report.patches = t.patches.size();
     report.meshes = std::move(patch_stats.meshes);
-    note_scene(scene, report);
+    note_scene(scene, t.patches, report);
     report.seconds.patches = seconds_since(start);
 
     start = Clock::now();

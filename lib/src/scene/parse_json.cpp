@@ -260,7 +260,14 @@ LinkSettings parse_links(const Node& n) {
     if (const auto tolerance = n.find("tolerance")) links.tolerance = tolerance->number();
     if (const auto time_bins = n.find("time_bins")) links.time_bins = time_bins->number();
     if (const auto pieces = n.find("spread_pieces")) links.spread_pieces = pieces->integer();
-    if (const auto rings = n.find("glossy_resolution")) links.glossy_resolution = rings->integer();
+    if (const auto rings = n.find("glossy_resolution")) {
+        if (rings->j.is_string()) {
+            if (rings->string() != "auto") rings->fail("must be \"auto\" or an integer in [0, 8]");
+            links.glossy_resolution = kGlossyAuto;
+        } else {
+            links.glossy_resolution = rings->integer();
+        }
+    }
     return links;
 }
 

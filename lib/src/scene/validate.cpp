@@ -455,9 +455,10 @@ void check_settings(const Scene& scene, const At& root) {
     if (scene.links.spread_pieces < 0 || scene.links.spread_pieces > kMaxSpreadPieces)
         root.key("links").key("spread_pieces").fail("must be an integer in [0, " + std::to_string(kMaxSpreadPieces) +
                                                     "] (0: each patch link at its centroid delay)");
-    if (scene.links.glossy_resolution < 0 || scene.links.glossy_resolution > kMaxGlossyResolution)
+    if (scene.links.glossy_resolution != kGlossyAuto &&
+        (scene.links.glossy_resolution < 0 || scene.links.glossy_resolution > kMaxGlossyResolution))
         root.key("links").key("glossy_resolution").fail(
-            "must be an integer in [0, " + std::to_string(kMaxGlossyResolution) +
+            "must be \"auto\" or an integer in [0, " + std::to_string(kMaxGlossyResolution) +
             "] (rings of a glossy patch's directional cells, 4 R^2 cells; 0: glossy patches pass light on as Lambertian)");
     if (scene.solver.max_bounces < -1) root.key("solver").key("max_bounces").fail("must be >= 0");
     if (scene.solver.max_specular < 0 || scene.solver.max_specular > 16)

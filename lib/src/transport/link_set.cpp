@@ -17,7 +17,8 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
                       double bin_width_m, const LinkOptions& options, LinkSetStats counts) {
     HierarchyStats* stats = counts.hierarchy;
     LinkStats* flat_stats = counts.flat;
-    const bool glossy = settings.glossy_resolution > 0 && !patches.glossy.empty() && bin_width_m > 0.0;
+    const int rings = patches.glossy_rings_for(settings.glossy_resolution);
+    const bool glossy = rings > 0 && bin_width_m > 0.0;
     LinkSet set;
     if (settings.method == LinkMethod::Flat) {
         set = flat_link_set(patches, visibility, options, flat_stats);
@@ -30,7 +31,7 @@ LinkSet make_link_set(const PatchSet& patches, const Visibility& visibility, con
     }
     if (settings.spread_pieces > 0 && bin_width_m > 0.0)
         spread_patch_links(set, patches, bin_width_m, settings.spread_pieces, options.threads);
-    if (glossy) add_glossy_links(set, patches, visibility, options, bin_width_m, settings.glossy_resolution);
+    if (glossy) add_glossy_links(set, patches, visibility, options, bin_width_m, rings);
     return set;
 }
 

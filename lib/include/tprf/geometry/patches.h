@@ -5,6 +5,7 @@
 #include "tprf/core/progress.h"
 #include "tprf/scene/brdf.h"
 #include "tprf/scene/mesh_io.h"
+#include "tprf/scene/scene.h"
 
 #include <cstdint>
 #include <optional>
@@ -38,6 +39,11 @@ struct PatchSet {
         return glossy.empty() || !glossy[object[i]] ? nullptr : &*glossy[object[i]];
     }
 
+    /// Number of glossy patches (brdf(i) not null).
+    std::size_t glossy_patches() const;
+    /// The rings of the glossy patches' directional cells under the setting `setting`
+    /// (links.glossy_resolution; glossy_rings of this set's counts).
+    int glossy_rings_for(int setting) const { return glossy_rings(setting, glossy_patches(), size()); }
     /// Number of patches N.
     std::size_t size() const { return centroid.size(); }
     /// Number of corners of patch i (3 or 4).

@@ -24,6 +24,7 @@ struct SceneSummary {
     std::uint64_t mirror_links = 0; ///< of `links`, those through mirrors and glass (both directions)
     std::size_t glossy_patches = 0; ///< patches with directional cells (links.glossy_resolution > 0)
     std::size_t glossy_rows = 0;    ///< their rows in the march (2 x 4 R^2 each)
+    int glossy_rings = 0;           ///< R of their cells (links.glossy_resolution, "auto" resolved)
     std::size_t clusters = 0;       ///< clusters of the tree (hierarchical)
     std::uint64_t cluster_links = 0;///< links with a cluster at either end, pieces counted once (hierarchical)
     std::uint64_t patch_links = 0;  ///< patch-to-patch links (hierarchical)
@@ -62,6 +63,7 @@ struct ResourceEstimate {
     std::size_t near_links = 0;          ///< hierarchical: facing patch pairs nearer than its shortest cluster link
     double near_gap_m = 0.0;             ///< hierarchical: that distance, metres
     std::size_t mirror_links = 0;        ///< of `links`, those through mirrors and glass
+    int glossy_rings = 0;                ///< the rings of their cells (glossy_rings of links.glossy_resolution)
     std::size_t glossy_rows = 0;         ///< rows of the glossy patches' cells (links.glossy_resolution)
     double glossy_lobe_fmas = 0.0;       ///< the march's multiply-adds of their lobes per bin and channel
     double facing_fraction = 0.0;        ///< share of sampled patch pairs that face each other

@@ -125,6 +125,22 @@ enum class LinkMethod {
 inline constexpr int kMaxSpreadPieces = 8;
 /// The most rings of a glossy patch's directional cells (links.glossy_resolution).
 inline constexpr int kMaxGlossyResolution = 8;
+/// links.glossy_resolution "auto" (the default): glossy_rings decides.
+inline constexpr int kGlossyAuto = -1;
+/// "auto": the rings glossy patches get while glossy patches x patches stay within kAutoGlossyPairs (the
+/// pairs whose links the cells add), and none beyond.
+inline constexpr int kAutoGlossyRings = 3;
+inline constexpr double kAutoGlossyPairs = 2.5e7;
+
+/// The rings of the glossy patches' directional cells for the setting `setting` (links.glossy_resolution:
+/// 0 to 8, or kGlossyAuto) in a scene of `patches` patches of which `glossy` are glossy: the setting
+/// itself, or for "auto" kAutoGlossyRings while glossy x patches <= kAutoGlossyPairs, else 0. The one
+/// rule of the patches (their albedo), the links and the resource estimate.
+inline int glossy_rings(int setting, std::size_t glossy, std::size_t patches) {
+    if (setting != kGlossyAuto) return setting;
+    if (glossy == 0) return 0;
+    return double(glossy) * double(patches) <= kAutoGlossyPairs ? kAutoGlossyRings : 0;
+}
 
 /// The optional `links` block.
 struct LinkSettings {
@@ -139,8 +155,8 @@ struct LinkSettings {
     int spread_pieces = 0;
     /// Rings R of a glossy patch's directional cells (4 R^2 cells over its hemisphere) through which the
     /// transport passes its light on (transport/glossy_rows.h, docs/method.md); 0: glossy patches pass
-    /// light on as Lambertian surfaces of their hemispherical albedo.
-    int glossy_resolution = 0;
+    /// light on as Lambertian surfaces of their hemispherical albedo; kGlossyAuto ("auto"): glossy_rings.
+    int glossy_resolution = kGlossyAuto;
 };
 
 /// A grid of points on a relay surface (docs/capture.md): point (a, b) is
