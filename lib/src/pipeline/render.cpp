@@ -92,7 +92,7 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
 void note_scene(const Scene& scene, const PatchSet& patches, RenderReport& report) {
     report.warnings.insert(report.warnings.end(), scene.warnings.begin(), scene.warnings.end());
     const std::size_t glossy = patches.glossy_patches();
-    if (glossy == 0 || patches.glossy_rings_for(scene.links.glossy_resolution) > 0) return;
+    if (glossy == 0 || glossy_rings(scene.links.glossy_resolution, glossy, patches.size()) > 0) return;
     for (std::size_t k = 0; k < scene.objects.size(); ++k)
         if (scene.objects[k].material.glossy()) {
             char why[160];

@@ -88,7 +88,9 @@ constexpr int kShareGridMin = 2, kShareGridMax = 8, kShareGridNear = 3;
 std::vector<CellShare> cell_shares(const PatchSet& patches, int rings, std::size_t p, const SharedPolygon& other) {
     const HemisphereCells cells(rings);
     const Vec3& n = patches.normal[p];
-    const auto cell_of = [&](const Vec3& dir) { return cells.cell_of(in_cell_frame(patches, p, dir)); };
+    Vec3 t, b;  // the cells' frame (in_cell_frame's), once for every point
+    cell_frame(n, t, b);
+    const auto cell_of = [&](const Vec3& dir) { return cells.cell_of(Vec3(dir.dot(t), dir.dot(b), dir.dot(n)).normalized()); };
     const Vec3* corners = other.corners;
     const std::size_t count = other.count;
     const Vec3& o = patches.centroid[p];

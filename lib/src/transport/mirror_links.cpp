@@ -170,9 +170,11 @@ void glossy_chain_links(const ChainPair& c, const GlossyRows& rows, const Glossy
                             c.radius[other_patch], near});
     };
     GlossyPair pair = base;
-    if (rows.slot[i] >= 0) pair.at_i = shares(i, from_i, j);
     if (rows.slot[j] >= 0) pair.at_j = shares(j, from_j, i);
-    if (rows.slot[i] >= 0) glossy_pair_cells(rows, pair, out);
+    if (rows.slot[i] >= 0) {
+        pair.at_i = shares(i, from_i, j);
+        glossy_pair_cells(rows, pair, out);
+    }
     if (rows.slot[j] < 0 || (i == j && palindrome)) return;
     GlossyPair back = pair;  // the same pair from j's side
     std::swap(back.i, back.j);
@@ -217,7 +219,7 @@ void chain_links(const PairScene& scene, const MirrorChain& chain, bool palindro
                 out.push_back({i, j, float(f), distance, tint});
                 if (i != j || !palindrome) out.push_back({j, i, float(f_ji), distance, tint});
             }
-            if ((is_glossy(i) || is_glossy(j))) {
+            if (is_glossy(i) || is_glossy(j)) {
                 GlossyPair g;
                 g.i = i;
                 g.j = j;

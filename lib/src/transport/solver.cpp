@@ -667,7 +667,7 @@ void March::block_totals(std::size_t q, std::int64_t lo, int count, int offset) 
     // Short blocks from the recent bins (which hold the whole block; compact, and in cache), long ones
     // from the ring, where a patch's bins are contiguous.
     const std::size_t i = p.order[q];
-    if (i >= p.in_begin() && i < p.out_begin) return;  // an in-cell: left zero (SolveBlock::unread)
+    if (p.unread(i)) return;  // a glossy in-cell: left zero (SolveBlock::unread)
     auto value = [&](int layer, std::int64_t bin) -> const float* {
         return count <= 4 ? recent(layer, q, bin) : ring_at(layer, i, bin);
     };
@@ -757,7 +757,7 @@ void March::emit_block(std::int64_t b0, const BlockSink& sink) {
     const std::size_t lanes = std::size_t(p.illuminations) * 3, kept_row = std::size_t(stride) * lanes;
     const std::size_t row = std::size_t(count) * lanes;
     parallel_for(p.patches, {p.threads, 1, false}, [&](std::size_t i) {
-        if (i >= p.in_begin() && i < p.out_begin) return;  // an in-cell: left zero
+        if (p.unread(i)) return;  // a glossy in-cell: left zero
         if (!m_kept.empty()) {
             const std::size_t q = p.position[i];
             std::copy_n(m_kept.data() + q * kept_row, row, m_out_total.data() + i * row);

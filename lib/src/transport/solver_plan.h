@@ -229,6 +229,7 @@ struct SolvePlan {
     /// The first glossy in-cell row (out_begin when there are none): rows [in_begin(), out_begin) are
     /// read by their patches' out-cells alone, and the output leaves them zero (SolveBlock::unread).
     std::size_t in_begin() const { return set && !set->glossy.empty() ? set->glossy.patches : out_begin; }
+    bool unread(std::size_t row) const { return row >= in_begin() && row < out_begin; }
     bool clusters = false;          // push and pull run (a link set with clusters)
     // With clusters: the subtrees that threads take whole (their patches and clusters) and the
     // clusters above them, in preorder.
