@@ -2,6 +2,7 @@
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/core/parallel.h"
+#include "tprf/geometry/patches.h"
 #include "tprf/pipeline/capture.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/pipeline/ranks.h"
@@ -160,8 +161,8 @@ void print_warnings(const std::vector<std::string>& warnings) {
     for (const std::string& w : warnings) std::fprintf(stderr, "tprf: warning: %s\n", w.c_str());
 }
 
-int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool quiet,
-             bool progress_lines) {
+int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool meshes_only, bool estimate_only,
+             bool quiet, bool progress_lines) {
     tprf::Scene scene = tprf::load_scene(scene_file, options.defines);
     print_warnings(scene.warnings);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
@@ -175,6 +176,12 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     const tprf::ResourceEstimate e = print_estimate(scene, options);
     print_meshes(e.meshes);
     print_mesh_repairs(e.meshes);
+    if (estimate_only) {
+        print_warnings(tprf::unit_warnings(scene, tprf::build_patches(scene)));
+        std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
+        print_time(scene);
+        return 0;
+    }
     if (e.link_stage_bytes > tprf::memory_limit_bytes(options)) {
         // Building the links to count them would exceed the limit: the counts stay estimates.
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
@@ -187,6 +194,7 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::SceneSummary s = tprf::describe_scene(scene, options);
     bar.finish();
+    print_warnings(s.warnings);
     std::printf("patches  %zu (max_edge %.6g m)\n", s.patches, s.max_edge);
     if (scene.links.method == tprf::LinkMethod::Flat)
         std::printf("links    %zu (%.1f MB; %llu facing pairs tested)\n", s.links, double(s.link_bytes) / 1e6,
@@ -368,6 +376,10 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     info->add_flag("--meshes", info_meshes,
                    "only load the mesh files and print, per mesh, its vertices, faces, triangles, bounding box "
                    "and what was dropped (no estimate, no links)");
+    bool info_estimate = false;
+    info->add_flag("--estimate-only", info_estimate,
+                   "print the estimate, the meshes, the patch count and the time window, and build no links (seconds "
+                   "where the links of a large scene take minutes)");
     tprf::RenderOptions render;
     std::string output;
     auto* rend = app.add_subcommand("render", "render a scene: transient cube, steady image and the flagged extras");
@@ -394,7 +406,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
         if (info->parsed()) {
             info_options.threads = threads;
             info_options.max_edge = max_edge;
-            return run_info(scene_file, info_options, info_meshes, quiet, progress_lines);
+            return run_info(scene_file, info_options, info_meshes, info_estimate, quiet, progress_lines);
         }
         if (rend->parsed()) {
             render.output = output;

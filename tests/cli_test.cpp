@@ -18,6 +18,7 @@
 #include <sstream>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace {
 
@@ -106,6 +107,55 @@ TEST_F(Cli, GoodSceneRendersAndInfoPrints) {
     EXPECT_EQ(r.status, 0) << r.err;
     for (const char* f : {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json"})
         EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / f)) << f;
+}
+
+TEST_F(Cli, InfoEstimateOnlyPrintsTheEstimateAndBuildsNoLinks) {
+    int status = -1;
+    const std::string out = run_stdout("info --estimate-only " + (m_dir / "good.json").string(), status);
+    EXPECT_EQ(status, 0);
+    EXPECT_NE(line_after(out, "estimate "), "") << out;
+    EXPECT_EQ(line_after(out, "patches  "), "4 (counted; max_edge 0.5 m)") << out;
+    EXPECT_NE(line_after(out, "time     "), "") << out;
+    EXPECT_EQ(out.find("links    "), std::string::npos) << out;
+}
+
+TEST_F(Cli, SettingsProbablyInAnotherUnitAreWarnedOfByInfoAndRender) {
+    // good.json's 1 m square (1.41 m across) with a fov of 0.78 (radians meant), bins of 5 m (mm meant) and
+    // bins of 0.001 ps (3e-7 m): each a warning before the links, from info (--estimate-only too) and render;
+    // none for good.json.
+    const auto scene = [&](const std::string& name, const std::string& fov, const std::string& time) {
+        std::ofstream(m_dir / name) << R"({"time": )" << time << R"(,
+          "camera": {"position": [2, 0.5, 0.5], "look_at": [0, 0.5, 0.3], "up": [0, 0, 1], "fov": )" << fov << R"(,
+                     "width": 8, "height": 8},
+          "lights": [{"type": "point", "position": [0.6, 0.5, 0.6], "intensity": 1.0}],
+          "objects": [{"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0]}],
+          "patches": {"max_edge": 0.5}})";
+        return (m_dir / name).string();
+    };
+    const std::string units = scene("units.json", "0.78", R"({"bins": 16, "bin_width": 5})");
+    const std::string fine = scene("fine.json", "40", R"({"bins": 16, "bin_width": 0.001, "unit": "ps"})");
+    for (const std::string& command :
+         std::vector<std::string>{"info ", "info --estimate-only ", "render -o " + (m_dir / "out").string() + " "}) {
+        const Outcome r = run(command + units);
+        EXPECT_EQ(r.status, 0) << command << r.err;
+        EXPECT_NE(r.err.find("warning: camera.fov is 0.78 degrees: fov is in degrees (if 0.78 was meant in radians, it "
+                             "is 44.69 degrees)"),
+                  std::string::npos)
+            << command << r.err;
+        EXPECT_NE(r.err.find("warning: time.bin_width 5 m against a scene 1.41 m across"), std::string::npos)
+            << command << r.err;
+        if (command.rfind("render", 0) == 0) continue;  // (its march would keep 5 million bins a patch)
+        const Outcome f = run(command + fine);
+        EXPECT_NE(f.err.find("warning: time.bin_width 0.001 ps (3e-07 m of light travel) against a scene 1.41 m "
+                             "across (its bounding box's diagonal): light takes over 10^5 bins to cross it"),
+                  std::string::npos)
+            << command << f.err;
+        EXPECT_EQ(f.err.find("camera.fov"), std::string::npos) << f.err;
+    }
+    for (const char* command : {"info ", "info --estimate-only "})
+        EXPECT_EQ(run(command + (m_dir / "good.json").string()).err.find("warning"), std::string::npos) << command;
+    const Outcome good = run("render -o " + (m_dir / "good").string() + " " + (m_dir / "good.json").string());
+    EXPECT_EQ(good.err.find("warning"), std::string::npos) << good.err;
 }
 
 TEST_F(Cli, MaxEdgeReplacesTheScenesPatchSize) {

@@ -46,6 +46,37 @@ std::string describe(const MeshReport& m) {
            cells + "); " + box + "; " + (repairs.empty() ? "nothing dropped" : "dropped " + repairs);
 }
 
+std::vector<std::string> unit_warnings(const Scene& scene, const PatchSet& patches) {
+    std::vector<std::string> out;
+    char text[400];
+    if (scene.camera && scene.camera->fov_deg < 1.0) {
+        std::snprintf(text, sizeof text,
+                      "camera.fov is %.6g degrees: fov is in degrees (if %.6g was meant in radians, it is %.4g degrees)",
+                      scene.camera->fov_deg, scene.camera->fov_deg, scene.camera->fov_deg * 180.0 / M_PI);
+        out.push_back(text);
+    }
+    if (patches.vertices.empty()) return out;
+    Vec3 lo = patches.vertices[0], hi = lo;
+    for (const Vec3& v : patches.vertices) {
+        lo = lo.cwiseMin(v);
+        hi = hi.cwiseMax(v);
+    }
+    const double size = (hi - lo).norm(), bin = scene.time.bin_width_m();
+    if (size > 0.0 && (bin > 0.5 * size || bin < 1e-5 * size)) {
+        char width[120];
+        if (scene.time.unit == TimeUnit::Metres)
+            std::snprintf(width, sizeof width, "%.6g m", scene.time.bin_width);
+        else
+            std::snprintf(width, sizeof width, "%.6g ps (%.3g m of light travel)", scene.time.bin_width, bin);
+        std::snprintf(text, sizeof text,
+                      "time.bin_width %s against a scene %.3g m across (its bounding box's diagonal): %s; is it in "
+                      "time.unit?",
+                      width, size, bin > 0.5 * size ? "all its light falls within a few bins" : "light takes over 10^5 bins to cross it");
+        out.push_back(text);
+    }
+    return out;
+}
+
 SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) {
     SceneSummary s;
     auto t0 = std::chrono::steady_clock::now();
@@ -53,6 +84,7 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     const PatchSet patches = build_patches(scene, {options.progress}, &patch_stats);
     s.patches = patches.size();
     s.max_edge = patch_stats.max_edge;
+    s.warnings = unit_warnings(scene, patches);
     s.seconds_patches = seconds_since(t0);
 
     t0 = std::chrono::steady_clock::now();

@@ -31,7 +31,14 @@ struct SceneSummary {
     std::uint64_t candidates = 0;   ///< node pairs the oracle judged (hierarchical)
     double seconds_patches = 0.0;
     double seconds_links = 0.0;
+    std::vector<std::string> warnings;  ///< unit_warnings
 };
+
+/// What in the scene is probably written in another unit than it means, as warnings: a camera whose
+/// fov is under 1 degree (radians meant for degrees), a time bin wider than half the scene's size
+/// (the diagonal of its patches' bounding box: all its light within a couple of bins) or narrower than
+/// 1e-5 of it. Render and info both say them before the links are built.
+std::vector<std::string> unit_warnings(const Scene& scene, const PatchSet& patches);
 
 /// Loads the scene's mesh files and nothing else: per mesh its size, bounds and repairs (`tprf info
 /// --meshes`).
