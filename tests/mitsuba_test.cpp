@@ -201,14 +201,51 @@ TEST(Mitsuba, LookatWithZeroUpIsLookatWithoutUp) {
     EXPECT_TRUE(tprf::camera_ray(none, 1.0, 2.0).isApprox(tprf::camera_ray(zero, 1.0, 2.0)));
 }
 
-TEST(Mitsuba, MirroringOrScaledCameraIsRefused) {
+// An exported camera's to_world written to six digits (columns orthonormal to about 5e-7, as
+// mitransient's staircase) is a rotation; a mirroring one renders Mitsuba's mirrored image (its left
+// column looking along the matrix's +x); a scale is refused, naming how far from a rotation it is.
+TEST(Mitsuba, ExportedAndMirroringCamerasAreTakenAScaledOneRefused) {
     TempDir dir;
+    const auto with = [&](const std::string& transform) {
+        std::string xml = scene_xml("");
+        const std::size_t at = xml.find("<lookat");
+        xml.replace(at, xml.find("/></transform>") - at + 2, transform);
+        return xml;
+    };
+    // A rotation about (1, 2, 3) by 0.7 rad and a translation, exactly and to six significant digits.
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    const auto matrix = [&](const Eigen::Matrix3d& m, int digits) {
+        char text[400], *at = text;
+        for (int i = 0; i < 3; ++i)
+            at += std::snprintf(at, sizeof text - std::size_t(at - text), "%.*g %.*g %.*g %g ", digits, m(i, 0),
+                                digits, m(i, 1), digits, m(i, 2), 0.5 * (i + 1));
+        std::snprintf(at, sizeof text - std::size_t(at - text), "0 0 0 1");
+        return std::string(R"(<matrix value=")") + text + R"("/>)";
+    };
+    const tprf::Camera exact = *parse(with(matrix(r, 17)), dir).camera;
+    const tprf::Camera rounded = *parse(with(matrix(r, 6)), dir).camera;
+    for (const double column : {0.0, 4.0, 8.0})
+        EXPECT_TRUE(tprf::camera_ray(rounded, column, 2.0).isApprox(tprf::camera_ray(exact, column, 2.0), 1e-5));
+    EXPECT_FALSE(exact.mirrored);
+    // Mirrored in the camera's x: the image's left column looks along the matrix's +x.
+    Eigen::Matrix3d mirror = r;
+    mirror.col(0) = -mirror.col(0);
+    const tprf::Camera m = *parse(with(matrix(mirror, 17)), dir).camera;
+    EXPECT_TRUE(m.mirrored);
+    EXPECT_TRUE(tprf::camera_ray(m, 0.0, 4.0).isApprox(tprf::camera_ray(exact, 8.0, 4.0), 1e-12));
+    EXPECT_TRUE(tprf::camera_ray(m, 8.0, 4.0).isApprox(tprf::camera_ray(exact, 0.0, 4.0), 1e-12));
+    EXPECT_GT(tprf::camera_ray(m, 0.0, 4.0).dot(mirror.col(0)), tprf::camera_ray(m, 8.0, 4.0).dot(mirror.col(0)));
     std::string xml = scene_xml("");
     xml.replace(xml.find("<lookat"), 0, R"(<scale x="-1"/>)");
-    const std::string e = error_of(xml, dir);
-    EXPECT_NE(e.find("scene.xml:4: <transform name=\"to_world\">: mirrors the image"), std::string::npos) << e;
+    EXPECT_TRUE(parse(xml, dir).camera->mirrored);
     xml = scene_xml("");
     xml.replace(xml.find("<lookat"), 0, R"(<scale value="2"/>)");
+    EXPECT_NE(error_of(xml, dir).find("scene.xml:4: <transform name=\"to_world\">: has a scale or shear (its columns are "
+                                      "orthonormal to 1.5, not 1e-05)"),
+              std::string::npos)
+        << error_of(xml, dir);
+    xml = scene_xml("");
+    xml.replace(xml.find("<lookat"), 0, R"(<scale value="1.0001"/>)");
     EXPECT_NE(error_of(xml, dir).find("scale or shear"), std::string::npos);
 }
 

@@ -38,6 +38,7 @@ struct Pinhole {
         forward = (camera.look_at - camera.position).normalized();
         right = forward.cross(camera.up).normalized();
         up = right.cross(forward);
+        if (camera.mirrored) right = -right;  // column 0 on the right
         const double tan_half = std::tan(0.5 * camera.fov_deg * M_PI / 180.0);
         const double aspect = double(camera.width) / double(camera.height);
         x_per_column = 2.0 / camera.width * tan_half * aspect;

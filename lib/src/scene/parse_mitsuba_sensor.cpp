@@ -2,9 +2,11 @@
 // time axis and bounce limit.
 #include "mitsuba_xml.h"
 
+#include <cstdio>
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <string>
 #include <string_view>
@@ -22,6 +24,9 @@ std::string lower(std::string s) {
 
 // Mitsuba's fov of axis `axis` as tprf's vertical fov, in degrees. Where the axis is the vertical one,
 // or the image is square, the number is kept as written (no round trip through tan and atan).
+// How far from orthonormal a camera's to_world columns may be (their dot products and lengths).
+constexpr double kRotationTolerance = 1e-5;
+
 double vertical_fov(Props& p, double fov, std::string axis, int width, int height) {
     const double aspect = double(width) / double(height);
     if (axis == "smaller") axis = aspect > 1.0 ? "y" : "x";
@@ -34,19 +39,28 @@ double vertical_fov(Props& p, double fov, std::string axis, int width, int heigh
 }
 
 // Mitsuba's camera looks along its +z with +y up, and its +x points to the image's left: tprf's pinhole
-// (right = forward x up) sees the same image from position M(0,0,0), forward M's +z, up M's +y, as long
-// as M is a rotation and a translation. A mirror would flip the image, which no pinhole does.
+// (right = forward x up) sees the same image from position M(0,0,0), forward M's +z, up M's +y when M is
+// a rotation and a translation. Exported cameras write their matrices to six or so digits: columns
+// orthonormal to 1e-5 count as a rotation. A mirroring M (negative determinant) keeps its image's left
+// column looking along M's +x, which is then the frame's right: the image is mirrored (Camera::mirrored),
+// as Mitsuba renders it.
 void set_pose(Props& p, const Eigen::Matrix4d& m, Camera& camera) {
     const pugi::xml_node where = p.find("to_world") ? p.find("to_world") : p.node();
     const Eigen::Matrix3d l = m.block<3, 3>(0, 0);
     if (m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) p.source().fail(where, "is not affine (last row 0 0 0 1)");
-    if (l.determinant() < 0.0)
-        p.source().fail(where, "mirrors the image (negative determinant): tprf's pinhole camera cannot render that");
-    if (!(l.transpose() * l).isIdentity(1e-6))
-        p.source().fail(where, "has a scale or shear: a camera's to_world must be a rotation and a translation");
+    const double off = (l.transpose() * l - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    if (!(off <= 2.0 * kRotationTolerance)) {
+        char text[200];
+        std::snprintf(text, sizeof text,
+                      "has a scale or shear (its columns are orthonormal to %.2g, not %g): a camera's to_world must be "
+                      "a rotation, or a mirror, and a translation",
+                      0.5 * off, kRotationTolerance);
+        p.source().fail(where, text);
+    }
     camera.position = m.block<3, 1>(0, 3);
     camera.look_at = camera.position + l.col(2).normalized();
     camera.up = l.col(1).normalized();
+    camera.mirrored = l.determinant() < 0.0;
 }
 
 int positive(Props& p, std::string_view name, int fallback) {

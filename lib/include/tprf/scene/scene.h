@@ -34,6 +34,10 @@ struct Camera {
     /// than its patch centroid's (SecondBounceLight; docs/scene.md): what patch-to-patch
     /// links carry, without mirrors or glass; ignored with them.
     bool shift_second_bounce = true;
+    /// The image's columns in reverse order, column 0 looking towards the right of the frame above: a
+    /// Mitsuba camera whose to_world mirrors (a negative determinant, as some exporters write) sees
+    /// the mirror image of what its rotation would (docs/mitsuba.md). No JSON key.
+    bool mirrored = false;
 };
 
 /// Isotropic point light: irradiance at x is intensity * cos(theta) / r^2.
