@@ -86,6 +86,13 @@ public:
         m_drawn = false;
     }
 
+    // A line of its own between the bar's redraws (PipelineOptions::notice).
+    void note(const std::string& text) {
+        finish();
+        std::fprintf(stderr, "tprf: note: %s\n", text.c_str());
+        std::fflush(stderr);
+    }
+
 private:
     bool m_lines;
     bool m_quiet;
@@ -166,7 +173,10 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     tprf::Scene scene = tprf::load_scene(scene_file, options.defines);
     print_warnings(scene.warnings);
     if (options.max_edge > 0.0) scene.max_edge = options.max_edge;
+    ProgressBar bar(quiet, progress_lines);
+    if (!quiet) options.notice = [&](const std::string& text) { bar.note(text); };
     std::printf("scene    %s\n", scene_file.c_str());
+    std::fflush(stdout);
     if (meshes_only) {
         const std::vector<tprf::MeshReport> meshes = tprf::describe_meshes(scene);
         print_meshes(meshes);
@@ -177,7 +187,7 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     print_meshes(e.meshes);
     print_mesh_repairs(e.meshes);
     if (estimate_only) {
-        print_warnings(tprf::unit_warnings(scene, tprf::build_patches(scene)));
+        print_warnings(tprf::unit_warnings(scene, tprf::build_patches(scene, {{}, options.notice})));
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
         print_time(scene);
         return 0;
@@ -190,7 +200,6 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
         print_time(scene);
         return 0;
     }
-    ProgressBar bar(quiet, progress_lines);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
     const tprf::SceneSummary s = tprf::describe_scene(scene, options);
     bar.finish();
@@ -222,6 +231,7 @@ int run_render(const std::string& scene_file, tprf::RenderOptions options, bool 
     quiet = quiet || options.ranks->rank() != 0;  // rank 0 alone prints
     ProgressBar bar(quiet, progress_lines);
     options.progress = [&](std::string_view phase, double f) { bar.update(phase, f); };
+    if (!quiet) options.notice = [&](const std::string& text) { bar.note(text); };
     const tprf::RenderReport r = tprf::render_file(scene_file, options);
     bar.finish();
     print_mesh_repairs(r.meshes);

@@ -158,6 +158,22 @@ TEST_F(Cli, SettingsProbablyInAnotherUnitAreWarnedOfByInfoAndRender) {
     EXPECT_EQ(good.err.find("warning"), std::string::npos) << good.err;
 }
 
+TEST_F(Cli, AMitsubaSceneWithoutAPatchSizeSaysTheOneItGetsFirst) {
+    const std::string xml = std::string(TPRF_SOURCE_DIR) + "/meshes/cornell-box.xml";
+    // (Without -q: notes are not warnings, and --quiet leaves them out.)
+    const auto loud = [](const std::string& args) { return tprf::test::shell(std::string(TPRF_BINARY) + " " + args + " >/dev/null"); };
+    const Outcome r = loud("info --estimate-only " + xml);
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_EQ(r.err.substr(0, r.err.find('\n')),
+              "tprf: note: patches of 0.05413 m: the scene sets no patch size, so its bounding box's diagonal (1.732 m) "
+              "/ 32 (--max-edge sets it)");
+    EXPECT_EQ(loud("info --estimate-only --max-edge 0.1 " + xml).err.find("note"), std::string::npos);
+    EXPECT_EQ(run("info --estimate-only -q " + xml).err.find("note"), std::string::npos);
+    int status = -1;
+    EXPECT_EQ(line_after(run_stdout("info --estimate-only " + xml, status), "patches  "),
+              "2325 (counted; max_edge 0.0541266 m)");
+}
+
 TEST_F(Cli, MaxEdgeReplacesTheScenesPatchSize) {
     // good.json: one 1 m square at max_edge 0.5 (4 patches); --max-edge 0.25 cuts it into 16, 0.1 into 100.
     int status = -1;

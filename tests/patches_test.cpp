@@ -7,6 +7,7 @@
 
 #include <fstream>
 #include <string>
+#include <vector>
 #include <unistd.h>
 
 namespace {
@@ -241,17 +242,35 @@ TEST_F(PatchesMesh, ObjectIdsAreSceneIndices) {
     EXPECT_LT((p.normal[11] + Vec3::UnitZ()).norm(), kTol);
 }
 
-TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverSixteenAndDropsAreSummed) {
+TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverThirtyTwoAndDropsAreSummed) {
     tprf::Scene scene;
     scene.objects.push_back(rectangle(Vec3::Zero(), Vec3(3, 0, 0), Vec3(0, 4, 0)));
     // The mesh lies inside the rectangle's box and brings one degenerate face.
     scene.objects.push_back(mesh(kTriangle + "f 1 2 2\n"));
     tprf::PatchStats stats;
-    const auto p = tprf::build_patches(scene, {}, &stats);
-    EXPECT_DOUBLE_EQ(stats.max_edge, 5.0 / 16.0);  // box 3 x 4 x 0
+    std::vector<std::string> notes;
+    tprf::PatchOptions options;
+    options.notice = [&](const std::string& text) { notes.push_back(text); };
+    const auto p = tprf::build_patches(scene, options, &stats);
+    EXPECT_DOUBLE_EQ(stats.max_edge, 5.0 / 32.0);  // box 3 x 4 x 0
+    EXPECT_TRUE(stats.default_size);
+    EXPECT_DOUBLE_EQ(stats.diagonal, 5.0);
     EXPECT_EQ(tprf::dropped_faces(stats.meshes), 1u);
-    EXPECT_EQ(p.size(), std::size_t{10 * 13 + 16});  // ceil(3 / 0.3125) x ceil(4 / 0.3125), n = 4
+    EXPECT_EQ(p.size(), std::size_t{20 * 26 + 49});  // ceil(3 / 0.15625) x ceil(4 / 0.15625), n = 7
     expect_well_formed(p, stats.max_edge);
+    // The user is told the size and why, once, before anything is cut.
+    EXPECT_EQ(notes, std::vector<std::string>{"patches of 0.1562 m: the scene sets no patch size, so its bounding "
+                                              "box's diagonal (5 m) / 32 (--max-edge sets it)"});
+    // The same scene in millimetres has the same patches; a size of its own, no notice.
+    tprf::Scene millimetres;
+    millimetres.objects.push_back(rectangle(Vec3::Zero(), Vec3(3000, 0, 0), Vec3(0, 4000, 0)));
+    EXPECT_EQ(tprf::build_patches(millimetres).size(), std::size_t{20 * 26});
+    scene.max_edge = 0.5;
+    notes.clear();
+    tprf::PatchStats given;
+    tprf::build_patches(scene, options, &given);
+    EXPECT_TRUE(notes.empty());
+    EXPECT_FALSE(given.default_size);
 }
 
 TEST_F(PatchesMesh, ReportsProgressPerObject) {

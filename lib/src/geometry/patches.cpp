@@ -11,6 +11,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <span>
 #include <string>
@@ -232,9 +233,9 @@ Eigen::AlignedBox3d scene_box(const LoadedObjects& loaded) {
     return box;
 }
 
-// The patch size: the scene's, or its bounding-box diagonal / 16.
+// The patch size: the scene's, or its bounding-box diagonal / kDefaultPatchDivisions.
 double patch_size(const Scene& scene, const Eigen::AlignedBox3d& box) {
-    const double max_edge = scene.max_edge > 0.0 ? scene.max_edge : box.diagonal().norm() / 16.0;
+    const double max_edge = scene.max_edge > 0.0 ? scene.max_edge : box.diagonal().norm() / kDefaultPatchDivisions;
     TPRF_CHECK_LT(0.0, max_edge);
     return max_edge;
 }
@@ -393,7 +394,19 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     PatchSet patches;
     patches.first.push_back(0);
     if (scene.objects.empty()) return patches;
-    st.max_edge = patch_size(scene, scene_box(loaded));
+    const Eigen::AlignedBox3d box = scene_box(loaded);
+    st.max_edge = patch_size(scene, box);
+    st.default_size = !(scene.max_edge > 0.0);
+    st.diagonal = box.diagonal().norm();
+    if (st.default_size && options.notice) {
+        char text[300];
+        std::snprintf(text, sizeof text,
+                      "patches of %.4g m: the scene sets no patch size, so its bounding box's diagonal (%.4g m) / %g "
+                      "(--max-edge%s sets it)",
+                      st.max_edge, st.diagonal, kDefaultPatchDivisions,
+                      scene.file.extension() == ".json" ? " or patches.max_edge" : "");
+        options.notice(text);
+    }
 
     // Counting before emitting lets every array be allocated once.
     std::vector<Source> sources;

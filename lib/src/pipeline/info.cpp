@@ -81,7 +81,7 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     SceneSummary s;
     auto t0 = std::chrono::steady_clock::now();
     PatchStats patch_stats;
-    const PatchSet patches = build_patches(scene, {options.progress}, &patch_stats);
+    const PatchSet patches = build_patches(scene, {options.progress, options.notice}, &patch_stats);
     s.patches = patches.size();
     s.max_edge = patch_stats.max_edge;
     s.warnings = unit_warnings(scene, patches);

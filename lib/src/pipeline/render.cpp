@@ -120,7 +120,7 @@ void build_geometry(const Scene& scene, const RenderOptions& options, bool links
                     RenderReport& report) {
     auto start = Clock::now();
     PatchStats patch_stats;
-    t.patches = build_patches(scene, {options.progress}, &patch_stats);
+    t.patches = build_patches(scene, {options.progress, options.notice}, &patch_stats);
     report.patches = t.patches.size();
     report.meshes = std::move(patch_stats.meshes);
     note_scene(scene, t.patches, report);

@@ -8,6 +8,7 @@
 #include "tprf/scene/scene.h"
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -76,18 +77,28 @@ std::size_t dropped_faces(const std::vector<MeshReport>& meshes);
 /// What build_patches saw besides the patches.
 struct PatchStats {
     double max_edge = 0.0;             ///< the patch size used, metres
+    /// The scene gave none: max_edge is the bounding box's `diagonal` / kDefaultPatchDivisions.
+    bool default_size = false;
+    double diagonal = 0.0;             ///< of every object's bounding box, metres
     std::vector<MeshReport> meshes;    ///< one per mesh object, in the scene's order
 };
+
+/// A scene without patches.max_edge (a Mitsuba scene without --max-edge) gets patches no longer than its
+/// bounding box's diagonal / this: the sample Cornell box (1 m) comes out at 2,325 patches from its XML
+/// against 2,520 at its JSON's 0.05 m, and a scene in millimetres at the same count.
+inline constexpr double kDefaultPatchDivisions = 32.0;
 
 /// Options of the patch stage.
 struct PatchOptions {
     ProgressFn progress;               ///< may be empty
+    /// Called once, before any patch is cut, with what the user should know first: the patch size a
+    /// scene without one gets and why (may be empty).
+    std::function<void(const std::string&)> notice;
 };
 
 /// Subdivides every object of the scene into patches: rectangles and the planar convex quads of meshes
 /// into grids of quads, other mesh faces into triangles refined until no patch edge exceeds the
-/// scene's max_edge (bounding-box diagonal / 16 when
-/// the scene gives none). A two-sided object yields each patch twice, once per side.
+/// scene's max_edge (bounding-box diagonal / kDefaultPatchDivisions when the scene gives none). A two-sided object yields each patch twice, once per side.
 PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
 
 /// The point of a triangle or quad (`count` 3 or 4 corners) at (u, v) in the unit square: bilinear on a

@@ -4,12 +4,18 @@
 #include "tprf/core/progress.h"
 #include "tprf/scene/parse_mitsuba.h"
 
+#include <functional>
+#include <string>
+
 namespace tprf {
 
 /// Options shared by the pipeline entry points.
 struct PipelineOptions {
     int threads = 0;        ///< 0: all cores
     ProgressFn progress;    ///< may be empty
+    /// Lines the user should read before the work goes on, each once (the patch size a scene without
+    /// one gets: PatchOptions::notice); may be empty.
+    std::function<void(const std::string&)> notice;
     /// Draw figures (sensor_plot.png) with python/tprf_plots.py in a child process. Off: only their
     /// data is written (sensor_plot.json), for callers that must not fork or draw themselves.
     bool draw_plots = true;
