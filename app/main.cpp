@@ -187,7 +187,8 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     print_meshes(e.meshes);
     print_mesh_repairs(e.meshes);
     if (estimate_only) {
-        print_warnings(tprf::unit_warnings(scene, tprf::build_patches(scene, {{}, options.notice})));
+        if (!(scene.max_edge > 0.0) && options.notice) options.notice(tprf::default_size_note(scene, e.diagonal));
+        print_warnings(tprf::unit_warnings(scene, e.meshes));
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
         print_time(scene);
         return 0;

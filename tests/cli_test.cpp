@@ -158,6 +158,29 @@ TEST_F(Cli, SettingsProbablyInAnotherUnitAreWarnedOfByInfoAndRender) {
     EXPECT_EQ(good.err.find("warning"), std::string::npos) << good.err;
 }
 
+TEST_F(Cli, AMeshInMillimetresIsNamedWithTheScaleThatFixesIt) {
+    // A 0.1 m tetrahedron written in millimetres on a 1 m floor: info warns, naming it, its size and the
+    // scale that fixes it; a render refused for size says so first.
+    std::ofstream(m_dir / "tetra.obj") << "v 0 0 0\nv 100 0 0\nv 0 100 0\nv 0 0 100\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    std::ofstream(m_dir / "mm.json") << R"({
+      "time": {"bins": 16, "bin_width": 0.1},
+      "camera": {"position": [2, 0.5, 0.5], "look_at": [0, 0.5, 0.3], "up": [0, 0, 1], "fov": 40, "width": 8, "height": 8},
+      "lights": [{"type": "point", "position": [0.6, 0.5, 0.6], "intensity": 1.0}],
+      "objects": [{"type": "rectangle", "origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0]},
+                  {"type": "mesh", "file": "tetra.obj"}],
+      "patches": {"max_edge": 0.05}})";
+    const std::string why =
+        "objects[1] ('tetra.obj') is 173.2 m across, 122 times the rest of the scene (1.414 m): is it in millimetres? "
+        "A scale of 0.001 in its transform makes it 0.1732 m";
+    const Outcome info = run("info --estimate-only " + (m_dir / "mm.json").string());
+    EXPECT_EQ(info.status, 0) << info.err;
+    EXPECT_NE(info.err.find("tprf: warning: " + why), std::string::npos) << info.err;
+    const Outcome r = run("render " + (m_dir / "mm.json").string() + " -o " + (m_dir / "out").string() + " --max-memory 0.01");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("mm.json: " + why + "; estimated peak memory"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(m_dir / "out"));
+}
+
 TEST_F(Cli, AMitsubaSceneWithoutAPatchSizeSaysTheOneItGetsFirst) {
     const std::string xml = std::string(TPRF_SOURCE_DIR) + "/meshes/cornell-box.xml";
     // (Without -q: notes are not warnings, and --quiet leaves them out.)

@@ -384,6 +384,16 @@ void add_glossy(const Scene& scene, PatchSet& patches) {
 
 }  // namespace
 
+std::string default_size_note(const Scene& scene, double diagonal) {
+    char text[300];
+    std::snprintf(text, sizeof text,
+                  "patches of %.4g m: the scene sets no patch size, so its bounding box's diagonal (%.4g m) / %g "
+                  "(--max-edge%s sets it)",
+                  diagonal / kDefaultPatchDivisions, diagonal, kDefaultPatchDivisions,
+                  scene.file.extension() == ".json" ? " or patches.max_edge" : "");
+    return text;
+}
+
 PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchStats* stats) {
     PatchStats local;
     PatchStats& st = stats ? *stats : local;
@@ -398,15 +408,7 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     st.max_edge = patch_size(scene, box);
     st.default_size = !(scene.max_edge > 0.0);
     st.diagonal = box.diagonal().norm();
-    if (st.default_size && options.notice) {
-        char text[300];
-        std::snprintf(text, sizeof text,
-                      "patches of %.4g m: the scene sets no patch size, so its bounding box's diagonal (%.4g m) / %g "
-                      "(--max-edge%s sets it)",
-                      st.max_edge, st.diagonal, kDefaultPatchDivisions,
-                      scene.file.extension() == ".json" ? " or patches.max_edge" : "");
-        options.notice(text);
-    }
+    if (st.default_size && options.notice) options.notice(default_size_note(scene, st.diagonal));
 
     // Counting before emitting lets every array be allocated once.
     std::vector<Source> sources;

@@ -46,7 +46,53 @@ std::string describe(const MeshReport& m) {
            cells + "); " + box + "; " + (repairs.empty() ? "nothing dropped" : "dropped " + repairs);
 }
 
-std::vector<std::string> unit_warnings(const Scene& scene, const PatchSet& patches) {
+namespace {
+
+// An object this many times larger than the rest of the scene (bounding-box diagonals) is probably in
+// another unit.
+constexpr double kOutsizeRatio = 100.0;
+
+// Per object, its bounding box: rectangles from the scene, meshes from their reports.
+std::vector<Eigen::AlignedBox3d> object_boxes(const Scene& scene, const std::vector<MeshReport>& meshes) {
+    std::vector<Eigen::AlignedBox3d> boxes(scene.objects.size());
+    for (std::size_t k = 0; k < scene.objects.size(); ++k)
+        if (const auto* r = std::get_if<RectangleShape>(&scene.objects[k].shape))
+            for (const Vec3& p : {r->origin, Vec3(r->origin + r->u), Vec3(r->origin + r->v), Vec3(r->origin + r->u + r->v)})
+                boxes[k].extend(p);
+    for (const MeshReport& m : meshes)
+        if (m.object < boxes.size()) boxes[m.object] = m.bounds;
+    return boxes;
+}
+
+// The object whose bounding box is over kOutsizeRatio times the rest of the scene's (diagonals), as a
+// sentence that names it, both sizes and the unit it is probably in; empty when there is none.
+std::string outsize_object(const Scene& scene, const std::vector<Eigen::AlignedBox3d>& boxes) {
+    if (boxes.size() < 2) return {};
+    std::size_t big = 0;
+    for (std::size_t k = 1; k < boxes.size(); ++k)
+        if (!boxes[k].isEmpty() && (boxes[big].isEmpty() || boxes[k].diagonal().norm() > boxes[big].diagonal().norm())) big = k;
+    Eigen::AlignedBox3d rest;
+    for (std::size_t k = 0; k < boxes.size(); ++k)
+        if (k != big && !boxes[k].isEmpty()) rest.extend(boxes[k]);
+    if (boxes[big].isEmpty() || rest.isEmpty()) return {};
+    const double size = boxes[big].diagonal().norm(), others = rest.diagonal().norm();
+    if (!(others > 0.0) || size <= kOutsizeRatio * others) return {};
+    const double ratio = size / others;
+    const double factor = std::pow(10.0, std::round(std::log10(ratio) / 3.0) * 3.0);  // 1000: mm for m, ...
+    std::string name = scene.object_path(big);
+    if (const auto* m = std::get_if<MeshShape>(&scene.objects[big].shape)) name += " ('" + m->file.filename().string() + "')";
+    char text[400];
+    std::snprintf(text, sizeof text,
+                  "%s is %.4g m across, %.3g times the rest of the scene (%.4g m): is it in %s? A scale of %g in its "
+                  "transform makes it %.4g m",
+                  name.c_str(), size, ratio, others, factor >= 1e3 && factor < 1e6 ? "millimetres" : "another unit",
+                  1.0 / factor, size / factor);
+    return text;
+}
+
+}  // namespace
+
+std::vector<std::string> unit_warnings(const Scene& scene, const std::vector<MeshReport>& meshes) {
     std::vector<std::string> out;
     char text[400];
     if (scene.camera && scene.camera->fov_deg < 1.0) {
@@ -55,13 +101,13 @@ std::vector<std::string> unit_warnings(const Scene& scene, const PatchSet& patch
                       scene.camera->fov_deg, scene.camera->fov_deg, scene.camera->fov_deg * 180.0 / M_PI);
         out.push_back(text);
     }
-    if (patches.vertices.empty()) return out;
-    Vec3 lo = patches.vertices[0], hi = lo;
-    for (const Vec3& v : patches.vertices) {
-        lo = lo.cwiseMin(v);
-        hi = hi.cwiseMax(v);
-    }
-    const double size = (hi - lo).norm(), bin = scene.time.bin_width_m();
+    const std::vector<Eigen::AlignedBox3d> boxes = object_boxes(scene, meshes);
+    if (std::string outsize = outsize_object(scene, boxes); !outsize.empty()) out.push_back(std::move(outsize));
+    Eigen::AlignedBox3d all;
+    for (const Eigen::AlignedBox3d& b : boxes)
+        if (!b.isEmpty()) all.extend(b);
+    if (all.isEmpty()) return out;
+    const double size = all.diagonal().norm(), bin = scene.time.bin_width_m();
     if (size > 0.0 && (bin > 0.5 * size || bin < 1e-5 * size)) {
         char width[120];
         if (scene.time.unit == TimeUnit::Metres)
@@ -84,7 +130,7 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     const PatchSet patches = build_patches(scene, {options.progress, options.notice}, &patch_stats);
     s.patches = patches.size();
     s.max_edge = patch_stats.max_edge;
-    s.warnings = unit_warnings(scene, patches);
+    s.warnings = unit_warnings(scene, patch_stats.meshes);
     s.seconds_patches = seconds_since(t0);
 
     t0 = std::chrono::steady_clock::now();
@@ -733,6 +779,7 @@ ResourceEstimate estimate_resources(const Scene& scene, const PipelineOptions& o
     const double n = double(census.patches);
     e.patches = census.patches;
     e.max_edge = census.max_edge;
+    e.diagonal = census.diagonal;
     e.meshes = census.meshes;
     e.base_bytes = to_size(kBaseBytes);
     e.mesh_bytes = to_size(kMeshBytesPerFace * double(census.mesh_faces));
@@ -782,6 +829,9 @@ void check_memory(const Scene& scene, const PipelineOptions& options, bool patch
     const ResourceEstimate e = estimate_resources(scene, options, patch_profiles);
     if (e.peak_bytes <= limit) return;
     std::ostringstream what;
+    // A mesh in millimetres among metres is the likeliest cause of an absurd estimate: it comes first.
+    if (const std::string outsize = outsize_object(scene, object_boxes(scene, e.meshes)); !outsize.empty())
+        what << outsize << "; ";
     char links[32];
     std::snprintf(links, sizeof links, "%.3g", double(e.links));
     what << "estimated peak memory " << gb(double(e.peak_bytes)) << " (" << e.patches << " patches, about "

@@ -92,7 +92,7 @@ LinkShares link_shares(const Scene& scene, const RenderOptions& options) {
 // cells, what they do then, said once per render that has one.
 void note_scene(const Scene& scene, const PatchSet& patches, RenderReport& report) {
     report.warnings.insert(report.warnings.end(), scene.warnings.begin(), scene.warnings.end());
-    for (std::string& w : unit_warnings(scene, patches)) report.warnings.push_back(std::move(w));
+    for (std::string& w : unit_warnings(scene, report.meshes)) report.warnings.push_back(std::move(w));
     const std::size_t glossy = patches.glossy_patches();
     if (glossy == 0 || glossy_rings(scene.links.glossy_resolution, glossy, patches.size()) > 0) return;
     for (std::size_t k = 0; k < scene.objects.size(); ++k)

@@ -88,6 +88,10 @@ struct PatchStats {
 /// against 2,520 at its JSON's 0.05 m, and a scene in millimetres at the same count.
 inline constexpr double kDefaultPatchDivisions = 32.0;
 
+/// The notice of a scene without a patch size whose objects' bounding box has this diagonal (metres):
+/// the size it gets and why (PatchOptions::notice).
+std::string default_size_note(const Scene& scene, double diagonal);
+
 /// Options of the patch stage.
 struct PatchOptions {
     ProgressFn progress;               ///< may be empty

@@ -34,11 +34,13 @@ struct SceneSummary {
     std::vector<std::string> warnings;  ///< unit_warnings
 };
 
-/// What in the scene is probably written in another unit than it means, as warnings: a camera whose
-/// fov is under 1 degree (radians meant for degrees), a time bin wider than half the scene's size
-/// (the diagonal of its patches' bounding box: all its light within a couple of bins) or narrower than
-/// 1e-5 of it. Render and info both say them before the links are built.
-std::vector<std::string> unit_warnings(const Scene& scene, const PatchSet& patches);
+/// What in the scene is probably written in another unit than it means, as warnings: an object over 100
+/// times the rest of the scene's size (a mesh in millimetres among metres: named with the scale that
+/// fixes it), a camera whose fov is under 1 degree (radians meant for degrees), a time bin wider than
+/// half the scene's size (the diagonal of its objects' bounding box: all its light within a couple of
+/// bins) or narrower than 1e-5 of it. From the scene and its meshes' reports (`meshes`: the patch
+/// stage's or the estimate's), so that render and info say them before anything large is built.
+std::vector<std::string> unit_warnings(const Scene& scene, const std::vector<MeshReport>& meshes);
 
 /// Loads the scene's mesh files and nothing else: per mesh its size, bounds and repairs (`tprf info
 /// --meshes`).
@@ -65,6 +67,7 @@ struct CubeShape {
 struct ResourceEstimate {
     std::size_t patches = 0;             ///< N (counted exactly)
     double max_edge = 0.0;               ///< the patch size, metres
+    double diagonal = 0.0;               ///< of every object's bounding box, metres
     std::size_t nodes = 0;               ///< nodes the solver marches: N, or the 2N - 1 of a cluster tree
     std::size_t links = 0;               ///< estimated links (flat: facing pairs, both directions)
     std::size_t near_links = 0;          ///< hierarchical: facing patch pairs nearer than its shortest cluster link
