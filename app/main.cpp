@@ -186,18 +186,17 @@ int run_info(const std::string& scene_file, tprf::PipelineOptions options, bool 
     const tprf::ResourceEstimate e = print_estimate(scene, options);
     print_meshes(e.meshes);
     print_mesh_repairs(e.meshes);
-    if (estimate_only) {
-        if (!(scene.max_edge > 0.0) && options.notice) options.notice(tprf::default_size_note(scene, e.diagonal));
+    // Without the links (asked for, or when building them to count them would exceed the limit) the
+    // counts stay estimates.
+    const bool over = e.link_stage_bytes > tprf::memory_limit_bytes(options);
+    if (estimate_only || over) {
+        if (const std::string note = tprf::default_size_note(scene, e.diagonal); !note.empty() && options.notice)
+            options.notice(note);
         print_warnings(tprf::unit_warnings(scene, e.meshes));
         std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
-        print_time(scene);
-        return 0;
-    }
-    if (e.link_stage_bytes > tprf::memory_limit_bytes(options)) {
-        // Building the links to count them would exceed the limit: the counts stay estimates.
-        std::printf("patches  %zu (counted; max_edge %.6g m)\n", e.patches, e.max_edge);
-        std::printf("links    not built: the link stage needs about %.0f MB, over the limit of %.0f MB\n",
-                    double(e.link_stage_bytes) / 1e6, double(tprf::memory_limit_bytes(options)) / 1e6);
+        if (!estimate_only)
+            std::printf("links    not built: the link stage needs about %.0f MB, over the limit of %.0f MB\n",
+                        double(e.link_stage_bytes) / 1e6, double(tprf::memory_limit_bytes(options)) / 1e6);
         print_time(scene);
         return 0;
     }

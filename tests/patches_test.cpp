@@ -253,7 +253,6 @@ TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverThirtyTwoAndDropsAreSummed) {
     options.notice = [&](const std::string& text) { notes.push_back(text); };
     const auto p = tprf::build_patches(scene, options, &stats);
     EXPECT_DOUBLE_EQ(stats.max_edge, 5.0 / 32.0);  // box 3 x 4 x 0
-    EXPECT_TRUE(stats.default_size);
     EXPECT_DOUBLE_EQ(stats.diagonal, 5.0);
     EXPECT_EQ(tprf::dropped_faces(stats.meshes), 1u);
     EXPECT_EQ(p.size(), std::size_t{20 * 26 + 49});  // ceil(3 / 0.15625) x ceil(4 / 0.15625), n = 7
@@ -270,7 +269,7 @@ TEST_F(PatchesMesh, DefaultSizeIsDiagonalOverThirtyTwoAndDropsAreSummed) {
     tprf::PatchStats given;
     tprf::build_patches(scene, options, &given);
     EXPECT_TRUE(notes.empty());
-    EXPECT_FALSE(given.default_size);
+    EXPECT_DOUBLE_EQ(given.max_edge, 0.5);
 }
 
 TEST_F(PatchesMesh, ReportsProgressPerObject) {

@@ -385,6 +385,7 @@ void add_glossy(const Scene& scene, PatchSet& patches) {
 }  // namespace
 
 std::string default_size_note(const Scene& scene, double diagonal) {
+    if (scene.max_edge > 0.0) return {};
     char text[300];
     std::snprintf(text, sizeof text,
                   "patches of %.4g m: the scene sets no patch size, so its bounding box's diagonal (%.4g m) / %g "
@@ -406,9 +407,8 @@ PatchSet build_patches(const Scene& scene, const PatchOptions& options, PatchSta
     if (scene.objects.empty()) return patches;
     const Eigen::AlignedBox3d box = scene_box(loaded);
     st.max_edge = patch_size(scene, box);
-    st.default_size = !(scene.max_edge > 0.0);
     st.diagonal = box.diagonal().norm();
-    if (st.default_size && options.notice) options.notice(default_size_note(scene, st.diagonal));
+    if (const std::string note = default_size_note(scene, st.diagonal); !note.empty() && options.notice) options.notice(note);
 
     // Counting before emitting lets every array be allocated once.
     std::vector<Source> sources;

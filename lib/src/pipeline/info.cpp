@@ -68,14 +68,15 @@ std::vector<Eigen::AlignedBox3d> object_boxes(const Scene& scene, const std::vec
 // sentence that names it, both sizes and the unit it is probably in; empty when there is none.
 std::string outsize_object(const Scene& scene, const std::vector<Eigen::AlignedBox3d>& boxes) {
     if (boxes.size() < 2) return {};
-    std::size_t big = 0;
-    for (std::size_t k = 1; k < boxes.size(); ++k)
-        if (!boxes[k].isEmpty() && (boxes[big].isEmpty() || boxes[k].diagonal().norm() > boxes[big].diagonal().norm())) big = k;
+    std::vector<double> diagonal(boxes.size(), 0.0);
+    for (std::size_t k = 0; k < boxes.size(); ++k)
+        if (!boxes[k].isEmpty()) diagonal[k] = boxes[k].diagonal().norm();
+    const std::size_t big = std::size_t(std::max_element(diagonal.begin(), diagonal.end()) - diagonal.begin());
     Eigen::AlignedBox3d rest;
     for (std::size_t k = 0; k < boxes.size(); ++k)
         if (k != big && !boxes[k].isEmpty()) rest.extend(boxes[k]);
-    if (boxes[big].isEmpty() || rest.isEmpty()) return {};
-    const double size = boxes[big].diagonal().norm(), others = rest.diagonal().norm();
+    if (rest.isEmpty()) return {};
+    const double size = diagonal[big], others = rest.diagonal().norm();
     if (!(others > 0.0) || size <= kOutsizeRatio * others) return {};
     const double ratio = size / others;
     const double factor = std::pow(10.0, std::round(std::log10(ratio) / 3.0) * 3.0);  // 1000: mm for m, ...

@@ -2,7 +2,6 @@
 // time axis and bounce limit.
 #include "mitsuba_xml.h"
 
-#include <cstdio>
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -16,6 +15,8 @@ namespace tprf::mitsuba {
 namespace {
 
 constexpr double kDegrees = std::numbers::pi / 180.0;
+// How far from orthonormal a camera's to_world columns may be (their dot products and lengths).
+constexpr double kRotationTolerance = 1e-5;
 
 std::string lower(std::string s) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
@@ -24,9 +25,6 @@ std::string lower(std::string s) {
 
 // Mitsuba's fov of axis `axis` as tprf's vertical fov, in degrees. Where the axis is the vertical one,
 // or the image is square, the number is kept as written (no round trip through tan and atan).
-// How far from orthonormal a camera's to_world columns may be (their dot products and lengths).
-constexpr double kRotationTolerance = 1e-5;
-
 double vertical_fov(Props& p, double fov, std::string axis, int width, int height) {
     const double aspect = double(width) / double(height);
     if (axis == "smaller") axis = aspect > 1.0 ? "y" : "x";

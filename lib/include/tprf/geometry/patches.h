@@ -77,8 +77,6 @@ std::size_t dropped_faces(const std::vector<MeshReport>& meshes);
 /// What build_patches saw besides the patches.
 struct PatchStats {
     double max_edge = 0.0;             ///< the patch size used, metres
-    /// The scene gave none: max_edge is the bounding box's `diagonal` / kDefaultPatchDivisions.
-    bool default_size = false;
     double diagonal = 0.0;             ///< of every object's bounding box, metres
     std::vector<MeshReport> meshes;    ///< one per mesh object, in the scene's order
 };
@@ -89,7 +87,7 @@ struct PatchStats {
 inline constexpr double kDefaultPatchDivisions = 32.0;
 
 /// The notice of a scene without a patch size whose objects' bounding box has this diagonal (metres):
-/// the size it gets and why (PatchOptions::notice).
+/// the size it gets and why (PatchOptions::notice); empty when the scene sets its patch size.
 std::string default_size_note(const Scene& scene, double diagonal);
 
 /// Options of the patch stage.
@@ -102,7 +100,8 @@ struct PatchOptions {
 
 /// Subdivides every object of the scene into patches: rectangles and the planar convex quads of meshes
 /// into grids of quads, other mesh faces into triangles refined until no patch edge exceeds the
-/// scene's max_edge (bounding-box diagonal / kDefaultPatchDivisions when the scene gives none). A two-sided object yields each patch twice, once per side.
+/// scene's max_edge (bounding-box diagonal / kDefaultPatchDivisions when the scene gives none). A
+/// two-sided object yields each patch twice, once per side.
 PatchSet build_patches(const Scene& scene, const PatchOptions& options = {}, PatchStats* stats = nullptr);
 
 /// The point of a triangle or quad (`count` 3 or 4 corners) at (u, v) in the unit square: bilinear on a
