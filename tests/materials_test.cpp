@@ -387,6 +387,33 @@ TEST(Materials, ACornerReflectorLightsTheFloorAsItsFourImagesDo) {
     EXPECT_GT(share, 0.05);
 }
 
+// A spot light aimed at a mirror lights the floor as its mirror image does: the image's cone is the
+// reflected cone (its axis turned with it), in the direct light and in every bounce after it.
+TEST(Materials, ASpotInAMirrorLightsTheFloorAsItsMirrorImage) {
+    const json mirror = specular({0, 0, 0}, {0, 2, 0}, {0, 0, 2}, kPerfectMirror);  // x = 0, facing +x
+    const json floor = rect({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0.6);
+    const auto spot = [](std::array<double, 3> at, std::array<double, 3> direction) {
+        return json{{"type", "spot"}, {"position", at}, {"direction", direction}, {"intensity", 1.0},
+                    {"half_angle", 15}, {"falloff", 10}};
+    };
+    const json base = {{"time", {{"bins", 300}, {"bin_width", 0.01}}},
+                       {"camera", {{"position", {0.5, 0.5, 2.0}}, {"look_at", {0.5, 0.5, 0}}, {"up", {0, 1, 0}},
+                                   {"fov", 24}, {"width", 16}, {"height", 16}}},  // the floor only, not the mirror
+                       {"patches", {{"max_edge", 0.1}}}};
+    json with_mirror = base, unfolded = base;
+    with_mirror["objects"] = {floor, mirror};
+    with_mirror["lights"] = {spot({0.3, 0.5, 0.5}, {-0.6, 0.1, -0.5})};  // at the mirror, down
+    unfolded["objects"] = {floor};
+    unfolded["lights"] = {spot({0.3, 0.5, 0.5}, {-0.6, 0.1, -0.5}), spot({-0.3, 0.5, 0.5}, {0.6, 0.1, -0.5})};
+    const tprf::RenderResult a = expect_same_light(with_mirror, unfolded, "spot in a mirror vs its image");
+    // The cones light part of the floor and leave part of it dark: the test compares light and shade.
+    const tprf::FloatArray& s = array(a, "steady");
+    const std::ptrdiff_t lit = std::count_if(s.data.begin(), s.data.end(), [](float v) { return v > 0.0f; });
+    MEASURED("spot in a mirror: %td of %zu pixel channels lit\n", lit, s.data.size());
+    EXPECT_GT(lit, std::ptrdiff_t(s.data.size() / 10));
+    EXPECT_LT(lit, std::ptrdiff_t(s.data.size() * 9 / 10));
+}
+
 }  // namespace
 
 namespace {

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 namespace tprf {
 namespace {
@@ -28,26 +29,38 @@ void subpixel(int s, int spp, double& sx, double& sy) {
 
 namespace {
 
-// The pinhole's frame: the unnormalised direction through (column, row) is forward + x right + y up,
-// x and y linear in column and row.
+// A sample's ray: its unnormalised direction from the camera and how that changes per column and per
+// row (for the sample's cell on the surface).
+struct PixelRay {
+    Vec3 towards, per_column, per_row;
+};
+
+// The pinhole's frame and intrinsics: the unnormalised direction through the image position (column,
+// row) in pixels (0, 0 the top-left corner of the image, so that pixel (c, r)'s centre is at (c + 0.5,
+// r + 0.5), OpenCV's (c, r)) is forward + x right - y up, where (x, y) are the normalised coordinates
+// that the distortion carries to ((column - 0.5 - cx) / fx, (row - 0.5 - cy) / fy): y points down.
 struct Pinhole {
     Vec3 forward, right, up;
-    double x_per_column, y_per_row, x0, y0;
+    Intrinsics k;
+    Distortion distortion;
 
-    explicit Pinhole(const Camera& camera) {
+    explicit Pinhole(const Camera& camera) : k(camera.pinhole()), distortion(camera.distortion) {
         forward = (camera.look_at - camera.position).normalized();
         right = forward.cross(camera.up).normalized();
         up = right.cross(forward);
         if (camera.mirrored) right = -right;  // column 0 on the right
-        const double tan_half = std::tan(0.5 * camera.fov_deg * M_PI / 180.0);
-        const double aspect = double(camera.width) / double(camera.height);
-        x_per_column = 2.0 / camera.width * tan_half * aspect;
-        x0 = -tan_half * aspect;
-        y_per_row = -2.0 / camera.height * tan_half;
-        y0 = tan_half;
     }
-    Vec3 direction(double column, double row) const {
-        return forward + (x0 + x_per_column * column) * right + (y0 + y_per_row * row) * up;
+    // The ray through (column, row); none where the distortion has no undistorted point for it.
+    std::optional<PixelRay> ray(double column, double row) const {
+        const Vec2 distorted((column - 0.5 - k.cx) / k.fx, (row - 0.5 - k.cy) / k.fy);
+        const std::optional<Vec2> xy = distortion.undo(distorted);
+        if (!xy) return std::nullopt;
+        // d(x, y) / d(column, row): the inverse of the distortion's Jacobian, over the focal lengths.
+        const Eigen::Matrix2d inverse =
+            distortion.none() ? Eigen::Matrix2d(Eigen::Matrix2d::Identity()) : Eigen::Matrix2d(distortion.jacobian(*xy).inverse());
+        const Vec2 per_column = inverse.col(0) / k.fx, per_row = inverse.col(1) / k.fy;
+        return PixelRay{forward + xy->x() * right - xy->y() * up, per_column.x() * right - per_column.y() * up,
+                        per_row.x() * right - per_row.y() * up};
     }
 };
 
@@ -64,7 +77,7 @@ struct RayEnd {
 // differentials through the reflections, onto the plane of normal n at distance `path` along the
 // unfolded ray (first order; a cell that meets the plane almost edge-on is capped at 100 times the
 // cell's width across the ray, rather than spread to infinity).
-void cell_on_surface(const Pinhole& pin, const RayEnd& end, double half_px, SensingPoint& sp) {
+void cell_on_surface(const PixelRay& ray, const RayEnd& end, double half_px, SensingPoint& sp) {
     const Vec3& direction = end.direction;
     const Eigen::Matrix3d& turn = end.turn;
     const double path = end.path;
@@ -77,7 +90,7 @@ void cell_on_surface(const Pinhole& pin, const RayEnd& end, double half_px, Sens
         const double cap = 100.0 * across.norm();
         return std::abs(nd) > 0.0 && along.norm() <= cap ? Vec3(across + along) : Vec3(across);
     };
-    const Vec3 du = on_surface(pin.x_per_column * pin.right), dv = on_surface(pin.y_per_row * pin.up);
+    const Vec3 du = on_surface(ray.per_column), dv = on_surface(ray.per_row);
     sp.du = du.cast<float>();
     sp.dv = dv.cast<float>();
     if (sp.leg > 0.0f) {  // the leg |x - camera'| changes by the unit direction's component along the axis
@@ -108,23 +121,28 @@ void straight_samples(const Sampler& sampler, int r, int c, std::vector<SensingP
     static const Eigen::Matrix3d straight = Eigen::Matrix3d::Identity();
     for (int s0 = 0; s0 < spp; s0 += Visibility::kBatch) {
         const int count = std::min(Visibility::kBatch, spp - s0);
-        Vec3 towards[Visibility::kBatch], dir[Visibility::kBatch];
+        PixelRay rays[Visibility::kBatch];
+        Vec3 dir[Visibility::kBatch];
+        bool seen[Visibility::kBatch];
         for (int k = 0; k < count; ++k) {
             double sx, sy;
             subpixel(s0 + k, spp, sx, sy);
-            towards[k] = pin.direction(c + sx, double(r) + sy);
-            dir[k] = towards[k].normalized();
+            const std::optional<PixelRay> ray = pin.ray(c + sx, double(r) + sy);
+            seen[k] = bool(ray);
+            rays[k] = ray.value_or(PixelRay{pin.forward, Vec3::Zero(), Vec3::Zero()});
+            dir[k] = rays[k].towards.normalized();
         }
         RayHit hits[Visibility::kBatch];
         sampler.vis.intersect_from(camera.position, dir, count, std::numeric_limits<double>::infinity(), hits);
         for (int k = 0; k < count; ++k) {
             const RayHit& h = hits[k];
-            if (!h.hit || !h.front) continue;
+            if (!seen[k] || !h.hit || !h.front) continue;
             SensingPoint& sp =
                 out.emplace_back(SensingPoint{pixel, h.patch, h.point, camera.unwarp ? 0.0f : float(h.distance)});
             sp.view = (-dir[k]).cast<float>();
             if (camera.footprint)
-                cell_on_surface(pin, {towards[k], straight, h.distance, sampler.patches.normal[h.patch]}, sampler.half_px, sp);
+                cell_on_surface(rays[k], {rays[k].towards, straight, h.distance, sampler.patches.normal[h.patch]},
+                                sampler.half_px, sp);
         }
     }
 }
@@ -132,7 +150,8 @@ void straight_samples(const Sampler& sampler, int r, int c, std::vector<SensingP
 }  // namespace
 
 Vec3 camera_ray(const Camera& camera, double column, double row) {
-    return Pinhole(camera).direction(column, row).normalized();
+    const std::optional<PixelRay> ray = Pinhole(camera).ray(column, row);
+    return ray ? Vec3(ray->towards.normalized()) : Vec3(Vec3::Zero());
 }
 
 SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, const Visibility& vis, int threads) {
@@ -154,7 +173,9 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
             for (int s = 0; s < spp; ++s) {
                 double sx, sy;
                 subpixel(s, spp, sx, sy);
-                const Vec3 towards = pin.direction(c + sx, double(r) + sy);
+                const std::optional<PixelRay> ray = pin.ray(c + sx, double(r) + sy);
+                if (!ray) continue;
+                const Vec3& towards = ray->towards;
                 const Vec3 dir = towards.normalized();
                 // Into mirrors and through glass: every diffuse front side the ray reaches, with its
                 // whole path and the specular weight of the way.
@@ -166,7 +187,7 @@ SensingPoints pinhole_points(const Camera& camera, const PatchSet& patches, cons
                         pixel, t.hit.patch, t.hit.point, camera.unwarp ? 0.0f : float(t.path), float(t.weight)});
                     sp.view = (-(t.turn * dir)).normalized().cast<float>();
                     if (camera.footprint)
-                        cell_on_surface(pin, {towards, t.turn, t.path, patches.normal[t.hit.patch]}, half_px, sp);
+                        cell_on_surface(*ray, {towards, t.turn, t.path, patches.normal[t.hit.patch]}, half_px, sp);
                     row_tints[r].push_back(t.tint);
                 }
             }

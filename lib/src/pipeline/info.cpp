@@ -393,6 +393,7 @@ double lit_share(const Scene& scene, const PatchCensus& census) {
     for (int y = 0; y < gy; ++y)
         for (int x = 0; x < gx; ++x) {
             const Vec3 d = camera_ray(camera, (x + 0.5) * camera.width / gx, (y + 0.5) * camera.height / gy);
+            if (d.isZero()) continue;  // a distortion's fold: the pixel sees nothing
             for (std::size_t k = 0; k < scene.objects.size(); ++k)
                 if (ray_meets(scene.objects[k], census.bounds[k], camera.position, d)) {
                     ++lit;

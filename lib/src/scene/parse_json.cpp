@@ -41,12 +41,30 @@ E parse_choice(const Node& n, std::string_view what, std::initializer_list<std::
 }
 
 Camera parse_camera(const Node& n) {
-    n.check_keys({"position", "look_at", "up", "fov", "width", "height", "spp", "unwarp", "footprint", "shift_second_bounce"});
+    n.check_keys({"position", "look_at", "up", "fov", "intrinsics", "distortion", "width", "height", "spp", "unwarp",
+                  "footprint", "shift_second_bounce"});
     Camera c;
     c.position = n.child("position").vec3();
     c.look_at = n.child("look_at").vec3();
     c.up = n.child("up").vec3();
-    c.fov_deg = n.child("fov").number();
+    const auto fov = n.find("fov");
+    const auto intrinsics = n.find("intrinsics");
+    if (fov && intrinsics) n.fail("give either \"fov\" or \"intrinsics\", not both");
+    if (intrinsics) {
+        intrinsics->check_keys({"fx", "fy", "cx", "cy"});
+        c.intrinsics = Intrinsics{intrinsics->child("fx").number(), intrinsics->child("fy").number(),
+                                  intrinsics->child("cx").number(), intrinsics->child("cy").number()};
+    } else {
+        c.fov_deg = n.child("fov").number();  // "missing key fov" when neither is there
+    }
+    if (const auto distortion = n.find("distortion")) {
+        distortion->check_keys({"k1", "k2", "k3", "p1", "p2"});
+        const auto coefficient = [&](const char* key) {
+            const auto value = distortion->find(key);
+            return value ? value->number() : 0.0;
+        };
+        c.distortion = {coefficient("k1"), coefficient("k2"), coefficient("k3"), coefficient("p1"), coefficient("p2")};
+    }
     c.width = n.child("width").integer();
     c.height = n.child("height").integer();
     if (const auto spp = n.find("spp")) c.spp = spp->integer();
@@ -65,22 +83,23 @@ Vec3 unit_or_zero(const Vec3& d) {
     return in_range ? d.normalized() : d.stableNormalized();
 }
 
+// A beam's or cone's unit direction from `direction` or from `target` seen from `from`, one of them.
+Vec3 parse_aim(const Node& n, const Vec3& from, std::string_view from_key) {
+    const auto direction = n.find("direction");
+    const auto target = n.find("target");
+    if (direction && target) n.fail("give either \"direction\" or \"target\", not both");
+    if (direction) return unit_or_zero(direction->vec3());
+    if (!target) n.fail("missing key \"direction\" or \"target\"");
+    const Vec3 d = target->vec3() - from;
+    if (d.norm() == 0.0) target->fail("equals " + std::string(from_key) + ", so there is no direction");
+    return unit_or_zero(d);
+}
+
 Light parse_laser(const Node& n) {
     n.check_keys({"type", "origin", "direction", "target", "power"});
     Laser l;
     l.origin = n.child("origin").vec3();
-    const auto direction = n.find("direction");
-    const auto target = n.find("target");
-    if (direction && target) n.fail("give either \"direction\" or \"target\", not both");
-    if (direction) {
-        l.direction = unit_or_zero(direction->vec3());
-    } else if (target) {
-        const Vec3 d = target->vec3() - l.origin;
-        if (d.norm() == 0.0) target->fail("equals origin, so there is no direction");
-        l.direction = unit_or_zero(d);
-    } else {
-        n.fail("missing key \"direction\" or \"target\"");
-    }
+    l.direction = parse_aim(n, l.origin, "origin");
     l.power = n.child("power").rgb();
     return l;
 }
@@ -89,11 +108,18 @@ Light parse_light(const Node& n) {
     const Node type = n.child("type");
     const std::string name = type.string();
     if (name == "laser") return parse_laser(n);
-    if (name != "point") type.fail("unknown light type " + in_quotes(name) + " (expected \"point\" or \"laser\")");
-    n.check_keys({"type", "position", "intensity"});
+    if (name != "point" && name != "spot")
+        type.fail("unknown light type " + in_quotes(name) + " (expected \"point\", \"spot\" or \"laser\")");
+    if (name == "point") n.check_keys({"type", "position", "intensity"});
+    else n.check_keys({"type", "position", "intensity", "direction", "target", "half_angle", "falloff"});
     PointLight p;
     p.position = n.child("position").vec3();
     p.intensity = n.child("intensity").rgb();
+    if (name == "spot") {
+        p.direction = parse_aim(n, p.position, "position");
+        p.half_angle_deg = n.child("half_angle").number();
+        if (const auto falloff = n.find("falloff")) p.falloff_deg = falloff->number();
+    }
     return p;
 }
 

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <numbers>
 #include <sstream>
@@ -84,6 +85,33 @@ void non_zero(const Vec3& v, const At& at) {
     if (v.norm() == 0.0) at.fail("has zero length");
 }
 
+// Every point of the image must have its undistorted ray: the distortion may not fold the image over
+// (as a strong k1 < 0 does beyond some radius). Probed at every pixel corner along the border and the
+// two centre lines, where a radial or tangential fold first shows.
+void check_distortion(const Camera& c, const At& at) {
+    const Distortion& d = c.distortion;
+    finite(d.k1, at.key("k1"));
+    finite(d.k2, at.key("k2"));
+    finite(d.k3, at.key("k3"));
+    finite(d.p1, at.key("p1"));
+    finite(d.p2, at.key("p2"));
+    if (d.none() || c.width <= 0 || c.height <= 0) return;
+    const Intrinsics k = c.pinhole();
+    const auto probe = [&](int column, int row) {  // the corner at the top left of pixel (column, row)
+        const Vec2 distorted((column - 0.5 - k.cx) / k.fx, (row - 0.5 - k.cy) / k.fy);
+        if (d.undo(distorted)) return;
+        char where[160];
+        std::snprintf(where, sizeof where,
+                      "folds the image over at pixel corner (%d, %d): no ray of the lens maps there (a smaller |k1|, "
+                      "|k2| or |k3|, or a narrower image)", column, row);
+        at.fail(where);
+    };
+    for (int column = 0; column <= c.width; ++column)
+        for (const int row : {0, c.height / 2, c.height}) probe(column, row);
+    for (int row = 0; row <= c.height; ++row)
+        for (const int column : {0, c.width / 2, c.width}) probe(column, row);
+}
+
 void check_camera(const Camera& c, const At& at) {
     finite3(c.position, at.key("position"));
     const At look_at = at.key("look_at");
@@ -92,18 +120,38 @@ void check_camera(const Camera& c, const At& at) {
     const At up = at.key("up");
     non_zero(c.up, up);
     if (parallel(c.up, c.look_at - c.position)) up.fail("is parallel to the view direction (look_at - position)");
-    const At fov = at.key("fov");
-    finite(c.fov_deg, fov);
-    if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
+    if (c.intrinsics) {
+        const At k = at.key("intrinsics");
+        positive(c.intrinsics->fx, k.key("fx"));
+        positive(c.intrinsics->fy, k.key("fy"));
+        finite(c.intrinsics->cx, k.key("cx"));
+        finite(c.intrinsics->cy, k.key("cy"));
+    } else {
+        const At fov = at.key("fov");
+        finite(c.fov_deg, fov);
+        if (c.fov_deg <= 0.0 || c.fov_deg >= 180.0) fov.fail("must be in (0, 180) degrees");
+    }
     positive(c.width, at.key("width"));
     positive(c.height, at.key("height"));
     positive(c.spp, at.key("spp"));
+    check_distortion(c, at.key("distortion"));
 }
 
 void check_light(const Light& light, const At& at) {
     if (const auto* p = std::get_if<PointLight>(&light)) {
         finite3(p->position, at.key("position"));
         non_negative(p->intensity, at.key("intensity"));
+        if (p->direction.isZero() && p->half_angle_deg == 0.0 && p->falloff_deg == 0.0) return;  // isotropic
+        const At direction = at.key("direction");
+        non_zero(p->direction, direction);
+        if (std::abs(p->direction.norm() - 1.0) > kUnitTol) direction.fail("must be a unit vector");
+        const At half = at.key("half_angle");
+        finite(p->half_angle_deg, half);
+        if (!(p->half_angle_deg > 0.0 && p->half_angle_deg < 180.0)) half.fail("must be in (0, 180) degrees");
+        const At falloff = at.key("falloff");
+        non_negative(p->falloff_deg, falloff);
+        if (p->half_angle_deg + p->falloff_deg > 180.0)
+            falloff.fail("with half_angle must be at most 180 degrees (the cone would pass the light's back)");
         return;
     }
     const Laser& l = std::get<Laser>(light);

@@ -70,8 +70,42 @@ PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Vi
 }
 
 
+double PointSource::spot_profile(const Vec3& dir) const {
+    if (spot_axis.isZero()) return 1.0;
+    const double angle = std::acos(std::clamp(spot_axis.dot(dir), -1.0, 1.0));
+    if (angle <= spot_half_angle) return 1.0;
+    if (angle >= spot_half_angle + spot_falloff) return 0.0;
+    const double t = (spot_half_angle + spot_falloff - angle) / spot_falloff;  // 1 at the inner edge, 0 at the outer
+    return t * t * (3.0 - 2.0 * t);
+}
+
+namespace {
+
+// The solid angle a spot's profile weighs, integral of spot_profile over the sphere: 2 pi (1 - cos h)
+// inside the half angle h, and the falloff by Simpson's rule (its smoothstep is smooth, so 256
+// intervals leave ~1e-10).
+double spot_solid_angle(const PointSource& s) {
+    if (s.spot_axis.isZero()) return 4.0 * M_PI;
+    double sum = 2.0 * M_PI * (1.0 - std::cos(s.spot_half_angle));
+    if (s.spot_falloff > 0.0) {
+        const int n = 256;
+        const double step = s.spot_falloff / n;
+        double simpson = 0.0;
+        for (int k = 0; k <= n; ++k) {
+            const double angle = s.spot_half_angle + k * step;
+            const Vec3 dir = std::cos(angle) * s.spot_axis + std::sin(angle) * s.spot_axis.unitOrthogonal();
+            const double f = s.spot_profile(dir) * std::sin(angle);
+            simpson += (k == 0 || k == n ? 1.0 : k % 2 ? 4.0 : 2.0) * f;
+        }
+        sum += 2.0 * M_PI * simpson * step / 3.0;
+    }
+    return sum;
+}
+
+}  // namespace
+
 Rgb PointSource::intensity_towards(const Vec3& dir) const {
-    if (lobe.isZero()) return intensity;
+    if (lobe.isZero()) return spot_axis.isZero() ? intensity : Rgb(intensity * spot_profile(dir));
     const double cos_o = lobe.dot(dir);
     if (!(cos_o > 0.0)) return Rgb::Zero();
     if (glossy) return intensity * brdf.eval(lobe, incoming, dir) * cos_o;
@@ -79,7 +113,7 @@ Rgb PointSource::intensity_towards(const Vec3& dir) const {
 }
 
 Rgb PointSource::power_sent() const {
-    if (lobe.isZero()) return 4.0 * M_PI * intensity;
+    if (lobe.isZero()) return spot_solid_angle(*this) * intensity;
     if (glossy) return intensity * brdf.directional_albedo(std::clamp(lobe.dot(incoming), 1e-9, 1.0));
     return intensity;
 }
@@ -145,6 +179,7 @@ void point_images(const PointSource& s, const Visibility& visibility, std::vecto
         image.position = chain.image(s.position);
         image.origin = chain.image(s.origin);
         image.lobe = chain.unfold.linear * s.lobe;
+        image.spot_axis = chain.unfold.linear * s.spot_axis;
         image.incoming = chain.unfold.linear * s.incoming;
         image.patch = kNoPatch;
         image.intensity *= chain.tint;
@@ -179,6 +214,11 @@ LightSources light_sources(const Scene& scene, const PatchSet& patches, const Vi
             PointSource s;
             s.position = s.origin = point->position;
             s.intensity = point->intensity;
+            if (!point->direction.isZero()) {
+                s.spot_axis = point->direction;
+                s.spot_half_angle = point->half_angle_deg * M_PI / 180.0;
+                s.spot_falloff = point->falloff_deg * M_PI / 180.0;
+            }
             sources.points.push_back(s);
         }
     for (const Light& light : scene.lights)

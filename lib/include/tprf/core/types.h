@@ -9,6 +9,8 @@ namespace tprf {
 
 /// A point or direction in metres (double precision: form factors of close patches need it).
 using Vec3 = Eigen::Vector3d;
+/// A point in a plane (normalised image coordinates).
+using Vec2 = Eigen::Vector2d;
 /// An RGB triple (albedo, emission, intensity or power per channel).
 using Rgb = Eigen::Array3d;
 

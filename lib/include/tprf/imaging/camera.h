@@ -12,7 +12,9 @@ struct PatchSet;
 struct LightSources;
 class Visibility;
 
-/// The pixel's ray direction at the sub-pixel position (column, row) in pixels; row 0 is the top.
+/// The unit ray direction through the image position (column, row) in pixels, (0, 0) the image's
+/// top-left corner (pixel (c, r)'s centre at (c + 0.5, r + 0.5)), through the camera's intrinsics and
+/// distortion; zero where the distortion has no undistorted direction for it.
 Vec3 camera_ray(const Camera& camera, double column, double row);
 
 /// Traces the camera's samples (a g x g grid per pixel when spp is a square, spp = 1 the centre, else

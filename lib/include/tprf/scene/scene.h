@@ -16,12 +16,39 @@
 
 namespace tprf {
 
-/// Pinhole camera (docs/scene.md: vertical fov in degrees, row 0 at the top).
+/// A calibrated camera's pinhole in pixels, OpenCV's convention: x right, y down, the centre of pixel
+/// (column c, row r) at (c, r); a point at normalised coordinates (x, y) lands at (fx x + cx, fy y + cy).
+struct Intrinsics {
+    double fx = 0.0, fy = 0.0;  ///< focal lengths, pixels, > 0
+    double cx = 0.0, cy = 0.0;  ///< principal point, pixels
+};
+
+/// Brown-Conrady lens distortion as OpenCV applies it to normalised coordinates (x, y), r^2 = x^2 + y^2:
+/// x' = x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2), and
+/// y' = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y.
+struct Distortion {
+    double k1 = 0.0, k2 = 0.0, k3 = 0.0, p1 = 0.0, p2 = 0.0;
+
+    bool none() const { return k1 == 0.0 && k2 == 0.0 && k3 == 0.0 && p1 == 0.0 && p2 == 0.0; }
+    /// (x', y') of the undistorted normalised point (x, y).
+    Vec2 apply(const Vec2& xy) const;
+    /// The Jacobian d(x', y') / d(x, y) at (x, y).
+    Eigen::Matrix2d jacobian(const Vec2& xy) const;
+    /// The undistorted point whose image is `distorted`, by Newton's method from it; nullopt where it
+    /// does not converge to 1e-12 or lands where the map folds (a non-positive Jacobian).
+    std::optional<Vec2> undo(const Vec2& distorted) const;
+};
+
+/// Pinhole camera (docs/scene.md: vertical fov in degrees, or intrinsics; row 0 at the top).
 struct Camera {
     Vec3 position = Vec3::Zero();   ///< metres
     Vec3 look_at = Vec3::UnitX();   ///< metres, != position
     Vec3 up = Vec3::UnitZ();        ///< non-zero, not parallel to look_at - position
-    double fov_deg = 40.0;          ///< vertical field of view, (0, 180)
+    double fov_deg = 40.0;          ///< vertical field of view, (0, 180); unused with intrinsics
+    /// Set: the pinhole in pixels (it replaces fov_deg); unset: fx = fy = (height / 2) / tan(fov / 2)
+    /// with the principal point at the image centre (Camera::pinhole()).
+    std::optional<Intrinsics> intrinsics;
+    Distortion distortion;          ///< none by default
     int width = 0;                  ///< pixels, > 0
     int height = 0;                 ///< pixels, > 0
     int spp = 1;                    ///< samples per pixel, > 0
@@ -38,12 +65,20 @@ struct Camera {
     /// Mitsuba camera whose to_world mirrors (a negative determinant, as some exporters write) sees
     /// the mirror image of what its rotation would (docs/mitsuba.md). No JSON key.
     bool mirrored = false;
+
+    /// The intrinsics, given or made from fov_deg.
+    Intrinsics pinhole() const;
 };
 
-/// Isotropic point light: irradiance at x is intensity * cos(theta) / r^2.
+/// A point light, isotropic or a spot: irradiance at x is intensity * profile * cos(theta) / r^2.
 struct PointLight {
     Vec3 position = Vec3::Zero();   ///< metres
-    Rgb intensity = Rgb::Zero();    ///< W/sr per channel, >= 0
+    Rgb intensity = Rgb::Zero();    ///< W/sr per channel, >= 0 (a spot's: inside its half angle)
+    /// Zero: isotropic. Else a spot (JSON type "spot") about this unit axis: full intensity within
+    /// half_angle_deg of it, falling to 0 over falloff_deg more by a smoothstep, 0 beyond.
+    Vec3 direction = Vec3::Zero();
+    double half_angle_deg = 0.0;    ///< [0, 180)
+    double falloff_deg = 0.0;       ///< >= 0, half_angle_deg + falloff_deg <= 180
 };
 
 /// Laser: deposits `power` at the first surface point it hits.

@@ -42,6 +42,11 @@ struct PointSource {
     /// intensity * f(incoming, dir) * max(0, lobe . dir).
     Rgb intensity = Rgb::Zero();
     Vec3 lobe = Vec3::Zero();       ///< zero: isotropic; else the unit normal of a Lambertian lobe
+    /// An isotropic source's cone (a spot light): zero for none, else the unit axis; its intensity is
+    /// scaled by spot_profile() of the angle to it.
+    Vec3 spot_axis = Vec3::Zero();
+    double spot_half_angle = 0.0;   ///< radians of full intensity about spot_axis
+    double spot_falloff = 0.0;      ///< radians more over which it falls to 0 (smoothstep)
     bool glossy = false;            ///< a glossy spot: `brdf` (about `lobe`) says what leaves
     GlossyBrdf brdf;                ///< a glossy spot's reflectance
     Vec3 incoming = Vec3::Zero();   ///< a glossy spot: the unit direction the light came from (back along the beam)
@@ -53,6 +58,10 @@ struct PointSource {
 
     /// Radiant intensity towards the unit direction `dir`, W/sr.
     Rgb intensity_towards(const Vec3& dir) const;
+    /// A spot's share of its intensity towards the unit direction `dir`: 1 within spot_half_angle of
+    /// spot_axis, 0 beyond spot_half_angle + spot_falloff, a smoothstep in the angle between (1
+    /// everywhere without a spot_axis).
+    double spot_profile(const Vec3& dir) const;
     /// The power it sends over all directions, W per channel (a glossy spot: the arriving power times
     /// the BRDF's directional albedo along the beam).
     Rgb power_sent() const;
