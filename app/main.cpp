@@ -6,6 +6,7 @@
 #include "tprf/pipeline/capture.h"
 #include "tprf/pipeline/info.h"
 #include "tprf/pipeline/ranks.h"
+#include "tprf/imaging/ground_truth.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/pipeline/sensor_run.h"
 #include "tprf/scene/parse_json.h"
@@ -350,6 +351,17 @@ void add_render_flags(CLI::App& rend, tprf::RenderOptions& render) {
     rend.add_flag("--frames", render.frames, "also write frames/frame_NNNNN.exr, one per time bin");
     rend.add_flag("--streaks", render.streaks, "also write streaks/row_NNNN.exr, one x-t image per image row");
     rend.add_flag("--video", render.video, "also write light_in_flight.mp4 (needs ffmpeg)");
+    rend.add_option_function<std::string>(
+        "--aov",
+        [&render](const std::string& list) {
+            try {
+                render.aovs = tprf::parse_aov_list(list, "--aov");
+            } catch (const tprf::Error& e) {
+                throw CLI::ValidationError(e.what());
+            }
+        },
+        "LIST: also write ground truth maps aov_NAME.npy for each pixel's centre ray: any of depth, normal, "
+        "position, object, albedo (comma-separated), or all");
     rend.add_option("--max-memory", render.max_memory_gb,
                     "refuse (exit 2, before allocating) a render whose estimated peak memory exceeds GB "
                     "(default: 80% of the memory available)")

@@ -6,6 +6,7 @@
 
 #include "tprf/core/error.h"
 #include "tprf/imaging/camera.h"
+#include "tprf/imaging/ground_truth.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/transport/light_sources.h"
@@ -298,3 +299,73 @@ TEST(SpotLight, BadSpotsNameTheirJsonPath) {
 
 }  // namespace
 
+namespace {
+
+// The ground truth maps of a distorted calibrated camera over a floor and a glossy board standing on
+// it: every pixel's position lies on the object its map names, projects back (OpenCV's formula) to the
+// pixel's centre, is `depth` from the camera and has that object's normal and diffuse albedo; pixels
+// that see nothing say so.
+TEST(GroundTruth, EveryPixelsCentreRayMeetsWhatItsMapsSay) {
+    const OpenCvProjection cv{70.0, 72.0, 31.0, 23.5, -0.08, 0.01, 0.0, 0.001, 0.0005};
+    const json s = {
+        {"time", {{"bins", 50}, {"bin_width", 0.1}}},
+        {"camera", {{"position", {0.0, -1.5, 0.8}}, {"look_at", {0.0, 0.5, 0.0}}, {"up", {0, 0, 1}}, {"width", 64},
+                    {"height", 48}, {"intrinsics", {{"fx", cv.fx}, {"fy", cv.fy}, {"cx", cv.cx}, {"cy", cv.cy}}},
+                    {"distortion", {{"k1", cv.k1}, {"k2", cv.k2}, {"p1", cv.p1}, {"p2", cv.p2}}}}},
+        {"lights", {{{"type", "point"}, {"position", {0.3, -0.5, 1.0}}, {"intensity", 1.0}}}},
+        {"objects",
+         {{{"type", "rectangle"}, {"origin", {-1, -1, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}}, {"albedo", {0.2, 0.4, 0.6}}},
+          {{"type", "rectangle"}, {"origin", {-0.3, 0.2, 0}}, {"u", {0.6, 0.0, 0}}, {"v", {0, 0.1, 0.5}},
+           {"material", {{"type", "glossy"}, {"albedo", 0.3}, {"reflectance", 0.5}, {"roughness", 0.2}}}}}},
+        {"patches", {{"max_edge", 0.25}}}};
+    const tprf::Scene scene = tprf::parse_scene(s.dump(), "truth.json");
+    tprf::RenderOptions options;
+    options.aovs = tprf::parse_aov_list("all", "aov");
+    const tprf::RenderResult r = tprf::render_scene(scene, options);
+    const auto& depth = r.arrays.at("aov_depth");
+    const auto& normal = r.arrays.at("aov_normal").data;
+    const auto& position = r.arrays.at("aov_position").data;
+    const auto& albedo = r.arrays.at("aov_albedo").data;
+    const auto& object = r.labels.at("aov_object");
+    ASSERT_EQ(depth.shape, (std::vector<std::size_t>{48, 64}));
+    ASSERT_EQ(object.shape, (std::vector<std::size_t>{48, 64}));
+    const tprf::Camera& cam = *scene.camera;
+    const Vec3 forward = (cam.look_at - cam.position).normalized();
+    const Vec3 right = forward.cross(cam.up).normalized(), up = right.cross(forward);
+    // Each object's plane (a point and the normal of the side the camera sees) and diffuse albedo.
+    const Vec3 board_normal = Vec3(0.6, 0, 0).cross(Vec3(0, 0.1, 0.5)).normalized();
+    const std::array<Vec3, 2> point = {Vec3(0, 0, 0), Vec3(-0.3, 0.2, 0)};
+    const std::array<Vec3, 2> side = {Vec3(0, 0, 1), board_normal.dot(cam.position - point[1]) > 0 ? board_normal
+                                                                                                      : Vec3(-board_normal)};
+    const std::array<tprf::Rgb, 2> diffuse = {tprf::Rgb(0.2, 0.4, 0.6), tprf::Rgb::Constant(0.3)};
+    std::array<int, 3> seen{};  // nothing, the floor, the board
+    double worst_px = 0.0;
+    for (std::size_t row = 0; row < 48; ++row)
+        for (std::size_t col = 0; col < 64; ++col) {
+            const std::size_t p = row * 64 + col;
+            const int k = object.data[p];
+            ASSERT_GE(k, -1);
+            ASSERT_LE(k, 1);
+            ++seen[std::size_t(k + 1)];
+            if (k < 0) {
+                EXPECT_TRUE(std::isinf(depth.data[p])) << row << "," << col;
+                EXPECT_TRUE(std::isnan(position[3 * p])) << row << "," << col;
+                continue;
+            }
+            const Vec3 x(position[3 * p], position[3 * p + 1], position[3 * p + 2]);
+            const Vec3 n(normal[3 * p], normal[3 * p + 1], normal[3 * p + 2]);
+            EXPECT_NEAR((x - point[std::size_t(k)]).dot(side[std::size_t(k)]), 0.0, 1e-6) << row << "," << col;
+            EXPECT_LT((n - side[std::size_t(k)]).norm(), 1e-6) << row << "," << col;
+            EXPECT_NEAR(depth.data[p], (x - cam.position).norm(), 1e-5) << row << "," << col;
+            for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(albedo[3 * p + std::size_t(c)], float(diffuse[std::size_t(k)][c]));
+            const Vec3 rel = x - cam.position;
+            const auto [u, v] = cv.project(Vec3(rel.dot(right), -rel.dot(up), rel.dot(forward)));
+            worst_px = std::max(worst_px, std::hypot(u - double(col), v - double(row)));
+        }
+    MEASURED("ground truth: %d pixels see nothing, %d the floor, %d the board; positions project back within %.3g px\n",
+             seen[0], seen[1], seen[2], worst_px);
+    EXPECT_LT(worst_px, 1e-3);  // float32 positions about 1 m away
+    for (const int n : seen) EXPECT_GT(n, 50);
+}
+
+}  // namespace

@@ -109,6 +109,29 @@ TEST_F(Cli, GoodSceneRendersAndInfoPrints) {
         EXPECT_TRUE(fs::is_regular_file(m_dir / "out" / f)) << f;
 }
 
+TEST_F(Cli, AovWritesTheGroundTruthMapsItNamesAndRefusesUnknownOnes) {
+    const std::string scene = (m_dir / "good.json").string();
+    const Outcome r = run("render " + scene + " -o " + (m_dir / "out").string() + " --aov depth,object");
+    EXPECT_EQ(r.status, 0) << r.err;
+    // float32 depth, int32 object labels, as numpy writes them; no map that was not asked for.
+    EXPECT_NE(read_bytes(m_dir / "out" / "aov_depth.npy").find("'descr': '<f4', 'fortran_order': False, 'shape': (8, 8), }"),
+              std::string::npos);
+    EXPECT_NE(read_bytes(m_dir / "out" / "aov_object.npy").find("'descr': '<i4', 'fortran_order': False, 'shape': (8, 8), }"),
+              std::string::npos);
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "aov_normal.npy"));
+    const Outcome all = run("render " + scene + " -o " + (m_dir / "all").string() + " --aov all");
+    EXPECT_EQ(all.status, 0) << all.err;
+    for (const char* f : {"aov_depth.npy", "aov_normal.npy", "aov_position.npy", "aov_object.npy", "aov_albedo.npy"})
+        EXPECT_TRUE(fs::is_regular_file(m_dir / "all" / f)) << f;
+    const Outcome bad = run("render " + scene + " -o " + (m_dir / "bad").string() + " --aov depth,colour");
+    EXPECT_EQ(bad.status, 2);
+    EXPECT_NE(bad.err.find("--aov: unknown map \"colour\" (expected a comma-separated list of depth, normal, position, "
+                           "object, albedo, or all)"),
+              std::string::npos)
+        << bad.err;
+    EXPECT_FALSE(fs::exists(m_dir / "bad"));
+}
+
 TEST_F(Cli, InfoEstimateOnlyPrintsTheEstimateAndBuildsNoLinks) {
     int status = -1;
     const std::string out = run_stdout("info --estimate-only " + (m_dir / "good.json").string(), status);

@@ -9,6 +9,7 @@
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/pipeline/info.h"
+#include "tprf/imaging/ground_truth.h"
 #include "tprf/pipeline/render.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
@@ -147,12 +148,12 @@ auto run_cancellable(Work work, const py::object& callback) -> decltype(work(tpr
 
 // A numpy view of `a`, which lives as long as `owner`: no copy. Read-only where the owner is const
 // (a Result's arrays: every access must see what the render computed).
-template <class Owner>
-py::array share(const std::shared_ptr<Owner>& owner, const tprf::FloatArray& a) {
+template <class Owner, class Array>
+py::array share(const std::shared_ptr<Owner>& owner, const Array& a) {
     auto* keep = new std::shared_ptr<Owner>(owner);
     py::capsule base(keep, [](void* p) { delete static_cast<std::shared_ptr<Owner>*>(p); });
     std::vector<py::ssize_t> shape(a.shape.begin(), a.shape.end());
-    py::array_t<float> view(shape, a.data.data(), base);
+    py::array_t<typename decltype(a.data)::value_type> view(shape, a.data.data(), base);
     if (std::is_const_v<Owner>) view.attr("flags").attr("writeable") = false;
     return view;
 }
@@ -175,6 +176,7 @@ template <class Owner>
 py::dict arrays_dict(const std::shared_ptr<Owner>& r) {
     py::dict d;
     for (const auto& [name, a] : r->arrays) d[py::str(name)] = share(r, a);
+    for (const auto& [name, a] : r->labels) d[py::str(name)] = share(r, a);
     return d;
 }
 
@@ -289,10 +291,20 @@ py::dict info(const PyScene& s, int threads, bool links, const py::object& progr
     return d;
 }
 
+// render's `aov`: None, a comma-separated string or a list of names, as --aov takes them.
+unsigned aov_maps(const py::object& aov) {
+    if (aov.is_none()) return 0;
+    if (py::isinstance<py::str>(aov)) return tprf::parse_aov_list(aov.cast<std::string>(), "aov");
+    std::string list;
+    for (const py::handle name : aov) list += (list.empty() ? "" : ",") + py::str(name).cast<std::string>();
+    return tprf::parse_aov_list(list, "aov");
+}
+
 PyResult render(const PyScene& s, int threads, const py::object& progress, bool patch_profiles,
-                double max_memory_gb) {
+                double max_memory_gb, const py::object& aov) {
     check_options(threads, max_memory_gb);
     tprf::RenderOptions options;
+    options.aovs = aov_maps(aov);
     options.threads = threads;
     options.patch_profiles = patch_profiles;
     options.max_memory_gb = max_memory_gb;
@@ -327,7 +339,16 @@ py::object scene_camera(const PyScene& s) {
     d["width"] = c.width;
     d["height"] = c.height;
     d["spp"] = c.spp;
-    d["fov"] = c.fov_deg;
+    if (c.intrinsics) {
+        d["intrinsics"] = py::dict(py::arg("fx") = c.intrinsics->fx, py::arg("fy") = c.intrinsics->fy,
+                                   py::arg("cx") = c.intrinsics->cx, py::arg("cy") = c.intrinsics->cy);
+    } else {
+        d["fov"] = c.fov_deg;
+    }
+    if (!c.distortion.none())
+        d["distortion"] = py::dict(py::arg("k1") = c.distortion.k1, py::arg("k2") = c.distortion.k2,
+                                   py::arg("k3") = c.distortion.k3, py::arg("p1") = c.distortion.p1,
+                                   py::arg("p2") = c.distortion.p2);
     d["unwarp"] = c.unwarp;
     d["footprint"] = c.footprint;
     d["shift_second_bounce"] = c.shift_second_bounce;
@@ -384,6 +405,16 @@ PYBIND11_MODULE(_tprf, m) {
                                "float32 (H, W, K, 3): the scene's sensor block")
         .def_property_readonly("depth", [](const PyResult& r) { return array_or_none(r, "depth"); },
                                "float32 (H, W): an amcw sensor's depth")
+        .def_property_readonly("aov", [](const PyResult& r) {
+                                   py::dict d;
+                                   for (const auto& [name, a] : r.result->arrays)
+                                       if (name.rfind("aov_", 0) == 0) d[py::str(name.substr(4))] = share(r.result, a);
+                                   for (const auto& [name, a] : r.result->labels)
+                                       if (name.rfind("aov_", 0) == 0) d[py::str(name.substr(4))] = share(r.result, a);
+                                   return d;
+                               },
+                               "the ground truth maps of render(aov=...) by name: depth (H, W), normal, position, "
+                               "albedo (H, W, 3) float32, object (H, W) int32")
         .def_property_readonly("arrays", [](const PyResult& r) { return arrays_dict(r.result); },
                                "every array by its output file's name (without .npy)")
         .def_property_readonly("time", [](const PyResult& r) { return time_dict(r.result->time); })
@@ -410,8 +441,9 @@ PYBIND11_MODULE(_tprf, m) {
           py::arg("progress") = py::none(), py::arg("max_memory_gb") = 0.0,
           "The estimate of a render and (links=True) the patches and links built and counted.");
     m.def("render", &render, py::arg("scene"), py::arg("threads") = 0, py::arg("progress") = py::none(),
-          py::arg("patch_profiles") = false, py::arg("max_memory_gb") = 0.0,
-          "Renders in memory; progress(phase, fraction) is called in order on this thread. Ctrl-C cancels.");
+          py::arg("patch_profiles") = false, py::arg("max_memory_gb") = 0.0, py::arg("aov") = py::none(),
+          "Renders in memory; progress(phase, fraction) is called in order on this thread. Ctrl-C cancels. "
+          "aov: ground truth maps (\"depth,normal\", a list of names, or \"all\") into result.arrays['aov_NAME'].");
     m.def("apply_sensor", &apply_sensor, py::arg("result"), py::arg("sensor"), py::arg("threads") = 0,
           "A sensor block (a dict or a file) applied to a result: {'measurements': ..., 'depth': ...}.");
 }

@@ -280,3 +280,31 @@ def test_numpy_values_in_a_dict_scene_and_any_scalar_in_defines():
     as_ints = tprf.load_scene(xml, defines={"res": 8, "bins": np.int32(32)})
     assert as_ints.camera["width"] == as_text.camera["width"] == 8
     assert as_ints.time == as_text.time
+
+
+@needs_tprf
+def test_aov_maps_equal_the_command_lines_files_and_have_their_dtypes(tmp_path):
+    scene = copy.deepcopy(CORNER)
+    del scene["camera"]["fov"]
+    scene["camera"]["intrinsics"] = {"fx": np.float64(20.0), "fy": 20.0, "cx": 11.5, "cy": 7.5}
+    scene["camera"]["distortion"] = {"k1": -0.05}
+    loaded = tprf.load_scene(scene)
+    assert loaded.camera["intrinsics"] == {"fx": 20.0, "fy": 20.0, "cx": 11.5, "cy": 7.5}
+    assert loaded.camera["distortion"]["k1"] == -0.05 and "fov" not in loaded.camera
+    path = write_scene(tmp_path, scene)
+    cli("render", path, "-o", tmp_path / "out", "--aov", "depth,object,albedo", "--quiet")
+    result = tprf.render(loaded, aov=["depth", "object", "albedo"])
+    assert sorted(result.aov) == ["albedo", "depth", "object"]
+    assert result.aov["object"].dtype == np.int32 and result.aov["depth"].dtype == np.float32
+    for name, array in result.aov.items():
+        on_disk = np.load(tmp_path / "out" / f"aov_{name}.npy")
+        assert array.dtype == on_disk.dtype and np.array_equal(array, on_disk), name
+        assert result.arrays[f"aov_{name}"] is not None
+    # Both rectangles are seen, and the albedo map is each one's own.
+    objects = result.aov["object"]
+    assert set(np.unique(objects)) <= {-1, 0, 1} and {0, 1} <= set(np.unique(objects))
+    assert np.allclose(result.aov["albedo"][objects == 1], [0.5, 0.4, 0.3])
+    assert np.all(np.isinf(result.aov["depth"][objects == -1]))
+    assert tprf.render(loaded).aov == {}
+    with pytest.raises(ValueError, match='aov: unknown map "colour"'):
+        tprf.render(loaded, aov="depth,colour")

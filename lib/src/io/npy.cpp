@@ -51,8 +51,8 @@ std::size_t payload_bytes(const fs::path& path, const std::vector<std::size_t>& 
 
 // Version 1.0 header: magic, version, little-endian uint16 length, then the dict that numpy writes,
 // spaces and '\n' so that magic + length + dict is a multiple of 64 bytes.
-std::string make_header(const fs::path& path, const std::vector<std::size_t>& shape) {
-    std::string dict = "{'descr': '<f4', 'fortran_order': False, 'shape': (";
+std::string make_header(const fs::path& path, const std::vector<std::size_t>& shape, const char* descr = "<f4") {
+    std::string dict = std::string("{'descr': '") + descr + "', 'fortran_order': False, 'shape': (";
     for (std::size_t i = 0; i < shape.size(); ++i) {
         if (i > 0) dict += ", ";
         dict += std::to_string(shape[i]);
@@ -179,12 +179,11 @@ std::vector<std::size_t> parse_header(const fs::path& path, std::string_view tex
     return *shape;
 }
 
-}  // namespace
-
-void write_npy(const fs::path& path, const std::vector<std::size_t>& shape, const float* data) {
+// A .npy of 4-byte elements (float32 or int32, the same size) of the given dtype.
+void write_npy4(const fs::path& path, const std::vector<std::size_t>& shape, const void* data, const char* descr) {
     std::size_t count = 0;
     const std::size_t bytes = payload_bytes(path, shape, count);
-    const std::string header = make_header(path, shape);
+    const std::string header = make_header(path, shape, descr);
     AtomicFile file(path);
     const int fd = ::open(file.temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
     if (fd < 0) fail_output(file.path(), "cannot open", errno);
@@ -198,6 +197,17 @@ void write_npy(const fs::path& path, const std::vector<std::size_t>& shape, cons
     // close() is where some file systems (NFS) report a failed write.
     if (::close(fd) != 0) fail_output(file.path(), "cannot write", errno);
     file.commit();
+}
+
+}  // namespace
+
+void write_npy(const fs::path& path, const std::vector<std::size_t>& shape, const float* data) {
+    write_npy4(path, shape, data, "<f4");
+}
+
+void write_npy(const fs::path& path, const std::vector<std::size_t>& shape, const std::int32_t* data) {
+    static_assert(sizeof(std::int32_t) == sizeof(float));
+    write_npy4(path, shape, data, "<i4");
 }
 
 NpyMap::NpyMap(const fs::path& path, std::vector<std::size_t> shape) : m_file(path), m_shape(std::move(shape)) {

@@ -37,6 +37,11 @@ const FloatArray& Arrays::put(const std::string& name, FloatArray&& array) {
     return kept;
 }
 
+void Arrays::put(const std::string& name, Int32Array&& array) {
+    if (m_staging) write_npy(m_staging->path(name + ".npy"), array.shape, array.data.data());
+    else m_result->labels[name] = std::move(array);
+}
+
 void Arrays::commit() {
     for (auto& map : m_maps) map->commit();
     m_maps.clear();

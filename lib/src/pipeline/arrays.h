@@ -28,6 +28,8 @@ public:
     /// A finished array handed over: written and kept here (files) or moved into the result (memory).
     /// The returned array lives as long as this Arrays (files) or the result (memory).
     const FloatArray& put(const std::string& name, FloatArray&& array);
+    /// An int32 array handed over: written (files) or moved into the result's labels (memory).
+    void put(const std::string& name, Int32Array&& array);
     /// Files: every open() array flushed and moved to its staging name. Memory: nothing to do.
     void commit();
 

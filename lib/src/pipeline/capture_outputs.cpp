@@ -121,6 +121,7 @@ void check_capture_flags(const RenderOptions& options) {
                        : options.video ? "--video"
                        : options.patch_profiles ? "--patch-profiles"
                        : options.plot_pixel ? "--plot-pixel"
+                       : options.aovs ? "--aov"
                                             : nullptr;
     if (flag)
         throw Error(std::string(flag) + " needs a camera: the scene has a capture block and no camera; nothing was "

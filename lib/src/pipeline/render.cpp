@@ -9,6 +9,7 @@
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
+#include "tprf/imaging/ground_truth.h"
 #include "tprf/imaging/film.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
@@ -287,6 +288,18 @@ void write_steady(const Scene& scene, const RenderOptions& options, const Transp
     if (Staging* staging = arrays.staging()) write_patches_csv(staging->path("patches.csv"), t.patches);
 }
 
+// The ground truth maps that options.aovs asks for (aov_*.npy), each pixel's centre ray.
+void write_ground_truth(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays) {
+    if (!options.aovs) return;
+    GroundTruth g = ground_truth(*scene.camera, t.patches, *t.visibility, options.aovs, options.threads);
+    const std::size_t H = std::size_t(g.height), W = std::size_t(g.width);
+    if (!g.depth.empty()) arrays.put("aov_depth", FloatArray{{H, W}, std::move(g.depth)});
+    if (!g.normal.empty()) arrays.put("aov_normal", FloatArray{{H, W, 3}, std::move(g.normal)});
+    if (!g.position.empty()) arrays.put("aov_position", FloatArray{{H, W, 3}, std::move(g.position)});
+    if (!g.object.empty()) arrays.put("aov_object", Int32Array{{H, W}, std::move(g.object)});
+    if (!g.albedo.empty()) arrays.put("aov_albedo", FloatArray{{H, W, 3}, std::move(g.albedo)});
+}
+
 // Frames, streaks, the sensor's measurements and the video: views of the finished cube. In memory,
 // only the sensor's measurements.
 void write_views(const Scene& scene, const RenderOptions& options, const float* cube, Arrays& arrays,
@@ -403,6 +416,7 @@ SolveStats render_camera(const Scene& scene, const RenderOptions& options, const
     const auto write_start = Clock::now();
     if (options.progress) options.progress("write", 0.0);
     write_steady(scene, options, transport, arrays);
+    write_ground_truth(scene, options, transport, arrays);
     write_views(scene, options, cubes.cube, arrays, report);
     arrays.commit();
     report.seconds.write += seconds_since(write_start);

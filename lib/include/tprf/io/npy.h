@@ -9,6 +9,7 @@
 #include "tprf/io/atomic_file.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <vector>
 
@@ -17,6 +18,8 @@ namespace tprf {
 /// Writes `data` (product(shape) floats, C order: the last index varies fastest) as a float32 .npy.
 /// An empty `shape` writes a 0-d array of one element.
 void write_npy(const std::filesystem::path& path, const std::vector<std::size_t>& shape, const float* data);
+/// The same for int32 ('<i4'): labels such as the ground truth's object map.
+void write_npy(const std::filesystem::path& path, const std::vector<std::size_t>& shape, const std::int32_t* data);
 
 /// A float32 .npy of a fixed shape, filled in place through a shared memory mapping, so that arrays
 /// larger than RAM (512 x 512 x 4096 x 3 floats = 12 GiB) are written without a copy in memory: the

@@ -24,6 +24,8 @@ struct RenderOptions : PipelineOptions {
     bool frames = false;            ///< frames/frame_NNNNN.exr, one per bin
     bool streaks = false;           ///< streaks/row_NNNN.exr, one x-t image per image row
     bool video = false;             ///< light_in_flight.mp4 through ffmpeg
+    /// Ground truth maps (imaging/ground_truth.h, `--aov`): AovMap bits, 0 for none. Needs a camera.
+    unsigned aovs = 0;
     /// The pixel (column x, row y) of sensor_plot.png when the scene has a sensor block; default:
     /// the image centre.
     std::optional<std::array<int, 2>> plot_pixel;
@@ -57,16 +59,25 @@ struct FloatArray {
     std::vector<float> data;         ///< product(shape) values
 };
 
+/// An int32 array, C order: labels (the ground truth's object map).
+struct Int32Array {
+    std::vector<std::size_t> shape;
+    std::vector<std::int32_t> data;
+};
+
 /// What render_scene computes, kept in memory: the arrays that render_file writes as .npy files, by
 /// the files' names without ".npy" (docs/outputs.md): "transient" (H, W, T, 3), "steady"
 /// (H, W, 3), "transient_bounce_K" (solver.bounces), "patch_transient" (N, T, 3) and "patch_steady"
 /// (N, 3) (RenderOptions::patch_profiles), "capture" (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s), and
-/// for a sensor block "measurements" (H, W, K, 3) and "depth" (H, W, amcw). The values are those of
+/// for a sensor block "measurements" (H, W, K, 3) and "depth" (H, W, amcw), and the ground truth maps
+/// "aov_depth" (H, W), "aov_normal", "aov_position", "aov_albedo" (H, W, 3) that RenderOptions::aovs
+/// asks for (aov_object in `labels`). The values are those of
 /// render_file's files, bit for bit.
 struct RenderResult {
     RenderReport report;
     TimeAxis time;                              ///< the scene's time axis
     std::map<std::string, FloatArray> arrays;   ///< by name, as above
+    std::map<std::string, Int32Array> labels;   ///< int32 arrays by name: "aov_object" (RenderOptions::aovs)
     std::string record;                         ///< render.json's text
 };
 
