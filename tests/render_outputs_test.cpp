@@ -502,7 +502,7 @@ TEST_F(RenderOutputs, InMemoryRenderHoldsTheFilesArraysBitForBit) {
     std::set<std::string> names;
     for (const auto& e : fs::directory_iterator(out))
         if (e.path().extension() == ".npy") names.insert(e.path().stem().string());
-    EXPECT_EQ(names.size(), 10u);  // transient, steady, 4 bounce cubes, 2 patch arrays, measurements, depth
+    EXPECT_EQ(names.size(), 11u);  // transient, steady, 4 bounce cubes, 2 patch arrays, measurements, depth, raw
     EXPECT_EQ(names.size(), r.arrays.size());
     for (const std::string& name : names) {
         const auto it = r.arrays.find(name);

@@ -400,6 +400,103 @@ TEST(Sensor, AmcwDepthInACornerIsTooLong) {
 }
 
 
+// A plane 2.5 to 2.9 m away is beyond the wrap of 100 MHz (1.5 m) and of 80 MHz (1.87 m): each alone
+// reads it wrapped, the two together (unambiguous to 7.5 m) read its distance.
+TEST(Sensor, TwoFrequenciesUnwrapTheDepthOfAPlaneBeyondEachOnesWrap) {
+    const json plane = {{{"type", "rectangle"}, {"origin", {0, -1, -1}}, {"u", {0, 2, 0}}, {"v", {0, 0, 2}}}};
+    json j = amcw_scene(plane, Vec3(2.5, 0.1, 0.2), Vec3(0, 0, 0));
+    j["sensor"]["exposure"] = {{"type", "amcw"}, {"frequencies", {100e6, 80e6}}, {"phases", 4}};
+    const std::vector<double> both = depth_errors(j, "two");
+    ASSERT_GT(both.size(), 100u);
+    double worst = 0.0;
+    for (const double err : both) worst = std::max(worst, std::abs(err));
+    j["sensor"]["exposure"] = {{"type", "amcw"}, {"frequency_mhz", 100}};
+    const std::vector<double> one = depth_errors(j, "one");
+    double wrapped = 0.0;
+    for (const double err : one) wrapped += err / double(one.size());
+    MEASURED("two frequencies: depth within %.3g m of the distance; 100 MHz alone off by %.3f m on average\n", worst,
+             wrapped);
+    EXPECT_LT(worst, 0.01);
+    EXPECT_NEAR(wrapped, -1.5, 0.01);  // one wrap of 100 MHz short
+}
+
+// Raw samples: the channels' sum of the measurements; with photons a Poisson count of photons times it
+// plus ambient (mean and variance over many equal pixels); with adc_bits integer levels whose top is
+// the frame's largest sample.
+TEST(Sensor, AmcwRawSamplesAreChannelSumsWithShotNoiseAndQuantisation) {
+    const int H = 64, W = 64, T = 200;
+    const TimeAxis time = time_axis(T, 0.01);
+    std::vector<float> cube(std::size_t(H * W * T * 3), 0.0f);
+    for (std::size_t p = 0; p < std::size_t(H * W); ++p)
+        for (int c = 0; c < 3; ++c) cube[(p * T + 37) * 3 + std::size_t(c)] = 0.1f * float(c + 1);  // one bin lit
+    json block = {{"exposure", {{"type", "amcw"}, {"frequencies", {20e6, 50e6}}, {"phases", 3}}}};
+    const auto raw_of = [&](const json& b, int threads) {
+        const SensorSettings s = sensor_from(b);
+        const int K = measurement_count(s, time);
+        EXPECT_EQ(K, 6);
+        std::vector<float> m(std::size_t(H * W * K * 3)), raw(std::size_t(H * W * K));
+        SensorOptions o;
+        o.threads = threads;
+        apply_sensor(s, {time, cube.data(), H, W}, m.data(), nullptr, o, raw.data());
+        return std::make_pair(m, raw);
+    };
+    const auto [m, clean] = raw_of(block, 0);
+    for (std::size_t q = 0; q < clean.size(); ++q)
+        EXPECT_EQ(clean[q], float(double(m[q * 3]) + m[q * 3 + 1] + m[q * 3 + 2])) << q;
+    block["exposure"]["photons"] = 1000.0;
+    block["exposure"]["ambient"] = 50.0;
+    block["exposure"]["seed"] = 11;
+    const std::vector<float> counts = raw_of(block, 1).second;
+    EXPECT_EQ(counts, raw_of(block, 2).second);  // the same for any thread count
+    for (std::size_t k = 0; k < 6; ++k) {
+        const double expected = 1000.0 * clean[k] + 50.0;
+        double mean = 0.0, var = 0.0;
+        for (std::size_t p = 0; p < std::size_t(H * W); ++p) mean += counts[p * 6 + k] / double(H * W);
+        for (std::size_t p = 0; p < std::size_t(H * W); ++p) var += std::pow(counts[p * 6 + k] - mean, 2) / double(H * W - 1);
+        const double n = double(H * W);
+        MEASURED("sample %zu: mean %.2f (expected %.2f), variance %.2f\n", k, mean, expected, var);
+        EXPECT_NEAR(mean, expected, 4.0 * std::sqrt(expected / n));
+        EXPECT_NEAR(var, expected, 4.0 * expected * std::sqrt(2.0 / (n - 1)));
+    }
+    block["exposure"]["adc_bits"] = 8;
+    const std::vector<float> levels = raw_of(block, 0).second;
+    const float top = *std::max_element(counts.begin(), counts.end());
+    EXPECT_EQ(*std::max_element(levels.begin(), levels.end()), 255.0f);
+    for (std::size_t q = 0; q < levels.size(); ++q) {
+        EXPECT_EQ(levels[q], std::round(levels[q]));
+        EXPECT_NEAR(levels[q], counts[q] / top * 255.0, 0.5 + 1e-4) << q;
+    }
+}
+
+TEST(Sensor, AmcwPhasesCountIsEvenlySpacedAndBadKeysNameTheirPath) {
+    const SensorSettings spaced = sensor_from({{"exposure", {{"type", "amcw"}, {"frequency_mhz", 20}, {"phases", 3}}}});
+    EXPECT_EQ(spaced.exposure.phases_deg, (std::vector<double>{0.0, 120.0, 240.0}));
+    const auto error = [](const json& exposure) {
+        try {
+            sensor_from({{"exposure", exposure}});
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string();
+    };
+    const json base = {{"type", "amcw"}, {"frequencies", {20e6, 50e6}}};
+    const auto with = [&](const char* key, const json& value) {
+        json e = base;
+        e[key] = value;
+        return error(e);
+    };
+    EXPECT_EQ(error(base), "");
+    EXPECT_NE(with("frequency_mhz", 20).find("give either \"frequency_mhz\" or \"frequencies\""), std::string::npos);
+    EXPECT_NE(with("frequencies", {20e6, 20e6}).find("frequencies[1]: repeats an earlier frequency"), std::string::npos)
+        << with("frequencies", {20e6, 20e6});
+    EXPECT_NE(with("frequencies", {20e6, -1}).find("frequencies[1]: must be > 0"), std::string::npos);
+    EXPECT_NE(with("frequencies", json::array()).find("expected at least one frequency"), std::string::npos);
+    EXPECT_NE(with("phases", 2).find("phases: must be an integer in [3,"), std::string::npos) << with("phases", 2);
+    EXPECT_NE(with("ambient", 5).find("ambient: needs \"photons\""), std::string::npos) << with("ambient", 5);
+    EXPECT_NE(with("adc_bits", 30).find("adc_bits: must be an integer in [0, 24]"), std::string::npos);
+    EXPECT_NE(with("photons", -1).find("photons: must be >= 0"), std::string::npos);
+}
+
 // ---- The random numbers behind noise and photon counts (core/random.h, docs/sensor.md) ----
 
 TEST(SensorRandom, SplitMix64MatchesTheReferenceOutputs) {

@@ -298,9 +298,24 @@ void box_window_weights(const TimeKernel& k, const TimeAxis& time, double a, dou
     first += int(lead);
 }
 
-// Angular frequency of the modulation per unit of the scene's time axis.
-double omega_per_unit(const Exposure& e, const TimeAxis& time) {
-    return 2.0 * std::numbers::pi * e.frequency_mhz * 1e6 * time.to_metres(1.0) / kSpeedOfLight;
+// Angular frequency of a modulation of `hz` per unit of the scene's time axis.
+double omega_per_unit(double hz, const TimeAxis& time) {
+    return 2.0 * std::numbers::pi * hz * time.to_metres(1.0) / kSpeedOfLight;
+}
+
+// The phase theta in [0, 2 pi) of the least-squares fit a + b cos(phi) + c sin(phi) to the P samples
+// m[k] at phases_deg[k], and whether they carry any modulation (b, c not both 0).
+bool fitted_phase(const std::vector<double>& phases_deg, const double* m, double& theta) {
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k < phases_deg.size(); ++k) {
+        const double phi = phases_deg[k] * std::numbers::pi / 180.0;
+        rhs += m[k] * Eigen::Vector3d(1.0, std::cos(phi), std::sin(phi));
+    }
+    const Eigen::Vector3d abc = phase_normal_matrix(phases_deg).ldlt().solve(rhs);
+    if (abc[1] == 0.0 && abc[2] == 0.0) return false;
+    theta = std::atan2(abc[2], abc[1]);
+    if (theta < 0.0) theta += 2.0 * std::numbers::pi;
+    return true;
 }
 
 }  // namespace
@@ -309,7 +324,7 @@ int measurement_count(const SensorSettings& s, const TimeAxis& time) {
     switch (s.exposure.type) {
         case ExposureType::Gates:
         case ExposureType::Windows: return int(s.exposure.windows.size());
-        case ExposureType::Amcw: return int(s.exposure.phases_deg.size());
+        case ExposureType::Amcw: return int(s.exposure.phases_deg.size() * s.exposure.amcw_frequencies_hz().size());
         case ExposureType::Spad: return time.bins;
     }
     return 0;
@@ -327,20 +342,26 @@ SensorWeights sensor_weights(const SensorSettings& s, const TimeAxis& time) {
         // kernel multiplies the cosine's phasor by the kernel's characteristic function P(w); averaged over
         // a bin [a, a + dt) the cosine becomes Re(P e^{i(w (a + dt/2) - phi)}) sinc(w dt / 2), exactly,
         // and without the cancellation of a difference of sines when w dt is small.
-        const double w = omega_per_unit(e, time);
+        // Measurement m is phase m % P at frequency m / P.
+        const std::vector<double> frequencies = e.amcw_frequencies_hz();
+        const std::size_t phases = e.phases_deg.size();
         const double dt = time.bin_width;
-        std::complex<double> P = 0.0;
-        for (std::size_t q = 0; q < k.mass.size(); ++q) P += k.mass[q] * std::polar(1.0, w * (k.first + double(q)) * k.step);
-        const double half = 0.5 * w * dt;
-        const double sinc = half < 1e-4 ? 1.0 - half * half / 6.0 : std::sin(half) / half;
-        for (int m = 0; m < K; ++m) {
-            const double phi = e.phases_deg[std::size_t(m)] * std::numbers::pi / 180.0;
-            std::vector<double>& row = out.weight[std::size_t(m)];
-            out.first[std::size_t(m)] = 0;
-            row.resize(std::size_t(time.bins));
-            for (int i = 0; i < time.bins; ++i) {
-                const double mid = time.start + (i + 0.5) * dt;
-                row[std::size_t(i)] = 0.5 + 0.5 * (P * std::polar(1.0, w * mid - phi)).real() * sinc;
+        for (std::size_t f = 0; f < frequencies.size(); ++f) {
+            const double w = omega_per_unit(frequencies[f], time);
+            std::complex<double> P = 0.0;
+            for (std::size_t q = 0; q < k.mass.size(); ++q) P += k.mass[q] * std::polar(1.0, w * (k.first + double(q)) * k.step);
+            const double half = 0.5 * w * dt;
+            const double sinc = half < 1e-4 ? 1.0 - half * half / 6.0 : std::sin(half) / half;
+            for (std::size_t j = 0; j < phases; ++j) {
+                const std::size_t m = f * phases + j;
+                const double phi = e.phases_deg[j] * std::numbers::pi / 180.0;
+                std::vector<double>& row = out.weight[m];
+                out.first[m] = 0;
+                row.resize(std::size_t(time.bins));
+                for (int i = 0; i < time.bins; ++i) {
+                    const double mid = time.start + (i + 0.5) * dt;
+                    row[std::size_t(i)] = 0.5 + 0.5 * (P * std::polar(1.0, w * mid - phi)).real() * sinc;
+                }
             }
         }
         return out;
@@ -381,21 +402,60 @@ ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& t
     return out;
 }
 
-double amcw_depth(const SensorSettings& s, const float* measurements) {
+double amcw_depth(const SensorSettings& s, const double* raw, double max_distance) {
+    const std::vector<double> frequencies = s.exposure.amcw_frequencies_hz();
     const std::vector<double>& phases = s.exposure.phases_deg;
-    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-    for (std::size_t k = 0; k < phases.size(); ++k) {
-        const double phi = phases[k] * std::numbers::pi / 180.0;
-        const double m = double(measurements[k * 3]) + measurements[k * 3 + 1] + measurements[k * 3 + 2];
-        rhs += m * Eigen::Vector3d(1.0, std::cos(phi), std::sin(phi));
+    const std::size_t F = frequencies.size(), P = phases.size();
+    // Each frequency's distance in [0, wrap) and its wrap c / (2 f); those without modulation take no part.
+    std::vector<double> distance, wrap, weight;
+    for (std::size_t f = 0; f < F; ++f) {
+        double theta = 0.0;
+        if (!fitted_phase(phases, raw + f * P, theta)) continue;
+        wrap.push_back(0.5 * kSpeedOfLight / frequencies[f]);
+        distance.push_back(theta / (2.0 * std::numbers::pi) * wrap.back());
+        weight.push_back(frequencies[f] * frequencies[f]);
     }
-    const Eigen::Vector3d abc = phase_normal_matrix(phases).ldlt().solve(rhs);
-    if (abc[1] == 0.0 && abc[2] == 0.0) return 0.0;
-    double theta = std::atan2(abc[2], abc[1]);
-    if (theta < 0.0) theta += 2.0 * std::numbers::pi;
-    const double omega_per_metre = 2.0 * std::numbers::pi * s.exposure.frequency_mhz * 1e6 / kSpeedOfLight;
-    return 0.5 * theta / omega_per_metre;
+    if (distance.empty()) return 0.0;
+    if (distance.size() == 1) return distance[0];
+    // Candidates: the longest wrap's distance plus whole wraps, up to max_distance; the one whose phases
+    // agree best with every frequency's.
+    const std::size_t base = std::size_t(std::max_element(wrap.begin(), wrap.end()) - wrap.begin());
+    const double reach = std::max(max_distance, wrap[base]);
+    const auto off = [&](double d, std::size_t f) {  // d's distance to f's nearest reading, in wraps of f
+        const double x = (d - distance[f]) / wrap[f];
+        return x - std::round(x);
+    };
+    double best = distance[base], best_cost = std::numeric_limits<double>::infinity();
+    for (int n = 0; distance[base] + n * wrap[base] <= reach; ++n) {
+        const double d = distance[base] + n * wrap[base];
+        double cost = 0.0;
+        for (std::size_t f = 0; f < distance.size(); ++f) cost += off(d, f) * off(d, f);
+        if (cost < best_cost - 1e-12) best = d, best_cost = cost;
+    }
+    double sum = 0.0, total = 0.0;
+    for (std::size_t f = 0; f < distance.size(); ++f) {
+        sum += weight[f] * (best - off(best, f) * wrap[f]);
+        total += weight[f];
+    }
+    return sum / total;
 }
+
+namespace {
+
+// The largest distance an AMCW pixel's light can encode in the window: half the path at its end (an
+// emitter beside the camera), metres.
+double window_distance(const TimeAxis& time) { return 0.5 * time.to_metres(time.start + time.bins * time.bin_width); }
+
+// An AMCW pixel's raw samples from its measurements (K x 3): the channels' sum, as the one infrared
+// channel of a ToF camera, and with `photons` a Poisson count of photons times it plus `ambient`.
+void amcw_raw(const Exposure& e, const float* measurements, std::size_t K, std::optional<Random>& shot, double* raw) {
+    for (std::size_t k = 0; k < K; ++k) {
+        const double sum = double(measurements[k * 3]) + measurements[k * 3 + 1] + measurements[k * 3 + 2];
+        raw[k] = e.amcw_photons > 0.0 ? shot->poisson(std::max(0.0, e.amcw_photons * sum) + e.amcw_ambient) : sum;
+    }
+}
+
+}  // namespace
 
 std::vector<double> spad_expected_counts(const SensorSettings& s, const CubeView& cube, int row, int column) {
     const TimeAxis& time = cube.time;
@@ -411,7 +471,7 @@ std::vector<double> spad_expected_counts(const SensorSettings& s, const CubeView
 }
 
 void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurements, float* depth,
-                  const SensorOptions& options) {
+                  const SensorOptions& options, float* raw) {
     const TimeAxis& time = view.time;
     const float* cube = view.data;
     const int height = view.height, width = view.width;
@@ -426,15 +486,25 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
         return;
     }
     const bool draws = s.noise.sigma > 0.0;  // a generator is seeded only where it is used
+    const bool amcw = s.exposure.type == ExposureType::Amcw;
+    const bool quantised = amcw && s.exposure.adc_bits > 0;
+    const double reach = window_distance(time);
+    std::vector<float> own_raw;  // the raw samples when the caller keeps none: the depth needs them
+    if (amcw && raw == nullptr) {
+        own_raw.resize(std::size_t(pixels) * K);
+        raw = own_raw.data();
+    }
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
     for (std::int64_t p = 0; p < pixels; ++p) {
         if (cancel_requested()) continue;  // thrown after the region
         const float* e = cube + std::size_t(p) * T * 3;
         float* out = measurements + std::size_t(p) * K * 3;
         // Pixel p's stream is seeded with output p of SplitMix64(seed), so that a pixel's noise does not
-        // depend on which thread draws it.
-        std::optional<Random> rng;
+        // depend on which thread draws it; its shot noise (AMCW photons) from output p of the stream
+        // seeded with the exposure's own seed, as a SPAD's counts.
+        std::optional<Random> rng, shot;
         if (draws) rng.emplace(SplitMix64::output(s.noise.seed, std::uint64_t(p)));
+        if (amcw && s.exposure.amcw_photons > 0.0) shot.emplace(SplitMix64::output(s.exposure.seed, std::uint64_t(p)));
         for (std::size_t k = 0; k < K; ++k) {
             double acc[3];
             weighted_sum(weights, k, e, acc);
@@ -446,9 +516,29 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
                 out[k * 3 + std::size_t(c)] = float(std::clamp(v, -double(FLT_MAX), double(FLT_MAX)));
             }
         }
-        if (depth != nullptr) depth[p] = s.exposure.type == ExposureType::Amcw ? float(amcw_depth(s, out)) : 0.0f;
+        if (!amcw) {
+            if (depth != nullptr) depth[p] = 0.0f;
+            continue;
+        }
+        std::vector<double> samples(K);
+        amcw_raw(s.exposure, out, K, shot, samples.data());
+        for (std::size_t k = 0; k < K; ++k) raw[std::size_t(p) * K + k] = float(std::min(samples[k], double(FLT_MAX)));
+        if (depth != nullptr && !quantised) depth[p] = float(amcw_depth(s, samples.data(), reach));
     }
     check_cancelled();
+    if (!quantised) return;
+    // The ADC: the frame's largest raw sample is its full scale (as an auto-exposure sets it), each
+    // sample rounded to one of 2^bits levels below it; the depth from the levels.
+    const std::size_t samples = std::size_t(pixels) * K;
+    const double top = *std::max_element(raw, raw + samples);
+    const double levels = std::ldexp(1.0, s.exposure.adc_bits) - 1.0;
+    for (std::size_t q = 0; q < samples; ++q) raw[q] = top > 0.0 ? float(std::round(std::max(0.0, double(raw[q])) / top * levels)) : 0.0f;
+    if (depth == nullptr) return;
+#pragma omp parallel for schedule(dynamic, 64) num_threads(threads)
+    for (std::int64_t p = 0; p < pixels; ++p) {
+        const std::vector<double> levels_p(raw + std::size_t(p) * K, raw + std::size_t(p + 1) * K);
+        depth[p] = float(amcw_depth(s, levels_p.data(), reach));
+    }
 }
 
 SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const float* profile, const float* measurements,
@@ -483,7 +573,7 @@ SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const floa
             case ExposureType::Windows:
                 at = s.exposure.windows[std::size_t(k)][0] + 0.5 * s.exposure.windows[std::size_t(k)][1];
                 break;
-            case ExposureType::Amcw: at = s.exposure.phases_deg[std::size_t(k)]; break;
+            case ExposureType::Amcw: at = s.exposure.phases_deg[std::size_t(k) % s.exposure.phases_deg.size()]; break;
             case ExposureType::Spad: at = time.start + k * dt; break;
         }
         plot.measurement_at.push_back(at);

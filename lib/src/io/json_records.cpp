@@ -16,7 +16,14 @@ nlohmann::json measurement_axis(const SensorSettings& s, const TimeAxis& time, i
         switch (s.exposure.type) {
             case ExposureType::Gates:
             case ExposureType::Windows: axis.push_back(s.exposure.windows[std::size_t(k)]); break;
-            case ExposureType::Amcw: axis.push_back(s.exposure.phases_deg[std::size_t(k)]); break;
+            case ExposureType::Amcw: {
+                // [frequency in Hz, phase in degrees] with several frequencies; the phase alone with one
+                const std::size_t P = s.exposure.phases_deg.size();
+                const double phase = s.exposure.phases_deg[std::size_t(k) % P];
+                if (s.exposure.frequencies_hz.empty()) axis.push_back(phase);
+                else axis.push_back({s.exposure.frequencies_hz[std::size_t(k) / P], phase});
+                break;
+            }
             case ExposureType::Spad: axis.push_back(time.start + k * time.bin_width); break;
         }
     }
@@ -137,6 +144,12 @@ void write_sensor_json(const std::filesystem::path& path, const SensorSettings& 
                      {"dead_pixels", {{"fraction", e.dead_fraction}, {"list", e.dead_pixels}}}};
     else
         j["noise"] = {{"sigma", sensor.noise.sigma}, {"seed", sensor.noise.seed}};
+    if (e.type == ExposureType::Amcw)
+        j["amcw"] = {{"frequencies_hz", e.amcw_frequencies_hz()},
+                     {"phases_deg", e.phases_deg},
+                     {"photons", e.amcw_photons},
+                     {"ambient", e.amcw_ambient},
+                     {"adc_bits", e.adc_bits}};
     j["plot_pixel"] = plot_pixel;
     write_text_file(path, j.dump(2) + "\n");
 }

@@ -51,10 +51,14 @@ Measured measure_cube(const SensorSettings& sensor, const CubeView& cube, int th
     const int K = measurement_count(sensor, cube.time);
     const std::size_t H = std::size_t(cube.height), W = std::size_t(cube.width);
     float* measurements = out.open("measurements", {H, W, std::size_t(K), 3});
-    float* depth = sensor.exposure.type == ExposureType::Amcw ? out.open("depth", {H, W}) : nullptr;
+    const bool amcw = sensor.exposure.type == ExposureType::Amcw;
+    float* depth = amcw ? out.open("depth", {H, W}) : nullptr;
+    float* raw = amcw ? out.open("raw", {H, W, sensor.exposure.amcw_frequencies_hz().size(),
+                                         sensor.exposure.phases_deg.size()})
+                      : nullptr;
     SensorOptions options;
     options.threads = threads;
-    apply_sensor(sensor, cube, measurements, depth, options);
+    apply_sensor(sensor, cube, measurements, depth, options, raw);
     return {K, measurements};
 }
 

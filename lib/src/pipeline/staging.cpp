@@ -113,8 +113,8 @@ std::string Staging::public_message(const std::string& message) const {
 }
 
 const std::vector<std::string>& sensor_outputs() {
-    static const std::vector<std::string> names = {"measurements.npy", "depth.npy", "sensor.json", "sensor_plot.json",
-                                                   "sensor_plot.png"};
+    static const std::vector<std::string> names = {"measurements.npy", "depth.npy", "raw.npy", "sensor.json",
+                                                   "sensor_plot.json", "sensor_plot.png"};
     return names;
 }
 

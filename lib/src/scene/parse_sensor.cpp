@@ -176,15 +176,41 @@ Exposure parse_exposure(const JsonNode& n) {
             e.windows.push_back({w.at(0).number(), w.at(1).number()});
         }
     } else if (name == "amcw") {
-        n.check_keys({"type", "frequency_mhz", "phases_deg"});
+        n.check_keys({"type", "frequency_mhz", "frequencies", "phases_deg", "phases", "photons", "ambient", "adc_bits",
+                      "seed"});
         e.type = ExposureType::Amcw;
-        e.frequency_mhz = n.child("frequency_mhz").number();
-        if (const auto phases = n.find("phases_deg")) {
+        const auto one = n.find("frequency_mhz");
+        const auto list = n.find("frequencies");
+        if (one && list) n.fail("give either \"frequency_mhz\" or \"frequencies\", not both");
+        if (list) {
+            const std::size_t count = list->array_size();
+            if (count == 0) list->fail("expected at least one frequency");
+            if (count > std::size_t(kMaxAmcwFrequencies))
+                list->fail("more than " + std::to_string(kMaxAmcwFrequencies) + " frequencies");
+            for (std::size_t k = 0; k < count; ++k) e.frequencies_hz.push_back(list->at(k).number());
+        } else {
+            e.frequency_mhz = n.child("frequency_mhz").number();  // "missing key" when neither is there
+        }
+        const auto phases = n.find("phases_deg");
+        const auto spaced = n.find("phases");
+        if (phases && spaced) n.fail("give either \"phases_deg\" or \"phases\", not both");
+        if (phases) {
             const std::size_t count = phases->array_size();
             for (std::size_t k = 0; k < count; ++k) e.phases_deg.push_back(phases->at(k).number());
         } else {
-            e.phases_deg = {0.0, 90.0, 180.0, 270.0};
+            // `phases` samples spread evenly over the period: 0, 360 / n, ...
+            int count = 4;
+            if (spaced) {
+                count = spaced->integer();
+                if (count < 3 || count > kMaxSensorMeasurements)
+                    spaced->fail("must be an integer in [3, " + std::to_string(kMaxSensorMeasurements) + "]");
+            }
+            for (int k = 0; k < count; ++k) e.phases_deg.push_back(360.0 * k / count);
         }
+        if (const auto photons = n.find("photons")) e.amcw_photons = photons->number();
+        if (const auto ambient = n.find("ambient")) e.amcw_ambient = ambient->number();
+        if (const auto bits = n.find("adc_bits")) e.adc_bits = bits->integer();
+        if (const auto seed = n.find("seed")) e.seed = seed_value(*seed);
     } else if (name == "spad") {
         parse_spad(n, e);
     } else {

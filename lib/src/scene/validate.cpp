@@ -336,11 +336,32 @@ void check_windows(const Exposure& e, const At& at) {
 }
 
 void check_amcw(const Exposure& e, const At& at) {
-    positive(e.frequency_mhz, at.key("frequency_mhz"));
+    if (e.frequencies_hz.empty()) {
+        positive(e.frequency_mhz, at.key("frequency_mhz"));
+    } else {
+        const At list = at.key("frequencies");
+        if (e.frequency_mhz != 0.0) at.fail("give either \"frequency_mhz\" or \"frequencies\", not both");
+        if (e.frequencies_hz.size() > std::size_t(kMaxAmcwFrequencies))
+            list.fail("more than " + std::to_string(kMaxAmcwFrequencies) + " frequencies");
+        for (std::size_t k = 0; k < e.frequencies_hz.size(); ++k) {
+            positive(e.frequencies_hz[k], list.index(k));
+            for (std::size_t j = 0; j < k; ++j)
+                if (e.frequencies_hz[j] == e.frequencies_hz[k]) list.index(k).fail("repeats an earlier frequency");
+        }
+    }
+    const At photons = at.key("photons");
+    non_negative(e.amcw_photons, photons);
+    if (e.amcw_photons > kMaxPhotons) photons.fail("must be at most 1e20 electrons per unit of signal");
+    const At ambient = at.key("ambient");
+    non_negative(e.amcw_ambient, ambient);
+    if (e.amcw_ambient > kMaxPhotons) ambient.fail("must be at most 1e20 electrons per sample");
+    if (e.amcw_ambient > 0.0 && e.amcw_photons == 0.0)
+        ambient.fail("needs \"photons\" (ambient light is counted in electrons, as the signal is with photons)");
+    if (e.adc_bits < 0 || e.adc_bits > 24) at.key("adc_bits").fail("must be an integer in [0, 24] (0: not quantised)");
     const At phases = at.key("phases_deg");
     const std::size_t count = e.phases_deg.size();
     for (std::size_t k = 0; k < count; ++k) finite(e.phases_deg[k], phases.index(k));
-    if (count > std::size_t(kMaxSensorMeasurements)) phases.fail("too many phases");
+    if (count * e.amcw_frequencies_hz().size() > std::size_t(kMaxSensorMeasurements)) phases.fail("too many phases");
     // The phase of the fit is determined only when cos and sin are both sampled.
     const Eigen::Matrix3d m = phase_normal_matrix(e.phases_deg);
     if (count < 3 || std::abs(m.determinant()) < 1e-9 * std::pow(double(count), 3))

@@ -57,11 +57,12 @@ struct CubeView {
 };
 
 /// Applies the sensor to a cube: writes `measurements` (H, W, K, 3) and, for amcw, `depth` (H, W),
-/// metres (may be null otherwise). Noise and photon counts are drawn per pixel from the seed, so that
-/// the result does not depend on the thread count. A SPAD's dead pixel outside the image is an Error
-/// (its JSON path and the image's size), raised before anything is written.
+/// metres, and `raw` (H, W, F, P): the camera's raw correlation samples, F frequencies by P phases
+/// (docs/sensor.md, "AMCW"); each may be null. Noise and photon counts are drawn per pixel from the
+/// seed, so that the result does not depend on the thread count. A SPAD's dead pixel outside the image
+/// is an Error (its JSON path and the image's size), raised before anything is written.
 void apply_sensor(const SensorSettings& sensor, const CubeView& cube, float* measurements, float* depth,
-                  const SensorOptions& options = {});
+                  const SensorOptions& options = {}, float* raw = nullptr);
 
 /// A SPAD pixel's expected counts per bin and channel (K x 3, bin by bin), the means that apply_sensor
 /// draws its Poisson counts from: photons x signal, dark and ambient counts, crosstalk from the 4-neighbours,
@@ -69,10 +70,14 @@ void apply_sensor(const SensorSettings& sensor, const CubeView& cube, float* mea
 /// pixel. A dead pixel outside the image is an Error, as in apply_sensor.
 std::vector<double> spad_expected_counts(const SensorSettings& sensor, const CubeView& cube, int row, int column);
 
-/// The depth a CW-ToF camera infers from one pixel's phase measurements (channels summed): the phase
-/// of the fitted M(phi) = a + b cos(phi) + c sin(phi), as distance c * phase / (4 pi f) (emitter
-/// beside the camera), in [0, c / (2 f)); 0 when the measurements carry no modulation.
-double amcw_depth(const SensorSettings& sensor, const float* measurements /* K x 3 */);
+/// The depth a CW-ToF camera infers from one pixel's raw samples (F frequencies x P phases, frequency
+/// by frequency): at each frequency f the phase theta_f of the fitted M(phi) = a + b cos(phi) + c sin(phi),
+/// the distance c theta_f / (4 pi f) (emitter beside the camera), in [0, c / (2 f)). One frequency: that
+/// distance (it wraps). Several: the distance up to `max_distance` (metres; at least the longest
+/// frequency's wrap) whose phases agree best with all of them (wrapped phase errors, squared and
+/// summed), refined as the mean of each frequency's unwrapped distance weighted by f^2. 0 when no
+/// frequency carries any modulation.
+double amcw_depth(const SensorSettings& sensor, const double* raw, double max_distance);
 
 /// What sensor_plot.png shows for one pixel, like the paper's figures 5 to 7 (channel means): its TPRF,
 /// the TPRF convolved with the pulse, and its measurements. Times in the scene's time unit.

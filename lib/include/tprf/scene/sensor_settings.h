@@ -50,12 +50,12 @@ struct Exposure {
     ExposureType type = ExposureType::Gates;
     /// gates and windows: one [start, width] per measurement, time unit (gates are expanded here).
     std::vector<std::array<double, 2>> windows;
-    double frequency_mhz = 0.0;        ///< amcw: modulation frequency, MHz, > 0
-    std::vector<double> phases_deg;    ///< amcw: one measurement per phase, degrees; >= 3 distinct
+    double frequency_mhz = 0.0;        ///< amcw `frequency_mhz`: one modulation frequency, MHz, > 0; 0 with `frequencies`
+    std::vector<double> phases_deg;    ///< amcw: the phases measured at each frequency, degrees; >= 3 distinct
     double photons = 1.0;              ///< spad: expected photons per unit of signal, > 0
     double jitter_fwhm = 0.0;          ///< spad: gaussian timing jitter, time unit, >= 0
     double dark_rate = 0.0;            ///< spad: dark counts per second of bin time, >= 0
-    std::uint64_t seed = 0;            ///< spad: seed of the photon counts (and of the dead pixels' choice)
+    std::uint64_t seed = 0;            ///< spad: seed of the photon counts (and of the dead pixels' choice); amcw: of the shot noise
     // The SPAD's detector effects (docs/sensor.md, "SPAD"); every default leaves the counts Poisson.
     JitterTail jitter_tail{};          ///< spad: none by default
     double dead_time = 0.0;            ///< spad: blind time after a detection, time unit, >= 0; 0: none
@@ -65,6 +65,16 @@ struct Exposure {
     double crosstalk = 0.0;            ///< spad: probability that a detection fires each 4-neighbour, [0, 1]
     double dead_fraction = 0.0;        ///< spad: share of the pixels that count nothing, chosen from `seed`, [0, 1]
     std::vector<std::array<int, 2>> dead_pixels{};  ///< spad: [row, column] of pixels that count nothing, >= 0
+    // The AMCW camera's frequencies and raw samples (docs/sensor.md, "AMCW").
+    std::vector<double> frequencies_hz{};  ///< amcw `frequencies`: measured in turn, Hz, > 0; empty: frequency_mhz
+    double amcw_photons = 0.0;         ///< amcw `photons`: photo-electrons per unit of signal; 0: no shot noise
+    double amcw_ambient = 0.0;         ///< amcw `ambient`: electrons of ambient light per raw sample, >= 0 (with photons)
+    int adc_bits = 0;                  ///< amcw: raw samples quantised to this many bits, [1, 24]; 0: not quantised
+
+    /// amcw: the modulation frequencies in Hz, in the order measured (from either key).
+    std::vector<double> amcw_frequencies_hz() const {
+        return frequencies_hz.empty() ? std::vector<double>{frequency_mhz * 1e6} : frequencies_hz;
+    }
 };
 
 /// `sensor.noise`: additive Gaussian noise on every measurement.

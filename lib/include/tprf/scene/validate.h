@@ -16,6 +16,8 @@ namespace tprf {
 /// Measurements per pixel a sensor block may ask for: beyond, the measurements alone would dwarf any
 /// render. (A gates block is refused before its gates are expanded, so this bounds memory too.)
 inline constexpr int kMaxSensorMeasurements = 1 << 20;
+/// Modulation frequencies an AMCW block may measure in turn (cameras use 2 or 3).
+inline constexpr int kMaxAmcwFrequencies = 16;
 
 /// Checks every value of a scene: finite numbers, ranges (bins > 0, albedo in [0, 1], ...), geometry
 /// that is not degenerate (zero-length or parallel vectors, a singular transform), mesh files that can
