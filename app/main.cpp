@@ -255,7 +255,7 @@ int run_sensor(const tprf::SensorRunOptions& options, bool quiet) {
     print_warnings(r.warnings);
     if (!quiet)
         std::fprintf(stderr, "tprf: %dx%d pixels x %d measurements in %.2f s -> %s\n", r.width, r.height,
-                     r.measurements, r.seconds, options.render_dir.string().c_str());
+                     r.measurements, r.seconds, r.folder.string().c_str());
     return 0;
 }
 
@@ -411,10 +411,14 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     add_render_flags(*rend, render);
     tprf::SensorRunOptions sensor;
     std::string render_dir, sensor_file;
-    auto* sens = app.add_subcommand("sensor", "apply a sensor block to an existing render: measurements.npy, ...");
+    auto* sens = app.add_subcommand("sensor", "apply a sensor block to a cube of an existing render, into OUTDIR/sensor-NAME/");
     sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
     sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
     add_plot_pixel(*sens, sensor.plot_pixel);
+    sens->add_option("--cube", sensor.cube,
+                     "the cube measured: transient (default), transient_bounce_K or capture (OUTDIR/NAME.npy)");
+    sens->add_option("--name", sensor.name,
+                     "the outputs go to OUTDIR/sensor-NAME/ (default: the sensor file's name without .json)");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -341,23 +341,27 @@ TEST_F(Cli, SensorOnARenderMatchesTheSceneSensorBlock) {
     ASSERT_EQ(r.status, 0) << r.err;
     const Outcome s = run("render " + (m_dir / "with_sensor.json").string() + " -o " + (m_dir / "b").string());
     ASSERT_EQ(s.status, 0) << s.err;
+    // `tprf sensor` writes into OUTDIR/sensor-NAME (NAME the sensor file's stem); the render, beside its cube.
+    const fs::path a_out = m_dir / "a" / "sensor-sensor", b_out = m_dir / "b";
     for (const char* f : {"measurements.npy", "sensor_plot.json", "sensor.json"}) {
-        EXPECT_TRUE(fs::is_regular_file(m_dir / "a" / f)) << f;
-        EXPECT_TRUE(fs::is_regular_file(m_dir / "b" / f)) << f;
+        EXPECT_TRUE(fs::is_regular_file(a_out / f)) << f;
+        EXPECT_TRUE(fs::is_regular_file(b_out / f)) << f;
+        EXPECT_FALSE(fs::exists(m_dir / "a" / f)) << f;
     }
     // The PNG is drawn by Python with matplotlib; without one, the run says so instead (and succeeds).
-    for (const auto& [dir, out] : {std::pair{"a", r}, std::pair{"b", s}}) {
+    for (const auto& [dir, out] : {std::pair{a_out, r}, std::pair{b_out, s}}) {
         const bool warned = out.err.find("sensor_plot.png not drawn") != std::string::npos;
-        EXPECT_NE(fs::is_regular_file(m_dir / dir / "sensor_plot.png"), warned) << dir << ": " << out.err;
+        EXPECT_NE(fs::is_regular_file(dir / "sensor_plot.png"), warned) << dir << ": " << out.err;
     }
-    const tprf::NpyArray a = tprf::read_npy(m_dir / "a" / "measurements.npy");
-    const tprf::NpyArray b = tprf::read_npy(m_dir / "b" / "measurements.npy");
+    const tprf::NpyArray a = tprf::read_npy(a_out / "measurements.npy");
+    const tprf::NpyArray b = tprf::read_npy(b_out / "measurements.npy");
     EXPECT_EQ(a.shape, (std::vector<std::size_t>{8, 8, 5, 3}));
     EXPECT_EQ(a.data, b.data);
-    // A scene file with a sensor block serves as the sensor file too.
+    // A scene file with a sensor block serves as the sensor file too; the render's own outputs stay.
     const Outcome again = run("sensor " + (m_dir / "b").string() + " " + (m_dir / "with_sensor.json").string());
     ASSERT_EQ(again.status, 0) << again.err;
-    EXPECT_EQ(tprf::read_npy(m_dir / "b" / "measurements.npy").data, a.data);
+    EXPECT_EQ(tprf::read_npy(m_dir / "b" / "sensor-with_sensor" / "measurements.npy").data, a.data);
+    EXPECT_EQ(tprf::read_npy(b_out / "measurements.npy").data, a.data);
     // The gates tile [0, 1.5 m), the first 15 of the 16 bins of 0.1 m: together they hold those bins.
     const tprf::NpyArray cube = tprf::read_npy(m_dir / "a" / "transient.npy");
     for (std::size_t p = 0; p < 64; ++p)
@@ -410,11 +414,12 @@ TEST_F(Cli, SensorPlotWithoutMatplotlibKeepsItsDataAndSaysHowToDrawIt) {
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     for (const char* part : {"sensor_plot.png not drawn", "apt-get install python3-matplotlib", "tprf_plots.py sensor "})
         EXPECT_NE(r.err.find(part), std::string::npos) << part << " in " << r.err;
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "sensor_plot.png")) << "a plot of the earlier run beside this run's data";
+    const fs::path folder = m_dir / "out" / "sensor-gates";
+    EXPECT_FALSE(fs::exists(folder / "sensor_plot.png")) << "a plot of the earlier run beside this run's data";
 
     // The data is the pixel's: its TPRF's bins sum to the pixel's energy in transient.npy (channel mean),
     // and its measurements are the pixel's in measurements.npy.
-    std::ifstream in(m_dir / "out" / "sensor_plot.json");
+    std::ifstream in(folder / "sensor_plot.json");
     const nlohmann::json j = nlohmann::json::parse(in);
     EXPECT_EQ(j.at("pixel"), nlohmann::json({4, 6}));
     EXPECT_EQ(j.at("exposure"), "gates");
@@ -432,7 +437,7 @@ TEST_F(Cli, SensorPlotWithoutMatplotlibKeepsItsDataAndSaysHowToDrawIt) {
     EXPECT_GT(energy, 0.0);
     EXPECT_NEAR(plotted, energy, 1e-9 * energy);  // 12 significant digits in the JSON
     const std::vector<double> values = j.at("measurements").at("value");
-    const tprf::NpyArray m = tprf::read_npy(m_dir / "out" / "measurements.npy");
+    const tprf::NpyArray m = tprf::read_npy(folder / "measurements.npy");
     ASSERT_EQ(values.size(), 5u);
     for (std::size_t k = 0; k < 5; ++k) {
         const double mean = (double(m.data[(pixel * 5 + k) * 3]) + m.data[(pixel * 5 + k) * 3 + 1] +
@@ -441,19 +446,50 @@ TEST_F(Cli, SensorPlotWithoutMatplotlibKeepsItsDataAndSaysHowToDrawIt) {
     }
 }
 
-TEST_F(Cli, SensorRunsReplaceEachOthersOutputs) {
-    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+TEST_F(Cli, SensorRunsGoToTheirOwnFoldersAndReplaceOnlyTheirOwnOutputs) {
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string() + " --aov depth").status, 0);
     std::ofstream(m_dir / "amcw.json") << R"({"exposure": {"type": "amcw", "frequency_mhz": 20}})";
     std::ofstream(m_dir / "gates.json") << R"({"exposure": {"type": "gates", "start": 0, "width": 0.5, "step": 0.5, "count": 3}})";
-    ASSERT_EQ(run("sensor " + (m_dir / "out").string() + " " + (m_dir / "amcw.json").string()).status, 0);
-    EXPECT_TRUE(fs::exists(m_dir / "out" / "depth.npy"));
-    ASSERT_EQ(run("sensor " + (m_dir / "out").string() + " " + (m_dir / "gates.json").string()).status, 0);
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "depth.npy")) << "an AMCW depth beside gated measurements";
-    EXPECT_EQ(tprf::read_npy(m_dir / "out" / "measurements.npy").shape, (std::vector<std::size_t>{8, 8, 3, 3}));
-    // A render without a sensor block into the same directory leaves no measurements of the old cube.
-    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + (m_dir / "out").string()).status, 0);
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
-    EXPECT_TRUE(fs::exists(m_dir / "out" / "transient.npy"));
+    const fs::path out = m_dir / "out";
+    ASSERT_EQ(run("sensor " + out.string() + " " + (m_dir / "amcw.json").string()).status, 0);
+    EXPECT_TRUE(fs::exists(out / "sensor-amcw" / "depth.npy"));
+    EXPECT_EQ(tprf::read_npy(out / "sensor-amcw" / "raw.npy").shape, (std::vector<std::size_t>{8, 8, 1, 4}));
+    ASSERT_EQ(run("sensor " + out.string() + " " + (m_dir / "gates.json").string()).status, 0);
+    EXPECT_TRUE(fs::exists(out / "sensor-amcw" / "depth.npy")) << "another sensor's folder is left as it was";
+    EXPECT_EQ(tprf::read_npy(out / "sensor-gates" / "measurements.npy").shape, (std::vector<std::size_t>{8, 8, 3, 3}));
+    // The same name again replaces that folder's outputs: no AMCW depth beside gated measurements.
+    ASSERT_EQ(run("sensor " + out.string() + " " + (m_dir / "gates.json").string() + " --name amcw").status, 0);
+    EXPECT_FALSE(fs::exists(out / "sensor-amcw" / "depth.npy"));
+    EXPECT_FALSE(fs::exists(out / "sensor-amcw" / "raw.npy"));
+    EXPECT_EQ(tprf::read_npy(out / "sensor-amcw" / "measurements.npy").shape, (std::vector<std::size_t>{8, 8, 3, 3}));
+    // A bounce cube: transient_bounce_1 measured into its own folder.
+    std::ifstream in(m_dir / "good.json");
+    std::string scene((std::istreambuf_iterator<char>(in)), {});
+    scene.insert(scene.rfind('}'), R"(, "solver": {"bounces": true, "max_bounces": 2})");
+    std::ofstream(m_dir / "bounces.json") << scene;
+    const fs::path bounces = m_dir / "bounces";
+    ASSERT_EQ(run("render " + (m_dir / "bounces.json").string() + " -o " + bounces.string()).status, 0);
+    const Outcome b = run("sensor " + bounces.string() + " " + (m_dir / "gates.json").string() +
+                          " --cube transient_bounce_1 --name first");
+    ASSERT_EQ(b.status, 0) << b.err;
+    EXPECT_TRUE(fs::exists(bounces / "sensor-first" / "measurements.npy"));
+    const Outcome missing = run("sensor " + bounces.string() + " " + (m_dir / "gates.json").string() + " --cube capture");
+    EXPECT_EQ(missing.status, 2);
+    EXPECT_NE(missing.err.find("--cube capture: " + bounces.string() + " has no capture.npy (cubes there: transient, "
+                               "transient_bounce_0, transient_bounce_1, transient_bounce_2)"),
+              std::string::npos)
+        << missing.err;
+    const Outcome bad_name = run("sensor " + out.string() + " " + (m_dir / "gates.json").string() + " --name ../up");
+    EXPECT_EQ(bad_name.status, 2);
+    EXPECT_NE(bad_name.err.find("--name \"../up\""), std::string::npos) << bad_name.err;
+    EXPECT_FALSE(fs::exists(m_dir / "sensor-../up"));
+    // A render into the same directory replaces everything of the earlier one: its ground truth maps
+    // and the sensors' folders, which measured the old cube.
+    ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + out.string()).status, 0);
+    EXPECT_FALSE(fs::exists(out / "sensor-amcw"));
+    EXPECT_FALSE(fs::exists(out / "sensor-gates"));
+    EXPECT_FALSE(fs::exists(out / "aov_depth.npy"));
+    EXPECT_TRUE(fs::exists(out / "transient.npy"));
 }
 
 TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
@@ -463,7 +499,7 @@ TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
     EXPECT_EQ(r.status, 2);
     EXPECT_NE(r.err.find("bad_sensor.json: exposure.width: must be > 0"), std::string::npos) << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "sensor-bad_sensor"));
 
     std::ofstream(m_dir / "sensor.json") << R"({"sensor": {"exposure": {"type": "amcw", "frequency_mhz": 30}}})";
     r = run("sensor " + m_dir.string() + " " + (m_dir / "sensor.json").string());  // not a render directory
@@ -478,8 +514,7 @@ TEST_F(Cli, BadSensorInputExitsTwoAndWritesNothing) {
             " --plot-pixel 99999999999,1");
     EXPECT_EQ(r.status, 2);
     EXPECT_NE(r.err.find("expected X,Y"), std::string::npos) << r.err;
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "measurements.npy"));
-    EXPECT_FALSE(fs::exists(m_dir / "out" / "depth.npy"));
+    EXPECT_FALSE(fs::exists(m_dir / "out" / "sensor-sensor"));
 }
 
 }  // namespace

@@ -296,7 +296,10 @@ unsigned aov_maps(const py::object& aov) {
     if (aov.is_none()) return 0;
     if (py::isinstance<py::str>(aov)) return tprf::parse_aov_list(aov.cast<std::string>(), "aov");
     std::string list;
-    for (const py::handle name : aov) list += (list.empty() ? "" : ",") + py::str(name).cast<std::string>();
+    for (const py::handle name : aov) {
+        if (!list.empty()) list += ',';
+        list += py::str(name).cast<std::string>();
+    }
     return tprf::parse_aov_list(list, "aov");
 }
 
@@ -319,15 +322,50 @@ PyResult render(const PyScene& s, int threads, const py::object& progress, bool 
     return {std::make_shared<const tprf::RenderResult>(std::move(result))};
 }
 
-// tprf.apply_sensor: a sensor block (a dict, or a file path) applied to a result.
-py::dict apply_sensor(const PyResult& r, const py::object& sensor, int threads) {
+// A numpy array as a result to measure: (H, W, T, 3) a camera's cube, (T, nu, nv) or (T, nu_l, nv_l,
+// nu_s, nv_s) a capture's H, time first; `time` the axis (a dict as Result.time; `bins` from the
+// array when left out).
+std::shared_ptr<const tprf::RenderResult> array_result(const py::object& x, const py::object& time) {
+    const auto a = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(x);
+    if (!a) throw tprf::Error("apply_sensor: expected a tprf.Result or a numpy array");
+    const bool camera = a.ndim() == 4;
+    if (!camera && a.ndim() != 3 && a.ndim() != 5)
+        throw tprf::Error("apply_sensor: an array must be a camera cube (H, W, T, 3) or a capture (T, nu, nv) or "
+                          "(T, nu_l, nv_l, nu_s, nv_s), not of " + std::to_string(a.ndim()) + " dimensions");
+    if (camera && a.shape(3) != 3)
+        throw tprf::Error("apply_sensor: a camera cube's last axis holds the 3 channels, not " + std::to_string(a.shape(3)));
+    if (time.is_none() || !py::isinstance<py::dict>(time))
+        throw tprf::Error("apply_sensor: an array needs its time axis: time={\"bin_width\": ..., \"start\": ..., \"unit\": ...}");
+    py::dict axis = py::dict(time.cast<py::dict>());
+    const py::ssize_t T = camera ? a.shape(2) : a.shape(0);
+    if (!axis.contains("bins")) axis["bins"] = T;
+    auto result = std::make_shared<tprf::RenderResult>();
+    result->time = tprf::parse_time_block(json_text(axis), "<time>", "time");
+    if (result->time.bins != int(T))
+        throw tprf::Error("apply_sensor: time[\"bins\"] is " + std::to_string(result->time.bins) + " but the array's time axis has " +
+                          std::to_string(T) + " bins");
+    tprf::FloatArray& cube = result->arrays[camera ? "transient" : "capture"];
+    cube.shape.assign(a.shape(), a.shape() + a.ndim());
+    cube.data.assign(a.data(), a.data() + a.size());
+    return result;
+}
+
+// tprf.apply_sensor: a sensor block (a dict, or a file path) applied to a result or an array.
+py::dict apply_sensor(const py::object& x, const py::object& sensor, int threads, const py::object& time) {
     check_options(threads, 0.0);
     const tprf::SensorSettings settings =
         py::isinstance<py::dict>(sensor)
             ? tprf::parse_sensor_block(json_text(sensor.cast<py::dict>()), "<dict>", "sensor")
             : tprf::load_sensor(sensor.cast<std::filesystem::path>());
+    std::shared_ptr<const tprf::RenderResult> input;
+    if (py::isinstance<PyResult>(x)) {
+        if (!time.is_none()) throw tprf::Error("apply_sensor: a Result carries its own time axis: leave out time");
+        input = x.cast<const PyResult&>().result;
+    } else {
+        input = array_result(x, time);
+    }
     auto out = std::make_shared<tprf::RenderResult>();
-    out->arrays = run_cancellable([&](const tprf::ProgressFn&) { return tprf::measure(settings, *r.result, threads); },
+    out->arrays = run_cancellable([&](const tprf::ProgressFn&) { return tprf::measure(settings, *input, threads); },
                                   py::none());
     return arrays_dict(out);
 }
@@ -445,5 +483,8 @@ PYBIND11_MODULE(_tprf, m) {
           "Renders in memory; progress(phase, fraction) is called in order on this thread. Ctrl-C cancels. "
           "aov: ground truth maps (\"depth,normal\", a list of names, or \"all\") into result.arrays['aov_NAME'].");
     m.def("apply_sensor", &apply_sensor, py::arg("result"), py::arg("sensor"), py::arg("threads") = 0,
-          "A sensor block (a dict or a file) applied to a result: {'measurements': ..., 'depth': ...}.");
+          py::arg("time") = py::none(),
+          "A sensor block (a dict or a file) applied to a Result, or to a numpy array: a camera cube (H, W, T, 3) or "
+          "a capture (T, ...), with time={'bin_width': ..., 'start': ..., 'unit': ...}: {'measurements': ..., "
+          "'depth': ..., 'raw': ...}.");
 }

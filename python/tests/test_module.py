@@ -240,7 +240,7 @@ def test_apply_sensor_equals_tprf_sensor(tmp_path):
     for given in (GATES, sensor_file):
         measured = tprf.apply_sensor(result, given)
         assert measured["measurements"].shape == (16, 24, 20, 3)
-        assert np.array_equal(measured["measurements"], np.load(tmp_path / "out" / "measurements.npy"))
+        assert np.array_equal(measured["measurements"], np.load(tmp_path / "out" / "sensor-sensor" / "measurements.npy"))
 
 
 @needs_tprf
@@ -308,3 +308,31 @@ def test_aov_maps_equal_the_command_lines_files_and_have_their_dtypes(tmp_path):
     assert tprf.render(loaded).aov == {}
     with pytest.raises(ValueError, match='aov: unknown map "colour"'):
         tprf.render(loaded, aov="depth,colour")
+
+
+def test_apply_sensor_on_numpy_arrays_equals_it_on_the_result():
+    scene = copy.deepcopy(CORNER)
+    scene["solver"] = {"bounces": True, "max_bounces": 2}
+    result = tprf.render(tprf.load_scene(scene))
+    amcw = {"exposure": {"type": "amcw", "frequencies": [20e6, 50e6], "phases": 4}}
+    on_result = tprf.apply_sensor(result, amcw)
+    on_array = tprf.apply_sensor(np.array(result.transient), amcw, time=result.time)
+    assert sorted(on_array) == ["depth", "measurements", "raw"] and on_array["raw"].shape == (16, 24, 2, 4)
+    for name in on_result:
+        assert np.array_equal(on_result[name], on_array[name]), name
+    # Any cube with its time axis: a bounce order, in picoseconds (3.3356 ps per cm of path).
+    bounce = result.arrays["transient_bounce_1"]
+    gates = {"exposure": {"type": "gates", "start": 0.0, "width": 0.5, "step": 0.5, "count": 6}}
+    in_metres = tprf.apply_sensor(bounce, gates, time=result.time)["measurements"]
+    assert in_metres.shape == (16, 24, 6, 3) and in_metres.max() > 0
+    ps = {"bin_width": 0.01 / 299792458.0 * 1e12, "unit": "ps"}
+    gates_ps = {"exposure": {"type": "gates", "start": 0.0, "width": 0.5 / 299792458.0 * 1e12,
+                             "step": 0.5 / 299792458.0 * 1e12, "count": 6}}
+    in_ps = tprf.apply_sensor(bounce, gates_ps, time=ps)["measurements"]
+    assert np.allclose(in_ps, in_metres, rtol=1e-5, atol=1e-7 * in_metres.max())
+    with pytest.raises(ValueError, match="needs its time axis"):
+        tprf.apply_sensor(bounce, gates)
+    with pytest.raises(ValueError, match="camera cube"):
+        tprf.apply_sensor(np.zeros((4, 4)), gates, time=result.time)
+    with pytest.raises(ValueError, match="bins"):
+        tprf.apply_sensor(bounce, gates, time={"bins": 7, "bin_width": 0.01})

@@ -151,7 +151,8 @@ def test_amcw_depth_and_measurements_load(render, tmp_path):
     shutil.copytree(render, out)
     (tmp_path / "amcw.json").write_text(json.dumps({"exposure": {"type": "amcw", "frequency_mhz": 20}}))
     tprf("sensor", out, tmp_path / "amcw.json")
-    check_npy(out / "measurements.npy", (H, W, 4, 3))
-    depth = check_npy(out / "depth.npy", (H, W))
+    check_npy(out / "sensor-amcw" / "measurements.npy", (H, W, 4, 3))
+    check_npy(out / "sensor-amcw" / "raw.npy", (H, W, 1, 4))
+    depth = check_npy(out / "sensor-amcw" / "depth.npy", (H, W))
     c = 299792458.0
     assert np.all((depth >= 0) & (depth < c / (2 * 20e6)))

@@ -48,7 +48,8 @@ using Clock = std::chrono::steady_clock;
 std::vector<std::string> render_outputs() {
     std::vector<std::string> all = {"transient.npy", "steady.npy", "steady.exr", "preview.png", "render.json",
                                     "patches.csv", "patch_transient.npy", "patch_steady.npy", "frames", "streaks",
-                                    "light_in_flight.mp4", "transient_bounce_*", "capture.hdf5", "capture.npy"};
+                                    "light_in_flight.mp4", "transient_bounce_*", "capture.hdf5", "capture.npy",
+                                    "aov_*", "sensor-*"};  // sensor-NAME: `tprf sensor` on an earlier cube
     all.insert(all.end(), sensor_outputs().begin(), sensor_outputs().end());
     return all;
 }

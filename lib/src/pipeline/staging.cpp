@@ -49,8 +49,9 @@ void remove_stale_staging(const std::filesystem::path& out) {
 
 }  // namespace
 
-Staging::Staging(const std::filesystem::path& out) : m_out(out), m_lock(lock_output_dir(out)) {
-    m_earlier_run = std::filesystem::exists(out / "render.json");
+Staging::Staging(const std::filesystem::path& out, const std::string& marker)
+    : m_out(out), m_lock(lock_output_dir(out)) {
+    m_earlier_run = std::filesystem::exists(out / marker);
     if (m_lock >= 0) remove_stale_staging(out);
     m_dir = out / (kStagingPrefix + std::to_string(::getpid()));
     std::error_code ec;

@@ -22,8 +22,9 @@ namespace tprf {
 class Staging {
 public:
     /// Locks `out` (which must exist), removes staging folders that killed runs left there, and
-    /// creates this run's.
-    explicit Staging(const std::filesystem::path& out);
+    /// creates this run's. `marker`: the file whose presence says an earlier run of the same kind
+    /// wrote `out` (render.json; a sensor folder's sensor.json), whose outputs publish() may replace.
+    explicit Staging(const std::filesystem::path& out, const std::string& marker = "render.json");
     ~Staging();
     Staging(const Staging&) = delete;
     Staging& operator=(const Staging&) = delete;

@@ -345,6 +345,13 @@ Scene load_scene(const std::filesystem::path& file, const XmlDefines& defines) {
     return scene;
 }
 
+TimeAxis parse_time_block(const std::string& text, const std::filesystem::path& file, std::string_view json_path) {
+    const nlohmann::json root = parse_json_text(text, file);
+    const TimeAxis time = parse_time(JsonNode{root, std::string(json_path), file});
+    validate_time(time, file, std::string(json_path));
+    return time;
+}
+
 TimeAxis read_render_time(const std::filesystem::path& render_json) {
     const nlohmann::json info = read_json_file(render_json, "render.json");
     const JsonNode root{info, "", render_json};

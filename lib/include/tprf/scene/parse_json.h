@@ -42,6 +42,10 @@ SensorSettings load_sensor(const std::filesystem::path& file);
 SensorSettings parse_sensor_block(const std::string& text, const std::filesystem::path& file,
                                   std::string_view json_path = "sensor");
 
+/// A `time` block given as JSON text (`bins`, `bin_width`, `start`, `unit`, as in a scene), validated;
+/// messages name `file` and `json_path`.
+TimeAxis parse_time_block(const std::string& text, const std::filesystem::path& file, std::string_view json_path = "time");
+
 /// The time axis recorded in a render directory's render.json (for `tprf sensor`), validated.
 TimeAxis read_render_time(const std::filesystem::path& render_json);
 
