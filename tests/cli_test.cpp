@@ -177,8 +177,34 @@ TEST_F(Cli, SettingsProbablyInAnotherUnitAreWarnedOfByInfoAndRender) {
     }
     for (const char* command : {"info ", "info --estimate-only "})
         EXPECT_EQ(run(command + (m_dir / "good.json").string()).err.find("warning"), std::string::npos) << command;
-    const Outcome good = run("render -o " + (m_dir / "good").string() + " " + (m_dir / "good.json").string());
+    // Rendered with 64 bins of 0.1 m, which hold its light (16 bins end before any of it arrives, which
+    // render warns of: AWindowThatMissesTheLightIsWarnedOf).
+    std::ifstream in_scene(m_dir / "good.json");
+    std::string lit((std::istreambuf_iterator<char>(in_scene)), {});
+    lit.replace(lit.find(R"("bins": 16)"), 10, R"("bins": 64)");
+    std::ofstream(m_dir / "lit.json") << lit;
+    const Outcome good = run("render -o " + (m_dir / "good").string() + " " + (m_dir / "lit.json").string());
     EXPECT_EQ(good.err.find("warning"), std::string::npos) << good.err;
+}
+
+TEST_F(Cli, AWindowThatMissesTheLightIsWarnedOf) {
+    // good.json's 16 bins of 0.1 m end at 1.6 m of path; its light's shortest path is 2.5 m: all of it
+    // falls after the window. With 64 bins (6.4 m) the open floor's single bounce is all inside.
+    const Outcome dark = run("render -o " + (m_dir / "dark").string() + " " + (m_dir / "good.json").string());
+    EXPECT_EQ(dark.status, 0) << dark.err;
+    EXPECT_NE(dark.err.find("tprf: warning: 100.0% of the light the camera sees falls outside the time window [0, 1.6] m"),
+              std::string::npos)
+        << dark.err;
+    std::ifstream dark_json(m_dir / "dark" / "render.json");
+    EXPECT_DOUBLE_EQ(nlohmann::json::parse(dark_json).at("camera").at("light_outside_window").get<double>(), 1.0);
+    std::ifstream in_scene(m_dir / "good.json");
+    std::string lit((std::istreambuf_iterator<char>(in_scene)), {});
+    lit.replace(lit.find(R"("bins": 16)"), 10, R"("bins": 64)");
+    std::ofstream(m_dir / "lit.json") << lit;
+    const Outcome all = run("render -o " + (m_dir / "lit").string() + " " + (m_dir / "lit.json").string());
+    EXPECT_EQ(all.err.find("warning"), std::string::npos) << all.err;
+    std::ifstream lit_json(m_dir / "lit" / "render.json");
+    EXPECT_LT(nlohmann::json::parse(lit_json).at("camera").at("light_outside_window").get<double>(), 1e-5);
 }
 
 TEST_F(Cli, AMeshInMillimetresIsNamedWithTheScaleThatFixesIt) {

@@ -1201,7 +1201,7 @@ TEST_F(RenderOutputs, SensorWindowsAfterTheFirstArrivalSumTheBinsInside) {
             for (int k = 0; k < gates; ++k) bins.emplace_back(t0 + 1 + 2 * k, t0 + 3 + 2 * k);
         const Outcome r = run_tprf("sensor " + out.string() + " " + file.string());
         ASSERT_EQ(r.status, 0) << r.err;
-        const tprf::NpyArray m = tprf::read_npy(out / "measurements.npy");
+        const tprf::NpyArray m = tprf::read_npy(out / ("sensor-" + file.stem().string()) / "measurements.npy");
         const std::size_t K = bins.size();
         ASSERT_EQ(m.shape, (std::vector<std::size_t>{std::size_t(H), std::size_t(W), K, 3})) << file;
         int lit = 0;

@@ -76,7 +76,8 @@ std::string render_json_text(const RenderRecord& r) {
                  {"unit", unit_name(r.time.unit)}};
     if (r.camera)
         j["camera"] = {{"width", r.camera->width}, {"height", r.camera->height}, {"spp", r.camera->spp},
-                       {"unwarp", r.camera->unwarp}, {"second_bounce_shifted", r.second_bounce_shifted}};
+                       {"unwarp", r.camera->unwarp}, {"second_bounce_shifted", r.second_bounce_shifted},
+                       {"light_outside_window", r.outside_window}};
     if (const auto& c = r.capture)
         j["capture"] = {{"type", c->type},
                         {"laser_points", c->laser_points},

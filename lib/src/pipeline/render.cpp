@@ -6,6 +6,7 @@
 #include "staging.h"
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
+#include "tprf/core/parallel.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
 #include "tprf/imaging/camera.h"
@@ -270,7 +271,8 @@ SolveStats solve_into_cubes(const Scene& scene, const RenderOptions& options, co
 
 // steady.npy, steady.exr and preview.png (the images: files only); with patch profiles also
 // patch_steady.npy and patches.csv.
-void write_steady(const Scene& scene, const RenderOptions& options, const Transport& t, Arrays& arrays) {
+const std::vector<float>& write_steady(const Scene& scene, const RenderOptions& options, const Transport& t,
+                                       Arrays& arrays) {
     const Camera& camera = *scene.camera;
     const std::size_t H = std::size_t(camera.height), W = std::size_t(camera.width), N = t.patches.size();
     const std::vector<Rgb> steady = solve_steady(t.patches, t.links, t.illumination, scene.solver.max_bounces);
@@ -281,12 +283,44 @@ void write_steady(const Scene& scene, const RenderOptions& options, const Transp
         const std::vector<std::uint8_t> preview = tonemap(camera.width, camera.height, image.data());
         write_png(staging->path("preview.png"), camera.width, camera.height, preview.data());
     }
-    if (!options.patch_profiles) return;
+    if (!options.patch_profiles) return image;
     FloatArray flat{{N, 3}, std::vector<float>(N * 3)};
     for (std::size_t i = 0; i < N; ++i)
         for (int ch = 0; ch < 3; ++ch) flat.data[i * 3 + std::size_t(ch)] = float(steady[i][ch]);
     arrays.put("patch_steady", std::move(flat));
     if (Staging* staging = arrays.staging()) write_patches_csv(staging->path("patches.csv"), t.patches);
+    return image;
+}
+
+// The share of the light the camera sees (the steady image, which holds every path) that the cube's
+// window does not: 1 - (the cube summed over pixels, bins and channels) / (the steady image summed).
+// Rows are summed in parallel, each in its own order, and added in row order: the same number for
+// any thread count. 0 for a dark image.
+double light_outside_window(const float* cube, const std::vector<float>& steady, int height, int width, int bins,
+                            int threads) {
+    const std::size_t row = std::size_t(width) * std::size_t(bins) * 3;
+    std::vector<double> rows(std::size_t(height), 0.0);
+    parallel_for(std::size_t(height), {threads, 1, true}, [&](std::size_t r) {
+        double sum = 0.0;
+        for (std::size_t q = 0; q < row; ++q) sum += cube[r * row + q];
+        rows[r] = sum;
+    });
+    double seen = 0.0, all = 0.0;
+    for (const double r : rows) seen += r;
+    for (const float v : steady) all += v;
+    return all > 0.0 ? std::max(0.0, 1.0 - seen / all) : 0.0;
+}
+
+// One line for the user when more than 1% of the camera's light falls outside the window.
+std::string window_warning(double share, const TimeAxis& time) {
+    const char* unit = time.unit == TimeUnit::Picoseconds ? "ps" : "m";
+    char line[400];
+    std::snprintf(line, sizeof line,
+                  "%.1f%% of the light the camera sees falls outside the time window [%.6g, %.6g] %s (its steady "
+                  "image holds it all): more time.bins or a wider bin_width keep later light, an earlier "
+                  "time.start earlier light (render.json: camera.light_outside_window)",
+                  100.0 * share, time.start, time.start + time.bins * time.bin_width, unit);
+    return line;
 }
 
 // The ground truth maps that options.aovs asks for (aov_*.npy), each pixel's centre ray.
@@ -343,6 +377,7 @@ RenderRecord render_record(const std::filesystem::path& scene_file, const Scene&
     r.peak_rss_mb = report.peak_rss_mb;
     r.meshes = report.meshes;
     r.second_bounce_shifted = report.second_bounce_shifted;
+    r.outside_window = report.outside_window;
     return r;
 }
 
@@ -416,7 +451,11 @@ SolveStats render_camera(const Scene& scene, const RenderOptions& options, const
     const SolveStats stats = solve_into_cubes(scene, options, transport, cubes, report);
     const auto write_start = Clock::now();
     if (options.progress) options.progress("write", 0.0);
-    write_steady(scene, options, transport, arrays);
+    const std::vector<float>& steady = write_steady(scene, options, transport, arrays);
+    const Camera& camera = *scene.camera;
+    report.outside_window = light_outside_window(cubes.cube, steady, camera.height, camera.width, scene.time.bins,
+                                                 options.threads);
+    if (report.outside_window > kWindowLossWarning) report.warnings.push_back(window_warning(report.outside_window, scene.time));
     write_ground_truth(scene, options, transport, arrays);
     write_views(scene, options, cubes.cube, arrays, report);
     arrays.commit();

@@ -66,6 +66,7 @@ struct RenderRecord {
     double peak_rss_mb = 0.0;
     std::vector<MeshReport> meshes;       ///< one per mesh object
     bool second_bounce_shifted = false;   ///< camera.shift_second_bounce applied (SecondBounceLight)
+    double outside_window = -1.0;         ///< the camera's light outside the window, a share (-1: no camera)
 };
 
 /// render.json's text (JSON, indented, ending in a newline).

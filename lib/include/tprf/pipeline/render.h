@@ -35,6 +35,9 @@ struct RenderOptions : PipelineOptions {
     const RankGroup* ranks = nullptr;
 };
 
+/// A render whose camera misses more than this share of its light outside the time window warns.
+inline constexpr double kWindowLossWarning = 0.01;
+
 /// What a render did.
 struct RenderReport {
     std::size_t patches = 0;
@@ -49,6 +52,8 @@ struct RenderReport {
     int measurements = 0;           ///< sensor measurements per pixel and channel (0: no sensor block)
     std::size_t capture_pairs = 0;  ///< (laser point, sensor point) pairs of the capture (0: none)
     bool second_bounce_shifted = false;  ///< whether the camera read the second bounce at its samples' times
+    /// The share of the camera's light (its steady image) outside the cube's time window; -1: no camera.
+    double outside_window = -1.0;
     std::vector<std::string> written;  ///< files and folders written, relative to the output directory
     std::vector<std::string> warnings; ///< lines for the user (a figure not drawn, and how to draw it)
 };
