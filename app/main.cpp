@@ -328,6 +328,13 @@ void add_plot_pixel(CLI::App& command, std::optional<std::array<int, 2>>& target
         "pixel X,Y (column, row) of sensor_plot.png (default: the centre)");
 }
 
+// --plot-scale auto|log|linear: the y axes of sensor_plot.png.
+void add_plot_scale(CLI::App& command, std::string& target) {
+    command.add_option("--plot-scale", target,
+                       "y axes of sensor_plot.png: auto (log where the values span more than 1e3), log or linear")
+        ->check(CLI::IsMember({"auto", "log", "linear"}));
+}
+
 // -D name=value (repeatable) into `target`: the parameters of a Mitsuba XML scene ($name).
 void add_defines(CLI::App& command, tprf::XmlDefines& target) {
     command
@@ -367,6 +374,7 @@ void add_render_flags(CLI::App& rend, tprf::RenderOptions& render) {
                     "(default: 80% of the memory available)")
         ->check(positive_finite());
     add_plot_pixel(rend, render.plot_pixel);
+    add_plot_scale(rend, render.plot_scale);
 }
 
 // Everything but joining the ranks: parse the arguments, run the subcommand, print. `ranks`: the MPI
@@ -415,6 +423,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
     sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
     add_plot_pixel(*sens, sensor.plot_pixel);
+    add_plot_scale(*sens, sensor.plot_scale);
     sens->add_option("--cube", sensor.cube,
                      "the cube measured: transient (default), transient_bounce_K or capture (OUTDIR/NAME.npy)");
     sens->add_option("--name", sensor.name,

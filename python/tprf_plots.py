@@ -84,8 +84,32 @@ def field(data, path, file):
     return node
 
 
-def plot_sensor(plt, data_file, out):
-    """sensor_plot.png from sensor_plot.json (docs/sensor.md, "Outputs")."""
+# "auto" draws an axis logarithmically where its positive values span more than this ratio.
+LOG_RANGE = 1e3
+
+
+def y_scale(values, mode):
+    """The y scale of an axis showing `values`: ("linear", None), or ("symlog", linthresh) for "log", and
+    for "auto" where the positive values span more than LOG_RANGE. symlog is linear below linthresh (the
+    smallest positive value) and logarithmic above, so that zero counts stay drawable."""
+    positive = [v for v in values if v > 0 and math.isfinite(v)]
+    if mode == "linear" or not positive:
+        return "linear", None
+    low, high = min(positive), max(positive)
+    if mode == "auto" and high <= LOG_RANGE * low:
+        return "linear", None
+    return "symlog", low
+
+
+def apply_scale(ax, values, mode):
+    scale, linthresh = y_scale(values, mode)
+    if scale == "symlog":
+        ax.set_yscale("symlog", linthresh=linthresh)
+
+
+def plot_sensor(plt, data_file, out, scale="auto"):
+    """sensor_plot.png from sensor_plot.json (docs/sensor.md, "Outputs"); `scale`: the y axes' scale,
+    "linear", "log" or "auto" (log where the values span more than 1e3)."""
     try:
         data = json.loads(pathlib.Path(data_file).read_text())
     except (OSError, ValueError) as e:
@@ -123,6 +147,8 @@ def plot_sensor(plt, data_file, out):
     bottom.set_xlabel("phase (degrees)" if units["measurement_at"] == "degrees" else f"time ({units['time']})")
     bottom.set_ylabel(units["measurements"])
     bottom.legend(loc="best")
+    apply_scale(top, density + conv, scale)
+    apply_scale(bottom, values, scale)
     for ax in (top, bottom):
         ax.set_axisbelow(True)  # the grid below the stairs, which are patches
         ax.grid(True, color="#e4e4e4")
@@ -248,6 +274,8 @@ def main(argv=None):
     sensor = sub.add_parser("sensor", help="sensor_plot.png from sensor_plot.json")
     sensor.add_argument("data")
     sensor.add_argument("out")
+    sensor.add_argument("--scale", choices=("auto", "log", "linear"), default="auto",
+                        help="the y axes: log where the values span more than 1e3 (auto), or always log or linear")
     scaling = sub.add_parser("scaling", help="tprf_harness's scaling.png from harness.csv and accuracy.csv")
     scaling.add_argument("harness")
     scaling.add_argument("accuracy")
@@ -258,7 +286,7 @@ def main(argv=None):
     plt, np = import_matplotlib()
     try:
         if args.figure == "sensor":
-            plot_sensor(plt, args.data, args.out)
+            plot_sensor(plt, args.data, args.out, args.scale)
         else:
             plot_scaling(plt, np, args.harness, args.accuracy, args.out, args.bin_width, args.accuracy_bins)
     except (BadInput, OSError) as e:

@@ -140,3 +140,29 @@ def test_without_matplotlib_exits_three_and_says_how_to_install(tmp_path):
     assert r.returncode == 3, r.stderr
     assert "apt-get install python3-matplotlib" in r.stderr
     assert not (tmp_path / "out.png").exists()
+
+
+def test_auto_scale_is_log_where_the_values_span_more_than_a_thousand():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("tprf_plots", SCRIPT)
+    plots = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(plots)
+    counts = [0, 0, 3, 12000, 40, 0]  # a SPAD histogram: zeros and a peak 4000 times the smallest count
+    assert plots.y_scale(counts, "auto") == ("symlog", 3)
+    assert plots.y_scale([1.0, 2.0, 900.0], "auto") == ("linear", None)
+    assert plots.y_scale([1.0, 2.0, 900.0], "log") == ("symlog", 1.0)
+    assert plots.y_scale(counts, "linear") == ("linear", None)
+    assert plots.y_scale([0.0, 0.0], "log") == ("linear", None)  # nothing positive to put on a log axis
+
+
+@needs_matplotlib
+@pytest.mark.parametrize("scale", ["auto", "log", "linear"])
+def test_every_scale_draws_the_spad_plot(tmp_path, scale):
+    data = tmp_path / "sensor_plot.json"
+    spad = sensor_data("spad")
+    spad["measurements"]["value"] = [0.0] * (len(spad["measurements"]["value"]) - 1) + [5000.0]
+    data.write_text(json.dumps(spad))
+    out = tmp_path / "sensor_plot.png"
+    r = run("sensor", data, out, "--scale", scale)
+    assert r.returncode == 0, r.stderr
+    assert png_size(out) == (900, 640)

@@ -145,11 +145,12 @@ int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const C
     if (!run.draw_plots) return K;
     const std::filesystem::path png = staging.path("sensor_plot.png");
     std::string failure;
-    if (!run_plot_script({"sensor", data.string(), png.string()}, &failure)) {
+    if (!run_plot_script({"sensor", data.string(), png.string(), "--scale", run.plot_scale}, &failure)) {
         staging.forget("sensor_plot.png");
         warnings.push_back(plot_not_drawn_message(staging.final_path("sensor_plot.png"),
                                                   {"sensor", staging.final_path("sensor_plot.json").string(),
-                                                   staging.final_path("sensor_plot.png").string()},
+                                                   staging.final_path("sensor_plot.png").string(), "--scale",
+                                                   run.plot_scale},
                                                   failure));
     }
     return K;

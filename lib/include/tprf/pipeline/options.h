@@ -19,6 +19,9 @@ struct PipelineOptions {
     /// Draw figures (sensor_plot.png) with python/tprf_plots.py in a child process. Off: only their
     /// data is written (sensor_plot.json), for callers that must not fork or draw themselves.
     bool draw_plots = true;
+    /// The y scale of those figures: "auto" (logarithmic where the values span more than 1e3), "log"
+    /// or "linear" (`--plot-scale`).
+    std::string plot_scale = "auto";
     /// A render whose estimated peak memory (estimate_resources) exceeds this many GB (1e9 bytes) is
     /// refused before anything heavy is allocated (check_memory); 0: 80% of the memory available
     /// (MemAvailable in /proc/meminfo).
