@@ -673,6 +673,10 @@ protected:
         EXPECT_NE(o.err.find("scene.json: " + path + ": "), std::string::npos) << o.err;
         EXPECT_NE(o.err.find(words), std::string::npos) << o.err;
         EXPECT_FALSE(fs::exists(m_dir / "out" / "capture.hdf5"));
+        // info checks what render checks before its links (the capture's points on the wall too).
+        const test::Outcome i = test::run_tprf("info " + scene(capture));
+        EXPECT_EQ(i.status, 2) << i.err;
+        EXPECT_EQ(i.err, o.err);
     }
     fs::path m_dir;
 };

@@ -137,6 +137,8 @@ SceneSummary describe_scene(const Scene& scene, const PipelineOptions& options) 
     t0 = std::chrono::steady_clock::now();
     const std::unique_ptr<Visibility> owned = scene_visibility(scene, patches);
     const Visibility& visibility = *owned;
+    // What render checks before its links: every capture point lies on a surface its device sees.
+    if (scene.capture) locate_capture_points(scene, patches, visibility);
     LinkOptions link_options;
     link_options.threads = options.threads;
     link_options.progress = options.progress;
