@@ -377,6 +377,21 @@ void add_render_flags(CLI::App& rend, tprf::RenderOptions& render) {
     add_plot_scale(rend, render.plot_scale);
 }
 
+// `tprf sensor OUTDIR SENSOR.json` and its flags, into `sensor` (OUTDIR and the file into the strings).
+CLI::App* add_sensor_command(CLI::App& app, tprf::SensorRunOptions& sensor, std::string& render_dir,
+                             std::string& sensor_file) {
+    auto* sens = app.add_subcommand("sensor", "apply a sensor block to a cube of an existing render, into OUTDIR/sensor-NAME/");
+    sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
+    sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
+    add_plot_pixel(*sens, sensor.plot_pixel);
+    add_plot_scale(*sens, sensor.plot_scale);
+    sens->add_option("--cube", sensor.cube,
+                     "the cube measured: transient (default), transient_bounce_K or capture (OUTDIR/NAME.npy)");
+    sens->add_option("--name", sensor.name,
+                     "the outputs go to OUTDIR/sensor-NAME/ (default: the sensor file's name without .json)");
+    return sens;
+}
+
 // Everything but joining the ranks: parse the arguments, run the subcommand, print. `ranks`: the MPI
 // ranks that share a render (docs/mpi.md), or this process alone; rank 0 alone runs info and sensor.
 int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
@@ -419,15 +434,7 @@ int run_tprf(int argc, char** argv, const tprf::RankGroup& ranks) {
     add_render_flags(*rend, render);
     tprf::SensorRunOptions sensor;
     std::string render_dir, sensor_file;
-    auto* sens = app.add_subcommand("sensor", "apply a sensor block to a cube of an existing render, into OUTDIR/sensor-NAME/");
-    sens->add_option("outdir", render_dir, "a directory written by tprf render")->required();
-    sens->add_option("sensor", sensor_file, "sensor JSON: the block itself or {\"sensor\": block}")->required();
-    add_plot_pixel(*sens, sensor.plot_pixel);
-    add_plot_scale(*sens, sensor.plot_scale);
-    sens->add_option("--cube", sensor.cube,
-                     "the cube measured: transient (default), transient_bounce_K or capture (OUTDIR/NAME.npy)");
-    sens->add_option("--name", sensor.name,
-                     "the outputs go to OUTDIR/sensor-NAME/ (default: the sensor file's name without .json)");
+    CLI::App* sens = add_sensor_command(app, sensor, render_dir, sensor_file);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

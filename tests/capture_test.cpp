@@ -7,11 +7,13 @@
 #include "tprf/core/error.h"
 #include "tprf/geometry/patches.h"
 #include "tprf/geometry/visibility.h"
+#include "tprf/io/npy.h"
 #include "tprf/pipeline/capture.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/transport/link_set.h"
 
 #include <gtest/gtest.h>
+#include <H5Cpp.h>
 
 #include <array>
 #include <cmath>
@@ -696,6 +698,42 @@ TEST(Capture, GridPointOnAPatchCornerIsOnTheWall) {
     const CaptureResult r = b.capture();
     ASSERT_EQ(r.points.sensor.size(), 1u);
     EXPECT_LT((r.points.sensor[0].point - Vec3(-0.6, 0.6, 0)).norm(), 1e-12);
+}
+
+// `tprf sensor --cube capture` with a SPAD: its histograms per scan point, and a capture.hdf5 that is the
+// render's with H the counts (one detector: the first channel's).
+TEST_F(CaptureCli, ASpadOnACaptureWritesANoisyCaptureFile) {
+    const std::string file = scene(R"({)" + kDevices + R"(, "grid": {"origin": [-0.5, -0.5, 0], "u": [1, 0, 0],
+        "v": [0, 1, 0], "nu": 3, "nv": 2}, "max_bounces": 3})");
+    const fs::path out = m_dir / "out";
+    ASSERT_EQ(test::run_tprf("render " + file + " -o " + out.string()).status, 0);
+    std::ofstream(m_dir / "spad.json") << R"({"exposure": {"type": "spad", "photons": 1e6, "seed": 5}})";
+    const test::Outcome r = test::run_tprf("sensor " + out.string() + " " + (m_dir / "spad.json").string() +
+                                           " --cube capture --name noisy");
+    ASSERT_EQ(r.status, 0) << r.err;
+    const NpyArray counts = read_npy(out / "sensor-noisy" / "measurements.npy");
+    ASSERT_EQ(counts.shape, (std::vector<std::size_t>{3, 2, 100, 3}));  // the scan points as rows of pixels
+    const NpyArray clean = read_npy(out / "capture.npy");
+    ASSERT_EQ(clean.shape, (std::vector<std::size_t>{100, 3, 2}));
+    const H5::H5File noisy((out / "sensor-noisy" / "capture.hdf5").string(), H5F_ACC_RDONLY);
+    const H5::DataSet h = noisy.openDataSet("H");
+    std::vector<float> H(100 * 6);
+    h.read(H.data(), H5::PredType::NATIVE_FLOAT);
+    double total = 0.0, expected = 0.0;
+    for (std::size_t t = 0; t < 100; ++t)
+        for (std::size_t p = 0; p < 6; ++p) {
+            EXPECT_EQ(H[t * 6 + p], counts.data[(p * 100 + t) * 3]) << t << " " << p;
+            EXPECT_EQ(H[t * 6 + p], std::round(H[t * 6 + p]));  // photon counts
+            total += H[t * 6 + p];
+            expected += 1e6 * clean.data[t * 6 + p];
+        }
+    MEASURED("noisy capture: %.0f counts where photons x H gives %.0f\n", total, expected);
+    EXPECT_NEAR(total, expected, 5.0 * std::sqrt(expected));
+    // A gated sensor's measurements are no histogram: no capture file.
+    std::ofstream(m_dir / "gates.json") << R"({"exposure": {"type": "gates", "start": 0, "width": 0.5, "step": 0.5, "count": 3}})";
+    ASSERT_EQ(test::run_tprf("sensor " + out.string() + " " + (m_dir / "gates.json").string() + " --cube capture").status, 0);
+    EXPECT_TRUE(fs::exists(out / "sensor-gates" / "measurements.npy"));
+    EXPECT_FALSE(fs::exists(out / "sensor-gates" / "capture.hdf5"));
 }
 
 TEST_F(CaptureCli, ZeroPointsAlongAGridSideIsRefused) {

@@ -508,7 +508,7 @@ TEST_F(Cli, SensorRunsGoToTheirOwnFoldersAndReplaceOnlyTheirOwnOutputs) {
     const Outcome bad_name = run("sensor " + out.string() + " " + (m_dir / "gates.json").string() + " --name ../up");
     EXPECT_EQ(bad_name.status, 2);
     EXPECT_NE(bad_name.err.find("--name \"../up\""), std::string::npos) << bad_name.err;
-    EXPECT_FALSE(fs::exists(m_dir / "sensor-../up"));
+    EXPECT_FALSE(fs::exists(out / "sensor-.."));
     // A render into the same directory replaces everything of the earlier one: its ground truth maps
     // and the sensors' folders, which measured the old cube.
     ASSERT_EQ(run("render " + (m_dir / "good.json").string() + " -o " + out.string()).status, 0);

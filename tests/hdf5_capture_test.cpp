@@ -222,6 +222,34 @@ TEST(Hdf5Capture, ConfocalRoundTripsEveryDataset) {
                 EXPECT_EQ(H[(t * nu + a) * nv + b], h[(t * nu + a) * nv + b]) << t << " " << a << " " << b;
 }
 
+// A sensor's measurement of a capture: the same file with another H (tal reads both alike).
+TEST(Hdf5Capture, ACopyWithANewHKeepsEveryOtherDataset) {
+    const TempDir dir;
+    const std::size_t T = 5, nu = 3, nv = 2;
+    const auto h = ramp(T * nu * nv);
+    CaptureFile capture = make_capture(true, {T, nu, nv}, h);
+    capture.sensor_grid = make_grid(int(nu), int(nv), 10.0);
+    capture.laser_grid = capture.sensor_grid;
+    const fs::path from = dir.path() / "capture.hdf5", to = dir.path() / "noisy.hdf5";
+    tprf::write_capture_hdf5(from, capture);
+    std::vector<float> counts(h.size());
+    for (std::size_t k = 0; k < counts.size(); ++k) counts[k] = float(7 * k % 11);
+    tprf::copy_capture_with_h(from, to, counts.data(), {T, nu, nv});
+    {
+        const H5::H5File file(to.string(), H5F_ACC_RDONLY);
+        expect_common(file, capture);
+        EXPECT_EQ(read_floats(file, "H", {T, nu, nv}), counts);
+        const H5::H5File original(from.string(), H5F_ACC_RDONLY);
+        EXPECT_EQ(read_floats(original, "H", {T, nu, nv}), h);  // the render's own file is left alone
+    }
+    try {
+        tprf::copy_capture_with_h(from, to, counts.data(), {T, nv, nu});
+        FAIL() << "a shape other than the file's H was written";
+    } catch (const tprf::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("does not have the shape"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Hdf5Capture, ExhaustiveRoundTripsEveryDataset) {
     const TempDir dir;
     const std::size_t T = 4, nul = 2, nvl = 1, nus = 2, nvs = 3;

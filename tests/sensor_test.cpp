@@ -495,6 +495,17 @@ TEST(Sensor, AmcwPhasesCountIsEvenlySpacedAndBadKeysNameTheirPath) {
     EXPECT_NE(with("ambient", 5).find("ambient: needs \"photons\""), std::string::npos) << with("ambient", 5);
     EXPECT_NE(with("adc_bits", 30).find("adc_bits: must be an integer in [0, 24]"), std::string::npos);
     EXPECT_NE(with("photons", -1).find("photons: must be >= 0"), std::string::npos);
+    // Against a 10 m window, 80 THz wraps 5e6 times: the unwrapping would try each (Hz meant as kHz?).
+    const TimeAxis time = time_axis(1000, 0.01);
+    try {
+        validate_sensor(sensor_from({{"exposure", {{"type", "amcw"}, {"frequencies", {80e12, 100e12}}}}}), time);
+        ADD_FAILURE() << "frequencies far too high for the window were accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("exposure.frequencies: the lowest frequency, 8e+13 Hz, wraps every"),
+                  std::string::npos)
+            << e.what();
+    }
+    EXPECT_NO_THROW(validate_sensor(sensor_from({{"exposure", {{"type", "amcw"}, {"frequencies", {80e6, 100e6}}}}}), time));
 }
 
 // ---- The random numbers behind noise and photon counts (core/random.h, docs/sensor.md) ----

@@ -332,6 +332,8 @@ std::shared_ptr<const tprf::RenderResult> array_result(const py::object& x, cons
     if (!camera && a.ndim() != 3 && a.ndim() != 5)
         throw tprf::Error("apply_sensor: an array must be a camera cube (H, W, T, 3) or a capture (T, nu, nv) or "
                           "(T, nu_l, nv_l, nu_s, nv_s), not of " + std::to_string(a.ndim()) + " dimensions");
+    for (py::ssize_t k = 0; k < a.ndim(); ++k)
+        if (a.shape(k) == 0) throw tprf::Error("apply_sensor: the array has no elements along axis " + std::to_string(k));
     if (camera && a.shape(3) != 3)
         throw tprf::Error("apply_sensor: a camera cube's last axis holds the 3 channels, not " + std::to_string(a.shape(3)));
     if (time.is_none() || !py::isinstance<py::dict>(time))

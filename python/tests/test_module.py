@@ -336,3 +336,5 @@ def test_apply_sensor_on_numpy_arrays_equals_it_on_the_result():
         tprf.apply_sensor(np.zeros((4, 4)), gates, time=result.time)
     with pytest.raises(ValueError, match="bins"):
         tprf.apply_sensor(bounce, gates, time={"bins": 7, "bin_width": 0.01})
+    with pytest.raises(ValueError, match="no elements along axis 2"):
+        tprf.apply_sensor(np.zeros((300, 4, 0), dtype=np.float32), gates, time=result.time)

@@ -4,6 +4,7 @@
 #include "tprf/core/error.h"
 #include "tprf/core/random.h"
 #include "tprf/core/types.h"
+#include "tprf/scene/validate.h"
 
 #include <Eigen/Dense>
 #include <omp.h>
@@ -426,7 +427,9 @@ double amcw_depth(const SensorSettings& s, const double* raw, double max_distanc
         return x - std::round(x);
     };
     double best = distance[base], best_cost = std::numeric_limits<double>::infinity();
-    for (int n = 0; distance[base] + n * wrap[base] <= reach; ++n) {
+    // validate_sensor bounds the candidates (kMaxAmcwCandidates) against the window.
+    const double candidates = std::min(std::floor((reach - distance[base]) / wrap[base]), double(kMaxAmcwCandidates));
+    for (double n = 0; n <= candidates; ++n) {
         const double d = distance[base] + n * wrap[base];
         double cost = 0.0;
         for (std::size_t f = 0; f < distance.size(); ++f) cost += off(d, f) * off(d, f);
@@ -530,6 +533,7 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
     // The ADC: the frame's largest raw sample is its full scale (as an auto-exposure sets it), each
     // sample rounded to one of 2^bits levels below it; the depth from the levels.
     const std::size_t samples = std::size_t(pixels) * K;
+    if (samples == 0) return;
     const double top = *std::max_element(raw, raw + samples);
     const double levels = std::ldexp(1.0, s.exposure.adc_bits) - 1.0;
     for (std::size_t q = 0; q < samples; ++q) raw[q] = top > 0.0 ? float(std::round(std::max(0.0, double(raw[q])) / top * levels)) : 0.0f;

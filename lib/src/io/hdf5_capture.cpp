@@ -4,6 +4,7 @@
 
 #include <H5Cpp.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -205,6 +206,26 @@ void write_grid(CaptureWriter& writer, const std::string& prefix, const CaptureG
 }
 
 }  // namespace
+
+void copy_capture_with_h(const fs::path& from, const fs::path& to, const float* H, const std::vector<std::size_t>& shape) {
+    std::error_code ec;
+    fs::copy_file(from, to, fs::copy_options::overwrite_existing, ec);
+    if (ec) throw Error(from.string() + ": cannot copy to " + to.string() + ": " + ec.message());
+    H5::Exception::dontPrint();
+    try {
+        H5::H5File file(to.string(), H5F_ACC_RDWR);
+        H5::DataSet h = file.openDataSet("H");
+        const H5::DataSpace space = h.getSpace();
+        std::vector<hsize_t> dims(std::size_t(std::max(0, space.getSimpleExtentNdims())));
+        space.getSimpleExtentDims(dims.data());
+        if (!std::equal(dims.begin(), dims.end(), shape.begin(), shape.end()))
+            throw Error(from.string() + ": its H does not have the shape of the measured capture");
+        h.write(H, H5::PredType::NATIVE_FLOAT);
+        file.close();
+    } catch (const H5::Exception& e) {
+        fail_hdf5(to, "cannot write H", e);
+    }
+}
 
 void write_capture_hdf5(const fs::path& path, const CaptureFile& capture) {
     check_capture(capture);

@@ -17,7 +17,7 @@ nlohmann::json measurement_axis(const SensorSettings& s, const TimeAxis& time, i
             case ExposureType::Gates:
             case ExposureType::Windows: axis.push_back(s.exposure.windows[std::size_t(k)]); break;
             case ExposureType::Amcw: {
-                // [frequency in Hz, phase in degrees] with several frequencies; the phase alone with one
+                // [frequency in Hz, phase in degrees] with `frequencies`; the phase alone with frequency_mhz
                 const std::size_t P = s.exposure.phases_deg.size();
                 const double phase = s.exposure.phases_deg[std::size_t(k) % P];
                 if (s.exposure.frequencies_hz.empty()) axis.push_back(phase);

@@ -651,7 +651,12 @@ void estimate_outputs(const Scene& scene, const PatchCensus& census, bool patch_
         }
         const double pixels = double(scene.camera->width) * double(scene.camera->height);
         image = 4.0 * pixels * 3 * 4;  // the steady image, its preview and the writers' copies
-        if (scene.sensor) measurements = pixels * (measurement_count(*scene.sensor, scene.time) * 3 + 1) * 4;
+        if (scene.sensor) {
+            // K x 3 measurements and a depth per pixel, and for AMCW its K raw samples too.
+            const double K = measurement_count(*scene.sensor, scene.time);
+            const bool amcw = scene.sensor->exposure.type == ExposureType::Amcw;
+            measurements = pixels * (K * 3 + 1 + (amcw ? K : 0.0)) * 4;
+        }
     }
     e.cube_bytes = to_size(cube);
     // BiCGSTAB's vectors, one channel at a time, and the radiosities (of the glossy rows too)

@@ -5,6 +5,7 @@
 #include "tprf/core/error.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
+#include "tprf/io/hdf5_capture.h"
 #include "tprf/io/npy.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
@@ -54,6 +55,8 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     const std::filesystem::path info_file = dir / "render.json";
     if (!std::filesystem::exists(info_file))
         throw Error(dir.string() + ": not a tprf render directory (no render.json)");
+    // The render's directory stays as it is while its cube is read and measured.
+    const DirectoryLock render_lock(dir);
     const TimeAxis time = read_render_time(info_file);
     validate_sensor(sensor, time);
     const std::filesystem::path cube_file = dir / (options.cube + ".npy");
@@ -86,6 +89,17 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     try {
         report.measurements = write_sensor_outputs(staging, sensor, {time, data, report.height, report.width}, pixel,
                                                    options, report.warnings);
+        // A SPAD's histograms of a capture are a capture: the render's capture.hdf5 with H replaced by
+        // the counts (the first channel's: one detector), for tal to read as it reads the noise-free one.
+        const std::filesystem::path hdf5 = dir / "capture.hdf5";
+        if (capture && sensor.exposure.type == ExposureType::Spad && std::filesystem::exists(hdf5)) {
+            const NpyView counts(staging.staged("measurements.npy"));
+            const std::size_t pairs = std::size_t(report.height) * std::size_t(report.width);
+            std::vector<float> H(T * pairs);
+            for (std::size_t p = 0; p < pairs; ++p)
+                for (std::size_t t = 0; t < T; ++t) H[t * pairs + p] = counts.data()[(p * T + t) * 3];
+            copy_capture_with_h(hdf5, staging.path("capture.hdf5"), H.data(), shape);
+        }
         staging.publish(sensor_outputs());
     } catch (const OutputError& e) {
         throw OutputError(staging.public_message(e.what()));

@@ -33,7 +33,7 @@ int lock_output_dir(const std::filesystem::path& out) {
         ::close(fd);
         if (err == EWOULDBLOCK)
             throw Error(out.string() + ": another tprf run is writing into this output directory; wait for it to "
-                                       "finish, or choose another with -o (nothing was rendered)");
+                                       "finish, or choose another (nothing was written)");
         return -1;  // no locks on this file system (some network file systems): nothing to keep apart with
     }
     return fd;
@@ -48,6 +48,12 @@ void remove_stale_staging(const std::filesystem::path& out) {
 }
 
 }  // namespace
+
+DirectoryLock::DirectoryLock(const std::filesystem::path& dir) : m_fd(lock_output_dir(dir)) {}
+
+DirectoryLock::~DirectoryLock() {
+    if (m_fd >= 0) ::close(m_fd);
+}
 
 Staging::Staging(const std::filesystem::path& out, const std::string& marker)
     : m_out(out), m_lock(lock_output_dir(out)) {
@@ -115,7 +121,7 @@ std::string Staging::public_message(const std::string& message) const {
 
 const std::vector<std::string>& sensor_outputs() {
     static const std::vector<std::string> names = {"measurements.npy", "depth.npy", "raw.npy", "sensor.json",
-                                                   "sensor_plot.json", "sensor_plot.png"};
+                                                   "sensor_plot.json", "sensor_plot.png", "capture.hdf5"};
     return names;
 }
 

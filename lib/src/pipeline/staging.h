@@ -15,6 +15,20 @@
 
 namespace tprf {
 
+/// An exclusive lock (flock) on a directory while it lives, as a Staging holds on its own: `tprf sensor`
+/// holds its render's directory, so that no render replaces the cube (or removes the sensor's folder)
+/// while it is measured. Throws tprf::Error when another run holds it.
+class DirectoryLock {
+public:
+    explicit DirectoryLock(const std::filesystem::path& dir);
+    ~DirectoryLock();
+    DirectoryLock(const DirectoryLock&) = delete;
+    DirectoryLock& operator=(const DirectoryLock&) = delete;
+
+private:
+    int m_fd = -1;
+};
+
 /// Outputs are written into a hidden staging folder inside the output directory, then moved into
 /// place one by one once every one of them is complete; on failure or cancellation the folder is
 /// removed. The output directory is locked (flock) from construction to destruction, so two runs
@@ -36,6 +50,8 @@ public:
     void forget(const std::string& name);
     /// Where output `name` will be once published.
     std::filesystem::path final_path(const std::string& name) const { return m_out / name; }
+    /// Where output `name` (already recorded by path()) is being written, to read it back.
+    std::filesystem::path staged(const std::string& name) const { return m_dir / name; }
 
     /// Moves every staged output into place (unless the run was cancelled: then Cancelled), then, when the directory held an earlier render, removes
     /// that run's outputs that this one did not write (`owned`: names, or prefixes ending in '*'), so

@@ -116,6 +116,7 @@ Light parse_light(const Node& n) {
     p.position = n.child("position").vec3();
     p.intensity = n.child("intensity").rgb();
     if (name == "spot") {
+        p.spot = true;
         p.direction = parse_aim(n, p.position, "position");
         p.half_angle_deg = n.child("half_angle").number();
         if (const auto falloff = n.find("falloff")) p.falloff_deg = falloff->number();

@@ -141,7 +141,7 @@ void check_light(const Light& light, const At& at) {
     if (const auto* p = std::get_if<PointLight>(&light)) {
         finite3(p->position, at.key("position"));
         non_negative(p->intensity, at.key("intensity"));
-        if (p->direction.isZero() && p->half_angle_deg == 0.0 && p->falloff_deg == 0.0) return;  // isotropic
+        if (!p->spot) return;  // isotropic
         const At direction = at.key("direction");
         non_zero(p->direction, direction);
         if (std::abs(p->direction.norm() - 1.0) > kUnitTol) direction.fail("must be a unit vector");
@@ -452,6 +452,20 @@ void check_sensor_against_time(const SensorSettings& s, const TimeAxis& time, co
             check_reach(std::max(std::abs(s.pulse.table_time.front()), std::abs(s.pulse.table_time.back())),
                         pulse.key("file"));
             break;
+    }
+    if (s.exposure.type == ExposureType::Amcw) {
+        // The depth tries every wrap of the lowest frequency that fits in the window: a bounded number.
+        const std::vector<double> f = s.exposure.amcw_frequencies_hz();
+        const double lowest = *std::min_element(f.begin(), f.end());
+        const double window_m = 0.5 * time.to_metres(time.start + time.bins * time.bin_width);
+        const double wraps = window_m / (0.5 * kSpeedOfLight / lowest);
+        if (!(wraps <= kMaxAmcwCandidates)) {
+            std::ostringstream os;
+            os << "the lowest frequency, " << lowest << " Hz, wraps every " << 0.5 * kSpeedOfLight / lowest
+               << " m of depth: " << wraps << " times over the window's " << window_m
+               << " m, more than " << kMaxAmcwCandidates << " (frequencies are in Hz)";
+            at.key("exposure").key(s.exposure.frequencies_hz.empty() ? "frequency_mhz" : "frequencies").fail(os.str());
+        }
     }
     if (s.exposure.type == ExposureType::Spad) {
         check_reach(kGaussianReach * s.exposure.jitter_fwhm / kFwhmPerSigma, at.key("exposure").key("jitter_fwhm"));

@@ -214,7 +214,7 @@ LightSources light_sources(const Scene& scene, const PatchSet& patches, const Vi
             PointSource s;
             s.position = s.origin = point->position;
             s.intensity = point->intensity;
-            if (!point->direction.isZero()) {
+            if (point->spot) {
                 s.spot_axis = point->direction;
                 s.spot_half_angle = point->half_angle_deg * M_PI / 180.0;
                 s.spot_falloff = point->falloff_deg * M_PI / 180.0;

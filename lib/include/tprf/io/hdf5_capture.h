@@ -41,4 +41,11 @@ struct CaptureFile {
 /// tprf::Error naming the file when the HDF5 library fails (a full disk, a missing folder).
 void write_capture_hdf5(const std::filesystem::path& path, const CaptureFile& capture);
 
+/// Writes `to` as a copy of the capture file `from` whose H is replaced by `H` (float32, C order, of
+/// `from`'s H's shape, which must equal `shape`): a sensor's measurement of a capture (a SPAD's noisy
+/// histograms) that tal reads as it reads the render's own. Throws tprf::Error naming the file when
+/// `from` cannot be read, its H has another shape, or the library fails.
+void copy_capture_with_h(const std::filesystem::path& from, const std::filesystem::path& to, const float* H,
+                         const std::vector<std::size_t>& shape);
+
 }  // namespace tprf

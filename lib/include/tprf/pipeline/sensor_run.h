@@ -35,7 +35,8 @@ struct SensorReport {
 };
 
 /// Applies a sensor block to a cube of an existing render (its time axis from render.json, the cube
-/// memory-mapped: a camera's (H, W, T, 3), or a capture's (T, ...) as rows of sensor points) and writes
+/// memory-mapped: a camera's (H, W, T, 3); or a capture's (T, ...), read, as rows of sensor points),
+/// with the render's directory locked (DirectoryLock), and writes
 /// measurements.npy, depth.npy and raw.npy (amcw), sensor.json and sensor_plot.png into
 /// OUTDIR/sensor-NAME/, each atomically, leaving everything else in OUTDIR as it was. Bad input (the
 /// block, a cube that is not there or does not fit render.json, a name that is no plain folder name)

@@ -74,8 +74,9 @@ struct Camera {
 struct PointLight {
     Vec3 position = Vec3::Zero();   ///< metres
     Rgb intensity = Rgb::Zero();    ///< W/sr per channel, >= 0 (a spot's: inside its half angle)
-    /// Zero: isotropic. Else a spot (JSON type "spot") about this unit axis: full intensity within
-    /// half_angle_deg of it, falling to 0 over falloff_deg more by a smoothstep, 0 beyond.
+    /// A spot (JSON type "spot"): full intensity within half_angle_deg of the unit axis `direction`,
+    /// falling to 0 over falloff_deg more by a smoothstep, 0 beyond. False: isotropic.
+    bool spot = false;
     Vec3 direction = Vec3::Zero();
     double half_angle_deg = 0.0;    ///< [0, 180)
     double falloff_deg = 0.0;       ///< >= 0, half_angle_deg + falloff_deg <= 180

@@ -18,6 +18,9 @@ namespace tprf {
 inline constexpr int kMaxSensorMeasurements = 1 << 20;
 /// Modulation frequencies an AMCW block may measure in turn (cameras use 2 or 3).
 inline constexpr int kMaxAmcwFrequencies = 16;
+/// Wraps of an AMCW block's lowest frequency that its time window may hold (the depth's unwrapping tries
+/// each): beyond, the frequencies are far too high for the window (Hz meant as kHz, say).
+inline constexpr int kMaxAmcwCandidates = 100000;
 
 /// Checks every value of a scene: finite numbers, ranges (bins > 0, albedo in [0, 1], ...), geometry
 /// that is not degenerate (zero-length or parallel vectors, a singular transform), mesh files that can
