@@ -54,14 +54,7 @@ json scene_with_camera(const json& camera) {
             {"objects", {{{"type", "rectangle"}, {"origin", {-1, -1, 0}}, {"u", {2, 0, 0}}, {"v", {0, 2, 0}}, {"albedo", 0.5}}}}};
 }
 
-std::string error_of(const json& scene) {
-    try {
-        tprf::parse_scene(scene.dump(), "bad.json");
-    } catch (const tprf::Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const json& scene) { return tprf::test::parse_error(scene.dump()); }
 
 // Every point in front of the camera that OpenCV's formula puts inside the image is seen by the ray of
 // the image position where it lands: camera_ray undoes the distortion that the formula applies.

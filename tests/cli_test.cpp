@@ -63,6 +63,15 @@ protected:
         std::ofstream(m_dir / "bad.json") << R"({"time": {"bins": 0, "bin_width": 0.1}, "objects": []})";
     }
     void TearDown() override { fs::remove_all(m_dir); }
+    // good.json with 64 bins of 0.1 m (6.4 m of path), which hold its light: its 16 bins end at 1.6 m,
+    // before any of it arrives (2.5 m).
+    fs::path lit_scene() const {
+        std::ifstream in(m_dir / "good.json");
+        std::string scene((std::istreambuf_iterator<char>(in)), {});
+        scene.replace(scene.find(R"("bins": 16)"), 10, R"("bins": 64)");
+        std::ofstream(m_dir / "lit.json") << scene;
+        return m_dir / "lit.json";
+    }
     fs::path m_dir;
 };
 
@@ -179,11 +188,7 @@ TEST_F(Cli, SettingsProbablyInAnotherUnitAreWarnedOfByInfoAndRender) {
         EXPECT_EQ(run(command + (m_dir / "good.json").string()).err.find("warning"), std::string::npos) << command;
     // Rendered with 64 bins of 0.1 m, which hold its light (16 bins end before any of it arrives, which
     // render warns of: AWindowThatMissesTheLightIsWarnedOf).
-    std::ifstream in_scene(m_dir / "good.json");
-    std::string lit((std::istreambuf_iterator<char>(in_scene)), {});
-    lit.replace(lit.find(R"("bins": 16)"), 10, R"("bins": 64)");
-    std::ofstream(m_dir / "lit.json") << lit;
-    const Outcome good = run("render -o " + (m_dir / "good").string() + " " + (m_dir / "lit.json").string());
+    const Outcome good = run("render -o " + (m_dir / "good").string() + " " + lit_scene().string());
     EXPECT_EQ(good.err.find("warning"), std::string::npos) << good.err;
 }
 
@@ -197,11 +202,7 @@ TEST_F(Cli, AWindowThatMissesTheLightIsWarnedOf) {
         << dark.err;
     std::ifstream dark_json(m_dir / "dark" / "render.json");
     EXPECT_DOUBLE_EQ(nlohmann::json::parse(dark_json).at("camera").at("light_outside_window").get<double>(), 1.0);
-    std::ifstream in_scene(m_dir / "good.json");
-    std::string lit((std::istreambuf_iterator<char>(in_scene)), {});
-    lit.replace(lit.find(R"("bins": 16)"), 10, R"("bins": 64)");
-    std::ofstream(m_dir / "lit.json") << lit;
-    const Outcome all = run("render -o " + (m_dir / "lit").string() + " " + (m_dir / "lit.json").string());
+    const Outcome all = run("render -o " + (m_dir / "lit").string() + " " + lit_scene().string());
     EXPECT_EQ(all.err.find("warning"), std::string::npos) << all.err;
     std::ifstream lit_json(m_dir / "lit" / "render.json");
     EXPECT_LT(nlohmann::json::parse(lit_json).at("camera").at("light_outside_window").get<double>(), 1e-5);
@@ -421,12 +422,7 @@ private:
 };
 
 TEST_F(Cli, SensorPlotWithoutMatplotlibKeepsItsDataAndSaysHowToDrawIt) {
-    // good.json with 64 bins of 0.1 m: long enough for the light to reach the camera (16 bins are not).
-    std::ifstream in_scene(m_dir / "good.json");
-    std::string scene((std::istreambuf_iterator<char>(in_scene)), {});
-    scene.replace(scene.find(R"("bins": 16)"), 10, R"("bins": 64)");
-    std::ofstream(m_dir / "lit.json") << scene;
-    ASSERT_EQ(run("render " + (m_dir / "lit.json").string() + " -o " + (m_dir / "out").string()).status, 0);
+    ASSERT_EQ(run("render " + lit_scene().string() + " -o " + (m_dir / "out").string()).status, 0);
     std::ofstream(m_dir / "gates.json") << R"({"exposure": {"type": "gates", "start": 0, "width": 0.3, "step": 0.3, "count": 5}})";
     const std::string sensor = "sensor " + (m_dir / "out").string() + " " + (m_dir / "gates.json").string() + " --plot-pixel 4,6";  // a pixel that sees the floor
     ASSERT_EQ(run(sensor).status, 0);  // with matplotlib where there is one: a sensor_plot.png to replace

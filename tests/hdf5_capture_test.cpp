@@ -201,13 +201,19 @@ CaptureFile make_capture(bool confocal, std::vector<std::size_t> shape, const st
     return capture;
 }
 
+// A confocal capture of H `h` (T, nu, nv) over one grid.
+CaptureFile confocal_capture(std::size_t T, std::size_t nu, std::size_t nv, const std::vector<float>& h) {
+    CaptureFile capture = make_capture(true, {T, nu, nv}, h);
+    capture.sensor_grid = make_grid(int(nu), int(nv), 10.0);
+    capture.laser_grid = capture.sensor_grid;
+    return capture;
+}
+
 TEST(Hdf5Capture, ConfocalRoundTripsEveryDataset) {
     const TempDir dir;
     const std::size_t T = 5, nu = 3, nv = 2;
     const auto h = ramp(T * nu * nv);
-    CaptureFile capture = make_capture(true, {T, nu, nv}, h);
-    capture.sensor_grid = make_grid(int(nu), int(nv), 10.0);
-    capture.laser_grid = capture.sensor_grid;
+    CaptureFile capture = confocal_capture(T, nu, nv, h);
     capture.t_accounts_first_and_last_bounces = true;
     const fs::path path = dir.path() / "capture.hdf5";
     tprf::write_capture_hdf5(path, capture);
@@ -227,9 +233,7 @@ TEST(Hdf5Capture, ACopyWithANewHKeepsEveryOtherDataset) {
     const TempDir dir;
     const std::size_t T = 5, nu = 3, nv = 2;
     const auto h = ramp(T * nu * nv);
-    CaptureFile capture = make_capture(true, {T, nu, nv}, h);
-    capture.sensor_grid = make_grid(int(nu), int(nv), 10.0);
-    capture.laser_grid = capture.sensor_grid;
+    const CaptureFile capture = confocal_capture(T, nu, nv, h);
     const fs::path from = dir.path() / "capture.hdf5", to = dir.path() / "noisy.hdf5";
     tprf::write_capture_hdf5(from, capture);
     std::vector<float> counts(h.size());

@@ -49,14 +49,7 @@ json specular(std::array<double, 3> o, std::array<double, 3> u, std::array<doubl
 
 const json kPerfectMirror = {{"type", "mirror"}, {"reflectance", 1.0}};
 
-std::string error_of(const json& scene) {
-    try {
-        tprf::parse_scene(scene.dump(), "bad.json");
-    } catch (const tprf::Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const json& scene) { return tprf::test::parse_error(scene.dump()); }
 
 json small_scene() {
     return {{"time", {{"bins", 10}, {"bin_width", 0.1}}},

@@ -1,6 +1,8 @@
 #pragma once
 // Scenes with known answers, built directly as tprf::Scene (no JSON), shared by the stage tests.
 
+#include "tprf/core/error.h"
+#include "tprf/scene/parse_json.h"
 #include "tprf/scene/scene.h"
 
 #include <cmath>
@@ -19,6 +21,16 @@
     } while (false)
 
 namespace tprf::test {
+
+/// The message with which parse_scene refuses scene JSON `text` (named bad.json), or "" when it parses.
+inline std::string parse_error(const std::string& text) {
+    try {
+        parse_scene(text, "bad.json");
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "";
+}
 
 /// A scratch directory holding a one-triangle mesh, meshes/tri.obj (what the scene tests' files name);
 /// removed with everything in it.
