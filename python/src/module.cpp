@@ -447,10 +447,10 @@ PYBIND11_MODULE(_tprf, m) {
                                "float32 (H, W): an amcw sensor's depth")
         .def_property_readonly("aov", [](const PyResult& r) {
                                    py::dict d;
-                                   for (const auto& [name, a] : r.result->arrays)
-                                       if (name.rfind("aov_", 0) == 0) d[py::str(name.substr(4))] = share(r.result, a);
-                                   for (const auto& [name, a] : r.result->labels)
-                                       if (name.rfind("aov_", 0) == 0) d[py::str(name.substr(4))] = share(r.result, a);
+                                   for (const auto& [name, array] : arrays_dict(r.result)) {
+                                       const std::string key = name.cast<std::string>();
+                                       if (key.rfind("aov_", 0) == 0) d[py::str(key.substr(4))] = array;
+                                   }
                                    return d;
                                },
                                "the ground truth maps of render(aov=...) by name: depth (H, W), normal, position, "

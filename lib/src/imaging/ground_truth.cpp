@@ -42,13 +42,6 @@ unsigned parse_aov_list(std::string_view list, std::string_view what) {
     return maps;
 }
 
-std::vector<std::string> aov_names(unsigned maps) {
-    std::vector<std::string> names;
-    for (const auto& [key, bit] : kMaps)
-        if (maps & bit) names.emplace_back(key);
-    return names;
-}
-
 GroundTruth ground_truth(const Camera& camera, const PatchSet& patches, const Visibility& visibility, unsigned maps,
                          int threads) {
     GroundTruth g;

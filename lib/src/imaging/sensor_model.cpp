@@ -10,6 +10,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cfloat>
 #include <cmath>
 #include <cstdlib>
@@ -304,21 +305,6 @@ double omega_per_unit(double hz, const TimeAxis& time) {
     return 2.0 * std::numbers::pi * hz * time.to_metres(1.0) / kSpeedOfLight;
 }
 
-// The phase theta in [0, 2 pi) of the least-squares fit a + b cos(phi) + c sin(phi) to the P samples
-// m[k] at phases_deg[k], and whether they carry any modulation (b, c not both 0).
-bool fitted_phase(const std::vector<double>& phases_deg, const double* m, double& theta) {
-    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-    for (std::size_t k = 0; k < phases_deg.size(); ++k) {
-        const double phi = phases_deg[k] * std::numbers::pi / 180.0;
-        rhs += m[k] * Eigen::Vector3d(1.0, std::cos(phi), std::sin(phi));
-    }
-    const Eigen::Vector3d abc = phase_normal_matrix(phases_deg).ldlt().solve(rhs);
-    if (abc[1] == 0.0 && abc[2] == 0.0) return false;
-    theta = std::atan2(abc[2], abc[1]);
-    if (theta < 0.0) theta += 2.0 * std::numbers::pi;
-    return true;
-}
-
 }  // namespace
 
 int measurement_count(const SensorSettings& s, const TimeAxis& time) {
@@ -403,51 +389,97 @@ ConvolvedProfile convolve_with_pulse(const SensorPulse& pulse, const TimeAxis& t
     return out;
 }
 
+namespace {
+
+// What turns an AMCW pixel's raw samples (F frequencies x P phases) into its depth, made once per
+// frame: per phase cos and sin of its angle, the least-squares fit's factorised normal matrix, per
+// frequency its wrap c / (2 f) and weight f^2, and how many wraps of the lowest frequency the window
+// holds (validate_sensor bounds them by kMaxAmcwCandidates).
+class AmcwDecoder {
+public:
+    AmcwDecoder(const SensorSettings& s, double max_distance) : m_fit(phase_normal_matrix(s.exposure.phases_deg)) {
+        for (const double deg : s.exposure.phases_deg) {
+            const double phi = deg * std::numbers::pi / 180.0;
+            m_cos.push_back(std::cos(phi));
+            m_sin.push_back(std::sin(phi));
+        }
+        for (const double f : s.exposure.amcw_frequencies_hz()) {
+            m_wrap.push_back(0.5 * kSpeedOfLight / f);
+            m_weight.push_back(f * f);
+        }
+        m_reach = max_distance;
+    }
+
+    // The depth of one pixel's samples (amcw_depth in the header says how).
+    template <class T>
+    double depth(const T* raw) const {
+        const std::size_t F = m_wrap.size(), P = m_cos.size();
+        // Each frequency's distance in [0, wrap); those without modulation take no part.
+        std::array<double, kMaxAmcwFrequencies> distance{}, wrap{}, weight{};
+        std::size_t n = 0;
+        for (std::size_t f = 0; f < F; ++f) {
+            double theta = 0.0;
+            if (!phase(raw + f * P, theta)) continue;
+            wrap[n] = m_wrap[f];
+            weight[n] = m_weight[f];
+            distance[n++] = theta / (2.0 * std::numbers::pi) * m_wrap[f];
+        }
+        if (n == 0) return 0.0;
+        if (n == 1) return distance[0];
+        // Candidates: the longest wrap's distance plus whole wraps, up to the window's reach; the one
+        // whose phases agree best with every frequency's.
+        const std::size_t base = std::size_t(std::max_element(wrap.begin(), wrap.begin() + n) - wrap.begin());
+        const double reach = std::max(m_reach, wrap[base]);
+        const auto off = [&](double d, std::size_t f) {  // d's distance to f's nearest reading, in wraps of f
+            const double x = (d - distance[f]) / wrap[f];
+            return x - std::round(x);
+        };
+        double best = distance[base], best_cost = std::numeric_limits<double>::infinity();
+        const double candidates = std::min(std::floor((reach - distance[base]) / wrap[base]), double(kMaxAmcwCandidates));
+        for (double k = 0; k <= candidates; ++k) {
+            const double d = distance[base] + k * wrap[base];
+            double cost = 0.0;
+            for (std::size_t f = 0; f < n; ++f) cost += off(d, f) * off(d, f);
+            if (cost < best_cost - 1e-12) best = d, best_cost = cost;
+        }
+        double sum = 0.0, total = 0.0;
+        for (std::size_t f = 0; f < n; ++f) {
+            sum += weight[f] * (best - off(best, f) * wrap[f]);
+            total += weight[f];
+        }
+        return sum / total;
+    }
+
+private:
+    // The phase theta in [0, 2 pi) of the least-squares fit a + b cos(phi) + c sin(phi) to the P
+    // samples m[k], and whether they carry any modulation (b, c not both 0).
+    template <class T>
+    bool phase(const T* m, double& theta) const {
+        Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+        for (std::size_t k = 0; k < m_cos.size(); ++k) rhs += double(m[k]) * Eigen::Vector3d(1.0, m_cos[k], m_sin[k]);
+        const Eigen::Vector3d abc = m_fit.solve(rhs);
+        if (abc[1] == 0.0 && abc[2] == 0.0) return false;
+        theta = std::atan2(abc[2], abc[1]);
+        if (theta < 0.0) theta += 2.0 * std::numbers::pi;
+        return true;
+    }
+
+    Eigen::LDLT<Eigen::Matrix3d> m_fit;
+    std::vector<double> m_cos, m_sin, m_wrap, m_weight;
+    double m_reach = 0.0;
+};
+
+}  // namespace
+
 double amcw_depth(const SensorSettings& s, const double* raw, double max_distance) {
-    const std::vector<double> frequencies = s.exposure.amcw_frequencies_hz();
-    const std::vector<double>& phases = s.exposure.phases_deg;
-    const std::size_t F = frequencies.size(), P = phases.size();
-    // Each frequency's distance in [0, wrap) and its wrap c / (2 f); those without modulation take no part.
-    std::vector<double> distance, wrap, weight;
-    for (std::size_t f = 0; f < F; ++f) {
-        double theta = 0.0;
-        if (!fitted_phase(phases, raw + f * P, theta)) continue;
-        wrap.push_back(0.5 * kSpeedOfLight / frequencies[f]);
-        distance.push_back(theta / (2.0 * std::numbers::pi) * wrap.back());
-        weight.push_back(frequencies[f] * frequencies[f]);
-    }
-    if (distance.empty()) return 0.0;
-    if (distance.size() == 1) return distance[0];
-    // Candidates: the longest wrap's distance plus whole wraps, up to max_distance; the one whose phases
-    // agree best with every frequency's.
-    const std::size_t base = std::size_t(std::max_element(wrap.begin(), wrap.end()) - wrap.begin());
-    const double reach = std::max(max_distance, wrap[base]);
-    const auto off = [&](double d, std::size_t f) {  // d's distance to f's nearest reading, in wraps of f
-        const double x = (d - distance[f]) / wrap[f];
-        return x - std::round(x);
-    };
-    double best = distance[base], best_cost = std::numeric_limits<double>::infinity();
-    // validate_sensor bounds the candidates (kMaxAmcwCandidates) against the window.
-    const double candidates = std::min(std::floor((reach - distance[base]) / wrap[base]), double(kMaxAmcwCandidates));
-    for (double n = 0; n <= candidates; ++n) {
-        const double d = distance[base] + n * wrap[base];
-        double cost = 0.0;
-        for (std::size_t f = 0; f < distance.size(); ++f) cost += off(d, f) * off(d, f);
-        if (cost < best_cost - 1e-12) best = d, best_cost = cost;
-    }
-    double sum = 0.0, total = 0.0;
-    for (std::size_t f = 0; f < distance.size(); ++f) {
-        sum += weight[f] * (best - off(best, f) * wrap[f]);
-        total += weight[f];
-    }
-    return sum / total;
+    return AmcwDecoder(s, max_distance).depth(raw);
 }
 
 namespace {
 
 // The largest distance an AMCW pixel's light can encode in the window: half the path at its end (an
 // emitter beside the camera), metres.
-double window_distance(const TimeAxis& time) { return 0.5 * time.to_metres(time.start + time.bins * time.bin_width); }
+double window_distance(const TimeAxis& time) { return 0.5 * time.to_metres(time.end()); }
 
 // An AMCW pixel's raw samples from its measurements (K x 3): the channels' sum, as the one infrared
 // channel of a ToF camera, and with `photons` a Poisson count of photons times it plus `ambient`.
@@ -491,7 +523,8 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
     const bool draws = s.noise.sigma > 0.0;  // a generator is seeded only where it is used
     const bool amcw = s.exposure.type == ExposureType::Amcw;
     const bool quantised = amcw && s.exposure.adc_bits > 0;
-    const double reach = window_distance(time);
+    const std::optional<AmcwDecoder> decoder = amcw ? std::optional<AmcwDecoder>(std::in_place, s, window_distance(time))
+                                                    : std::nullopt;
     std::vector<float> own_raw;  // the raw samples when the caller keeps none: the depth needs them
     if (amcw && raw == nullptr) {
         own_raw.resize(std::size_t(pixels) * K);
@@ -526,7 +559,7 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
         std::vector<double> samples(K);
         amcw_raw(s.exposure, out, K, shot, samples.data());
         for (std::size_t k = 0; k < K; ++k) raw[std::size_t(p) * K + k] = float(std::min(samples[k], double(FLT_MAX)));
-        if (depth != nullptr && !quantised) depth[p] = float(amcw_depth(s, samples.data(), reach));
+        if (depth != nullptr && !quantised) depth[p] = float(decoder->depth(samples.data()));
     }
     check_cancelled();
     if (!quantised) return;
@@ -539,10 +572,7 @@ void apply_sensor(const SensorSettings& s, const CubeView& view, float* measurem
     for (std::size_t q = 0; q < samples; ++q) raw[q] = top > 0.0 ? float(std::round(std::max(0.0, double(raw[q])) / top * levels)) : 0.0f;
     if (depth == nullptr) return;
 #pragma omp parallel for schedule(dynamic, 64) num_threads(threads)
-    for (std::int64_t p = 0; p < pixels; ++p) {
-        const std::vector<double> levels_p(raw + std::size_t(p) * K, raw + std::size_t(p + 1) * K);
-        depth[p] = float(amcw_depth(s, levels_p.data(), reach));
-    }
+    for (std::int64_t p = 0; p < pixels; ++p) depth[p] = float(decoder->depth(raw + std::size_t(p) * K));
 }
 
 SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const float* profile, const float* measurements,
@@ -552,7 +582,7 @@ SensorPlot sensor_plot(const SensorSettings& s, const TimeAxis& time, const floa
     SensorPlot plot;
     plot.x = x, plot.y = y;
     plot.exposure = exposure_name(s.exposure.type);
-    plot.time_unit = time.unit == TimeUnit::Picoseconds ? "ps" : "m";
+    plot.time_unit = unit_name(time.unit);
     plot.start = time.start, plot.end = time.start + time.bins * dt;
 
     // The TPRF and its convolution with the pulse as densities (energy per unit time), so that the two

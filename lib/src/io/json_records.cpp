@@ -7,8 +7,6 @@
 namespace tprf {
 namespace {
 
-const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
-
 // What the k-th measurement is.
 nlohmann::json measurement_axis(const SensorSettings& s, const TimeAxis& time, int K) {
     nlohmann::json axis = nlohmann::json::array();

@@ -62,17 +62,16 @@ Measured measure_cube(const SensorSettings& sensor, const CubeView& cube, int th
     return {K, measurements};
 }
 
-CaptureCube capture_cube(const FloatArray& capture) {
-    const std::vector<std::size_t>& shape = capture.shape;
+CaptureCube capture_cube(const std::vector<std::size_t>& shape, const float* data) {
     const std::size_t T = shape[0];
-    const std::size_t pairs = T ? capture.data.size() / T : 0;
+    const std::size_t pairs = T ? elements(shape) / T : 0;
     CaptureCube c;
     c.width = int(shape.back());
     c.height = int(pairs / shape.back());
     c.cube.resize(pairs * T * 3);
     for (std::size_t pair = 0; pair < pairs; ++pair)
         for (std::size_t t = 0; t < T; ++t)
-            for (std::size_t ch = 0; ch < 3; ++ch) c.cube[(pair * T + t) * 3 + ch] = capture.data[t * pairs + pair];
+            for (std::size_t ch = 0; ch < 3; ++ch) c.cube[(pair * T + t) * 3 + ch] = data[t * pairs + pair];
     return c;
 }
 

@@ -61,7 +61,7 @@ struct CaptureCube {
     int height = 0;
     int width = 0;
 };
-/// `capture`: H time first, (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s) (capture.npy's layout).
-CaptureCube capture_cube(const FloatArray& capture);
+/// `data` of `shape`: H time first, (T, nu, nv) or (T, nu_l, nv_l, nu_s, nv_s) (capture.npy's layout).
+CaptureCube capture_cube(const std::vector<std::size_t>& shape, const float* data);
 
 }  // namespace tprf

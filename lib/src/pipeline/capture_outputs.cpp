@@ -92,11 +92,12 @@ const FloatArray& write_capture(const Scene& scene, const CaptureResult& r, Arra
 // (capture_cube), so that the camera's sensor model applies unchanged.
 int capture_measurements(const Scene& scene, const RenderOptions& options, const FloatArray& H, Arrays& arrays,
                          std::vector<std::string>& warnings) {
-    const CaptureCube c = capture_cube(H);
+    const CaptureCube c = capture_cube(H.shape, H.data.data());
+    const CubeView view{scene.time, c.cube.data(), c.height, c.width};
     if (Staging* staging = arrays.staging())
-        return write_sensor_outputs(*staging, *scene.sensor, {scene.time, c.cube.data(), c.height, c.width},
-                                    plot_pixel(std::nullopt, c.width, c.height), options, warnings);
-    return measure_cube(*scene.sensor, {scene.time, c.cube.data(), c.height, c.width}, options.threads, arrays).K;
+        return write_sensor_outputs(*staging, *scene.sensor, {view, plot_pixel(std::nullopt, c.width, c.height)},
+                                    options, warnings);
+    return measure_cube(*scene.sensor, view, options.threads, arrays).K;
 }
 
 // The capture's options for a render: threads, progress, the ranks, and what the march may use: the

@@ -313,13 +313,12 @@ double light_outside_window(const float* cube, const std::vector<float>& steady,
 
 // One line for the user when more than 1% of the camera's light falls outside the window.
 std::string window_warning(double share, const TimeAxis& time) {
-    const char* unit = time.unit == TimeUnit::Picoseconds ? "ps" : "m";
     char line[400];
     std::snprintf(line, sizeof line,
                   "%.1f%% of the light the camera sees falls outside the time window [%.6g, %.6g] %s (its steady "
                   "image holds it all): more time.bins or a wider bin_width keep later light, an earlier "
                   "time.start earlier light (render.json: camera.light_outside_window)",
-                  100.0 * share, time.start, time.start + time.bins * time.bin_width, unit);
+                  100.0 * share, time.start, time.end(), unit_name(time.unit));
     return line;
 }
 
@@ -342,18 +341,17 @@ void write_views(const Scene& scene, const RenderOptions& options, const float* 
     const Camera& camera = *scene.camera;
     const int bins = scene.time.bins;
     Staging* staging = arrays.staging();
+    const CubeView view{scene.time, cube, camera.height, camera.width};
     if (!staging) {
-        if (scene.sensor)
-            report.measurements =
-                measure_cube(*scene.sensor, {scene.time, cube, camera.height, camera.width}, options.threads, arrays).K;
+        if (scene.sensor) report.measurements = measure_cube(*scene.sensor, view, options.threads, arrays).K;
         return;
     }
     if (options.frames) write_frames(staging->path("frames"), cube, camera.height, camera.width, bins);
     if (options.streaks) write_streaks(staging->path("streaks"), cube, camera.height, camera.width, bins);
     if (scene.sensor)
-        report.measurements = write_sensor_outputs(*staging, *scene.sensor, {scene.time, cube, camera.height, camera.width},
-                                                   plot_pixel(options.plot_pixel, camera.width, camera.height), options,
-                                                   report.warnings);
+        report.measurements = write_sensor_outputs(
+            *staging, *scene.sensor, {view, plot_pixel(options.plot_pixel, camera.width, camera.height)}, options,
+            report.warnings);
     if (options.video) {
         const std::filesystem::path mp4 = staging->path("light_in_flight.mp4");
         write_video(mp4, cube, camera.height, camera.width, bins);
@@ -572,7 +570,7 @@ std::map<std::string, FloatArray> measure(const SensorSettings& sensor, const Re
         c.height = int(camera->second.shape[0]);
         c.width = int(camera->second.shape[1]);
     } else if (const auto capture = result.arrays.find("capture"); capture != result.arrays.end()) {
-        c = capture_cube(capture->second);
+        c = capture_cube(capture->second.shape, capture->second.data.data());
         cube = c.cube.data();
     } else {
         throw Error("the result has neither a transient cube nor a capture to measure");

@@ -5,7 +5,6 @@
 #include "tprf/core/error.h"
 #include "tprf/imaging/sensor_model.h"
 #include "tprf/io/atomic_file.h"
-#include "tprf/io/hdf5_capture.h"
 #include "tprf/io/npy.h"
 #include "tprf/scene/parse_json.h"
 #include "tprf/scene/validate.h"
@@ -30,7 +29,6 @@ bool plain_name(const std::string& name) {
 std::string cubes_in(const std::filesystem::path& dir) {
     std::vector<std::string> names;
     for (const auto& entry : std::filesystem::directory_iterator(dir)) {
-        const std::string file = entry.path().filename().string();
         if (entry.path().extension() != ".npy") continue;
         const std::string stem = entry.path().stem().string();
         if (stem == "transient" || stem == "capture" || stem.rfind("transient_bounce_", 0) == 0) names.push_back(stem);
@@ -72,8 +70,7 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     if (capture) {
         if (shape.size() < 2 || shape[0] != T || view.size() == 0)
             fail_input(cube_file, "", "expected shape (" + std::to_string(T) + ", ...) to match render.json's time axis");
-        FloatArray h{shape, std::vector<float>(view.data(), view.data() + view.size())};
-        rows = capture_cube(h);
+        rows = capture_cube(shape, view.data());
     } else if (shape.size() != 4 || shape[2] != T || shape[3] != 3 || shape[0] == 0 || shape[1] == 0) {
         fail_input(cube_file, "", "expected shape (H, W, " + std::to_string(T) + ", 3) to match render.json's time axis");
     }
@@ -87,19 +84,10 @@ SensorReport apply_sensor_file(const SensorRunOptions& options) {
     Staging staging(report.folder, "sensor.json");
     if (options.progress) options.progress("sensor", 0.0);
     try {
-        report.measurements = write_sensor_outputs(staging, sensor, {time, data, report.height, report.width}, pixel,
-                                                   options, report.warnings);
-        // A SPAD's histograms of a capture are a capture: the render's capture.hdf5 with H replaced by
-        // the counts (the first channel's: one detector), for tal to read as it reads the noise-free one.
-        const std::filesystem::path hdf5 = dir / "capture.hdf5";
-        if (capture && sensor.exposure.type == ExposureType::Spad && std::filesystem::exists(hdf5)) {
-            const NpyView counts(staging.staged("measurements.npy"));
-            const std::size_t pairs = std::size_t(report.height) * std::size_t(report.width);
-            std::vector<float> H(T * pairs);
-            for (std::size_t p = 0; p < pairs; ++p)
-                for (std::size_t t = 0; t < T; ++t) H[t * pairs + p] = counts.data()[(p * T + t) * 3];
-            copy_capture_with_h(hdf5, staging.path("capture.hdf5"), H.data(), shape);
-        }
+        const CaptureSource source{dir / "capture.hdf5", shape};
+        const CubeView measured{time, data, report.height, report.width};
+        report.measurements =
+            write_sensor_outputs(staging, sensor, {measured, pixel, capture ? &source : nullptr}, options, report.warnings);
         staging.publish(sensor_outputs());
     } catch (const OutputError& e) {
         throw OutputError(staging.public_message(e.what()));

@@ -4,6 +4,7 @@
 #include "tprf/core/cancel.h"
 #include "tprf/core/error.h"
 #include "tprf/imaging/sensor_model.h"
+#include "tprf/io/hdf5_capture.h"
 #include "tprf/io/json_records.h"
 #include "tprf/io/npy.h"
 #include "tprf/io/plots.h"
@@ -134,12 +135,24 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
     return *asked;
 }
 
-int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const CubeView& view, std::array<int, 2> pixel,
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const SensorSubject& subject,
                          const PipelineOptions& run, std::vector<std::string>& warnings) {
+    const CubeView& view = subject.cube;
+    const std::array<int, 2>& pixel = subject.pixel;
+    const CaptureSource* capture = subject.capture;
     const TimeAxis& time = view.time;
     const float* cube = view.data;
     Arrays arrays(staging);
     const auto [K, measurements] = measure_cube(sensor, view, run.threads, arrays);
+    // A SPAD's histograms of a capture are a capture: its file with H replaced by the counts (the first
+    // channel's: one detector), for tal to read as it reads the noise-free one.
+    if (capture && sensor.exposure.type == ExposureType::Spad && std::filesystem::exists(capture->file)) {
+        const std::size_t T = std::size_t(time.bins), pairs = std::size_t(view.height) * std::size_t(view.width);
+        std::vector<float> H(T * pairs);
+        for (std::size_t q = 0; q < pairs; ++q)
+            for (std::size_t t = 0; t < T; ++t) H[t * pairs + q] = measurements[(q * T + t) * 3];
+        copy_capture_with_h(capture->file, staging.path("capture.hdf5"), H.data(), capture->shape);
+    }
     const std::size_t p = std::size_t(pixel[1]) * std::size_t(view.width) + std::size_t(pixel[0]);
     const std::filesystem::path data = staging.path("sensor_plot.json");
     write_sensor_plot_json(data, sensor_plot(sensor, time, cube + p * std::size_t(time.bins) * 3,

@@ -50,8 +50,6 @@ public:
     void forget(const std::string& name);
     /// Where output `name` will be once published.
     std::filesystem::path final_path(const std::string& name) const { return m_out / name; }
-    /// Where output `name` (already recorded by path()) is being written, to read it back.
-    std::filesystem::path staged(const std::string& name) const { return m_dir / name; }
 
     /// Moves every staged output into place (unless the run was cancelled: then Cancelled), then, when the directory held an earlier render, removes
     /// that run's outputs that this one did not write (`owned`: names, or prefixes ending in '*'), so
@@ -78,11 +76,26 @@ std::array<int, 2> plot_pixel(const std::optional<std::array<int, 2>>& asked, in
 
 struct CubeView;
 
-/// measurements.npy, depth.npy (amcw), sensor.json, sensor_plot.json and sensor_plot.png: what a sensor
-/// block turns a cube (H, W, T, 3) into. Returns K. When no Python with matplotlib can draw the plot,
-/// the data is still written and `warnings` gets a line saying how to draw it; with draw_plots off, only
-/// the data is written.
-int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const CubeView& cube, std::array<int, 2> pixel,
+/// A capture that a cube's rows are (capture_cube): its capture.hdf5 and the shape of its H (T, ...).
+struct CaptureSource {
+    std::filesystem::path file;
+    std::vector<std::size_t> shape;
+};
+
+/// What a sensor measures: a cube (H, W, T, 3), the pixel its plot shows and, when the cube's rows are
+/// a capture's sensor points, that capture.
+struct SensorSubject {
+    const CubeView& cube;
+    std::array<int, 2> pixel;
+    const CaptureSource* capture = nullptr;
+};
+
+/// measurements.npy, depth.npy and raw.npy (amcw), sensor.json, sensor_plot.json and sensor_plot.png:
+/// what a sensor block turns the subject's cube into; with a SPAD on the rows of its capture (when the
+/// capture's file exists), also capture.hdf5: that file with H the first channel's counts. Returns K.
+/// When no Python with matplotlib can draw the plot, the data is still written and `warnings` gets a
+/// line saying how to draw it; with draw_plots off, only the data is written.
+int write_sensor_outputs(Staging& staging, const SensorSettings& sensor, const SensorSubject& subject,
                          const PipelineOptions& options, std::vector<std::string>& warnings);
 
 /// Seconds from `start` to now.

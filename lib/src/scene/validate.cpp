@@ -457,7 +457,7 @@ void check_sensor_against_time(const SensorSettings& s, const TimeAxis& time, co
         // The depth tries every wrap of the lowest frequency that fits in the window: a bounded number.
         const std::vector<double> f = s.exposure.amcw_frequencies_hz();
         const double lowest = *std::min_element(f.begin(), f.end());
-        const double window_m = 0.5 * time.to_metres(time.start + time.bins * time.bin_width);
+        const double window_m = 0.5 * time.to_metres(time.end());
         const double wraps = window_m / (0.5 * kSpeedOfLight / lowest);
         if (!(wraps <= kMaxAmcwCandidates)) {
             std::ostringstream os;

@@ -70,16 +70,16 @@ PointSource spot_source(const LaserSpot& spot, const PatchSet& patches, const Vi
 }
 
 
-double PointSource::spot_profile(const Vec3& dir) const {
-    if (spot_axis.isZero()) return 1.0;
-    const double angle = std::acos(std::clamp(spot_axis.dot(dir), -1.0, 1.0));
-    if (angle <= spot_half_angle) return 1.0;
-    if (angle >= spot_half_angle + spot_falloff) return 0.0;
-    const double t = (spot_half_angle + spot_falloff - angle) / spot_falloff;  // 1 at the inner edge, 0 at the outer
+namespace {
+
+// A spot's profile at `angle` radians from its axis: 1 within the half angle h, 0 beyond h + f, and
+// the smoothstep of t = (h + f - angle) / f between (1 at the inner edge, 0 at the outer).
+double cone_profile(double angle, double half, double falloff) {
+    if (angle <= half) return 1.0;
+    if (angle >= half + falloff) return 0.0;
+    const double t = (half + falloff - angle) / falloff;
     return t * t * (3.0 - 2.0 * t);
 }
-
-namespace {
 
 // The solid angle a spot's profile weighs, integral of spot_profile over the sphere: 2 pi (1 - cos h)
 // inside the half angle h, and the falloff by Simpson's rule (its smoothstep is smooth, so 256
@@ -93,8 +93,7 @@ double spot_solid_angle(const PointSource& s) {
         double simpson = 0.0;
         for (int k = 0; k <= n; ++k) {
             const double angle = s.spot_half_angle + k * step;
-            const Vec3 dir = std::cos(angle) * s.spot_axis + std::sin(angle) * s.spot_axis.unitOrthogonal();
-            const double f = s.spot_profile(dir) * std::sin(angle);
+            const double f = cone_profile(angle, s.spot_half_angle, s.spot_falloff) * std::sin(angle);
             simpson += (k == 0 || k == n ? 1.0 : k % 2 ? 4.0 : 2.0) * f;
         }
         sum += 2.0 * M_PI * simpson * step / 3.0;
@@ -103,6 +102,11 @@ double spot_solid_angle(const PointSource& s) {
 }
 
 }  // namespace
+
+double PointSource::spot_profile(const Vec3& dir) const {
+    if (spot_axis.isZero()) return 1.0;
+    return cone_profile(std::acos(std::clamp(spot_axis.dot(dir), -1.0, 1.0)), spot_half_angle, spot_falloff);
+}
 
 Rgb PointSource::intensity_towards(const Vec3& dir) const {
     if (lobe.isZero()) return spot_axis.isZero() ? intensity : Rgb(intensity * spot_profile(dir));

@@ -10,6 +10,9 @@ namespace tprf {
 /// The unit the scene's time axis is written in.
 enum class TimeUnit { Metres, Picoseconds };
 
+/// The unit as the scene file writes it: "m" or "ps".
+inline const char* unit_name(TimeUnit u) { return u == TimeUnit::Picoseconds ? "ps" : "m"; }
+
 /// How a delay that falls between two bins is placed.
 enum class DelayMode { Nearest, Linear };
 
@@ -82,6 +85,8 @@ struct TimeAxis {
     double bin_width_m() const;
     /// Start of bin 0 as an optical path length, metres.
     double start_m() const;
+    /// The end of the last bin, in `unit`.
+    double end() const { return start + bins * bin_width; }
     /// Converts a length in `unit` to metres of optical path.
     double to_metres(double value_in_unit) const;
     /// The axis's bins in metres (BinMap): where paths and delays fall.

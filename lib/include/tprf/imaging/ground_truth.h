@@ -6,7 +6,6 @@
 #include "tprf/core/types.h"
 
 #include <cstdint>
-#include <string>
 #include <string_view>
 #include <vector>
 
@@ -28,9 +27,6 @@ enum AovMap : unsigned {
 /// The maps of a comma-separated list ("depth,normal"); "all" names every one. Throws Error naming
 /// `what` (the flag or key it came from) for an empty list or an unknown name.
 unsigned parse_aov_list(std::string_view list, std::string_view what);
-
-/// The maps' names in a fixed order ("depth", "normal", ...), those of `maps` only.
-std::vector<std::string> aov_names(unsigned maps);
 
 /// The maps of `maps` for `camera`, each pixel's centre ray through the camera's intrinsics and
 /// distortion to the first surface it meets (mirrors and glass are surfaces here, like any other).
